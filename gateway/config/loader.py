@@ -1,0 +1,287 @@
+"""Load YAML configuration with line numbers, and report every error at once.
+
+PyYAML forgets where values came from once it builds Python objects, so this
+module composes the node graph itself and records the line of every key and list
+item. Pydantic's error locations are then mapped back to `file:line: key`.
+It also rejects duplicate keys (PyYAML silently keeps the last one) and expands
+`${NAME}` / `${NAME:-default}` references from the environment, so that secrets
+stay out of files.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from gateway.config.gateway import GatewayConfig
+from gateway.config.mapping import MachineMapping, tree_conflicts
+from gateway.errors import ConfigError, ConfigIssue
+
+Loc = tuple[str | int, ...]
+M = TypeVar("M", bound=BaseModel)
+
+ENV_RE = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
+
+
+@dataclass
+class Located:
+    """Plain Python data from a YAML document, with the line of every location in it."""
+
+    file: str
+    data: Any
+    lines: dict[Loc, int] = field(default_factory=dict)
+
+    def line(self, loc: Loc) -> int | None:
+        """The line of `loc`, or of its nearest ancestor that exists in the file."""
+        for cut in range(len(loc), -1, -1):
+            line = self.lines.get(tuple(loc[:cut]))
+            if line is not None:
+                return line
+        return None
+
+
+def format_loc(loc: Loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def read_yaml(path: Path, environ: Mapping[str, str] | None = None) -> Located:
+    """Parse one YAML file into data plus line numbers. Raises ConfigError on any problem."""
+    file = str(path)
+    env = os.environ if environ is None else environ
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError([ConfigIssue(file, None, "", f"cannot read file: {exc.strerror or exc}")]) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError([ConfigIssue(file, None, "", f"not UTF-8 text: {exc.reason}")]) from None
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError([ConfigIssue(file, line, "", f"invalid YAML: {problem}")]) from None
+    if node is None:
+        raise ConfigError([ConfigIssue(file, 1, "", "the file is empty")])
+    builder = _Builder(Located(file, None), env)
+    builder.located.data = builder.build(node, ())
+    if builder.issues:
+        raise ConfigError(builder.issues)
+    return builder.located
+
+
+class _Builder:
+    """Turns a composed YAML node graph into plain data, recording lines as it goes."""
+
+    def __init__(self, located: Located, env: Mapping[str, str]) -> None:
+        self.located = located
+        self.env = env
+        self.issues: list[ConfigIssue] = []
+        self.constructor = yaml.constructor.SafeConstructor()
+
+    def build(self, node: yaml.Node, loc: Loc) -> Any:
+        lines = self.located.lines
+        lines.setdefault(loc, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            out: dict[str, Any] = {}
+            for key_node, value_node in node.value:
+                key = str(self.scalar(key_node))
+                sub = (*loc, key)
+                if key in out:
+                    self.issues.append(
+                        ConfigIssue(
+                            self.located.file,
+                            key_node.start_mark.line + 1,
+                            format_loc(sub),
+                            f"duplicate key (first at line {lines[sub]})",
+                        )
+                    )
+                    continue
+                lines[sub] = key_node.start_mark.line + 1
+                out[key] = self.build(value_node, sub)
+            return out
+        if isinstance(node, yaml.SequenceNode):
+            return [self.build(item, (*loc, i)) for i, item in enumerate(node.value)]
+        value = self.scalar(node)
+        if isinstance(value, str) and "${" in value:
+            return self.expand_env(value, loc)
+        return value
+
+    def scalar(self, node: yaml.Node) -> Any:
+        if not isinstance(node, yaml.ScalarNode):
+            return str(node.value)
+        return self.constructor.construct_object(node)
+
+    def expand_env(self, value: str, loc: Loc) -> str:
+        def repl(m: re.Match[str]) -> str:
+            name, default = m.group(1), m.group(2)
+            if name in self.env:
+                return self.env[name]
+            if default is not None:
+                return default
+            self.issues.append(
+                ConfigIssue(
+                    self.located.file,
+                    self.located.lines.get(loc),
+                    format_loc(loc),
+                    f"environment variable {name} is not set (use ${{{name}:-default}} to give a default)",
+                )
+            )
+            return ""
+
+        return ENV_RE.sub(repl, value)
+
+
+def validate(model: type[M], located: Located) -> M:
+    """Validate located data against a model; every pydantic error becomes a located issue."""
+    try:
+        return model.model_validate(located.data)
+    except ValidationError as exc:
+        raise ConfigError(issues_from(exc, located)) from None
+
+
+def issues_from(exc: ValidationError, located: Located) -> list[ConfigIssue]:
+    issues = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(err["loc"])
+        # pydantic adds the tag of a function validator or a union member to the location
+        loc = tuple(p for p in loc if not (isinstance(p, str) and ("[" in p or p.startswith("function-"))))
+        message = _message(err)
+        issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
+    return issues
+
+
+def _message(err: Mapping[str, Any]) -> str:
+    kind = err["type"]
+    msg = str(err["msg"])
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, ") :]
+    if kind == "extra_forbidden":
+        return "unknown key (check the spelling; see mappings/mapping.schema.json for the keys allowed)"
+    if kind == "missing":
+        return "required key is missing"
+    got = err.get("input")
+    if kind not in ("value_error", "assertion_error") and not isinstance(got, (dict, list)):
+        msg = f"{msg} (got {got!r})"
+    return msg
+
+
+# --- whole configurations ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated gateway configuration: gateway-wide settings plus each machine's mapping."""
+
+    gateway: GatewayConfig
+    machines: tuple[MachineMapping, ...]
+    base_dir: Path
+    files: tuple[Path, ...] = ()
+
+    @property
+    def state_dir(self) -> Path:
+        return (self.base_dir / self.gateway.state_dir).resolve()
+
+
+def load_mapping(path: Path, environ: Mapping[str, str] | None = None) -> MachineMapping:
+    located = read_yaml(path, environ)
+    if not isinstance(located.data, dict):
+        raise ConfigError([ConfigIssue(str(path), 1, "", "a mapping file must be a YAML mapping with a 'machine' key")])
+    issues: list[ConfigIssue] = []
+    mapping: MachineMapping | None = None
+    try:
+        mapping = validate(MachineMapping, located)
+    except ConfigError as exc:
+        issues.extend(exc.issues)
+    issues.extend(_structure_issues(located))
+    if issues:
+        issues.sort(key=lambda i: (i.line or 0, i.key))
+        raise ConfigError(issues)
+    assert mapping is not None
+    return mapping
+
+
+def _structure_issues(located: Located) -> list[ConfigIssue]:
+    variables = located.data.get("variables")
+    if not isinstance(variables, Sequence) or isinstance(variables, str):
+        return []
+    paths = []
+    indices = []
+    for index, var in enumerate(variables):
+        if isinstance(var, dict) and isinstance(var.get("path"), str):
+            paths.append(var["path"])
+            indices.append(index)
+    issues = []
+    for pos, message in tree_conflicts(paths):
+        loc: Loc = ("variables", indices[pos], "path")
+        issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
+    return issues
+
+
+def is_gateway_file(located: Located) -> bool:
+    return isinstance(located.data, dict) and "machine" not in located.data
+
+
+def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Config:
+    """Load a gateway file, or one or more mapping files run with default settings.
+
+    Every file is checked and every problem reported together; nothing starts
+    half-configured.
+    """
+    if not paths:
+        raise ConfigError([ConfigIssue("<command line>", None, "", "no configuration file given")])
+    issues: list[ConfigIssue] = []
+    gateway = GatewayConfig()
+    base_dir = Path.cwd()
+    mapping_files: list[Path] = []
+    for path in paths:
+        try:
+            located = read_yaml(path, environ)
+        except ConfigError as exc:
+            issues.extend(exc.issues)
+            continue
+        if is_gateway_file(located):
+            if len(paths) > 1:
+                issues.append(ConfigIssue(str(path), 1, "", "a gateway file must be given on its own"))
+                continue
+            try:
+                gateway = validate(GatewayConfig, located)
+            except ConfigError as exc:
+                raise ConfigError(exc.issues) from None
+            base_dir = path.parent.resolve()
+            if not gateway.machines:
+                issues.append(ConfigIssue(str(path), located.line(("machines",)), "machines", "lists no mapping files"))
+            mapping_files.extend(base_dir / m for m in gateway.machines)
+        else:
+            mapping_files.append(path)
+    machines: list[MachineMapping] = []
+    seen: dict[str, Path] = {}
+    for file in mapping_files:
+        try:
+            mapping = load_mapping(file, environ)
+        except ConfigError as exc:
+            issues.extend(exc.issues)
+            continue
+        if mapping.machine in seen:
+            issues.append(
+                ConfigIssue(str(file), None, "machine", f"machine {mapping.machine!r} is already defined in {seen[mapping.machine]}")
+            )
+            continue
+        seen[mapping.machine] = file
+        machines.append(mapping)
+    if issues:
+        raise ConfigError(issues)
+    return Config(gateway, tuple(machines), base_dir, tuple(mapping_files))

@@ -1,0 +1,287 @@
+"""The mapping file: one machine, its controller, and its variables.
+
+These pydantic models are the single definition of the format. They validate a
+file once, at start-up, and also produce the JSON Schema that editors use
+(`cnc-gateway schema`). Unknown keys are errors, not silently ignored.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainSerializer,
+    SecretStr,
+    WithJsonSchema,
+    field_validator,
+    ValidationInfo,
+    model_validator,
+)
+
+from gateway.model.types import TYPE_NAMES, TypeSpec
+
+RESERVED_SEGMENTS = frozenset({"Status", "Jobs", "Commands", "Programs", "Alarms"})
+SEGMENT_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
+MACHINE_RE = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,62}$")
+
+
+class Strict(BaseModel):
+    """Every config model rejects unknown keys and is immutable once loaded."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _parse_type(value: Any) -> TypeSpec:
+    if isinstance(value, TypeSpec):
+        return value
+    if not isinstance(value, str):
+        raise ValueError(f"expected a type name such as Double or Int32[], got {value!r}")
+    return TypeSpec.parse(value)
+
+
+TypeField = Annotated[
+    TypeSpec,
+    BeforeValidator(_parse_type),
+    PlainSerializer(str, return_type=str),
+    WithJsonSchema({"type": "string", "enum": TYPE_NAMES, "description": "OPC UA built-in type name"}),
+]
+
+
+def check_path(path: str) -> str:
+    """A tree path: segments joined by '/', each a plain name."""
+    if not path or path.startswith("/") or path.endswith("/"):
+        raise ValueError(f"path {path!r} must be segments joined by '/', without a leading or trailing '/'")
+    segments = path.split("/")
+    for seg in segments:
+        if not SEGMENT_RE.match(seg):
+            raise ValueError(
+                f"path segment {seg!r} in {path!r} must start with a letter, digit or '_' "
+                "and contain only letters, digits, '_', '-' and '.'"
+            )
+    if segments[0] in RESERVED_SEGMENTS:
+        raise ValueError(f"path {path!r} starts with {segments[0]!r}, which the gateway reserves for itself")
+    return path
+
+
+def _require_numeric(value: Any, info: ValidationInfo) -> None:
+    upstream = info.data.get("type")
+    if value is not None and upstream is not None and not upstream.is_numeric:
+        raise ValueError(f"{info.field_name} is only allowed on numeric variables, and this one is {upstream}")
+
+
+class Scale(Strict):
+    """Linear scaling: engineering = raw * gain + offset (and back again for writes)."""
+
+    gain: float = 1.0
+    offset: float = 0.0
+
+    @field_validator("gain")
+    @classmethod
+    def _nonzero(cls, gain: float) -> float:
+        if gain == 0:
+            raise ValueError("gain must not be zero: scaling would not be reversible for writes")
+        return gain
+
+
+class EURange(Strict):
+    """Engineering range: shown to OPC UA clients as EURange, and enforced on writes."""
+
+    min: float
+    max: float
+
+    @model_validator(mode="after")
+    def _ordered(self) -> EURange:
+        if not self.min < self.max:
+            raise ValueError(f"range min ({self.min}) must be below max ({self.max})")
+        return self
+
+
+class VariableSpec(Strict):
+    """One mapped variable: where it lives on the controller and how it looks upstream."""
+
+    path: Annotated[str, Field(description="Tree path, e.g. Axes/X/Position: OPC UA browse path and MQTT topic")]
+    source: Annotated[str, Field(min_length=1, description="Driver address, e.g. ns=2;s=::AsGlobalPV:gAxis[0].ActPos")]
+    type: TypeField
+    source_type: TypeField | None = Field(
+        default=None, description="The controller's own type, when scaling changes it (e.g. Int32 counts to Double mm)"
+    )
+    unit: str = ""
+    access: Literal["read", "readwrite"] = "read"
+    scale: Scale | None = None
+    range: EURange | None = None
+    deadband: float | str | None = Field(
+        default=None, description="Absolute change below which updates are dropped, or a percentage of range: '0.5%'"
+    )
+    description: str = ""
+    sampling_interval: float | None = Field(default=None, ge=0, description="Milliseconds; default from defaults")
+    queue_size: int | None = Field(default=None, ge=1, le=10000)
+
+    @field_validator("path")
+    @classmethod
+    def _path(cls, path: str) -> str:
+        return check_path(path)
+
+    @field_validator("source_type")
+    @classmethod
+    def _source_type(cls, value: TypeSpec | None, info: ValidationInfo) -> TypeSpec | None:
+        upstream = info.data.get("type")
+        if value is not None and upstream is not None:
+            if value.array != upstream.array:
+                raise ValueError(f"source_type {value} and type {upstream} must both be arrays or both scalars")
+            if value.is_numeric != upstream.is_numeric:
+                raise ValueError(f"source_type {value} and type {upstream} must both be numeric or both not")
+        return value
+
+    @field_validator("scale", "range")
+    @classmethod
+    def _numeric_only(cls, value: Any, info: ValidationInfo) -> Any:
+        _require_numeric(value, info)
+        return value
+
+    @field_validator("deadband")
+    @classmethod
+    def _deadband(cls, value: float | str | None, info: ValidationInfo) -> float | str | None:
+        if value is None:
+            return None
+        _require_numeric(value, info)
+        if isinstance(value, str):
+            m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*%\s*", value)
+            if not m:
+                raise ValueError(f"deadband {value!r} must be a number or a percentage such as '0.5%'")
+            if float(m.group(1)) > 100:
+                raise ValueError("a percentage deadband must be at most 100%")
+            if info.data.get("range") is None:
+                raise ValueError("a percentage deadband needs a range to be a percentage of")
+            return value.strip()
+        if value < 0:
+            raise ValueError("deadband must not be negative")
+        return value
+
+    @property
+    def writable(self) -> bool:
+        return self.access == "readwrite"
+
+    @property
+    def raw_type(self) -> TypeSpec:
+        return self.source_type or self.type
+
+    @property
+    def deadband_abs(self) -> float:
+        """The deadband as an absolute amount in engineering units (0 = every change)."""
+        if self.deadband is None:
+            return 0.0
+        if isinstance(self.deadband, str):
+            assert self.range is not None
+            return float(self.deadband.rstrip("%").strip()) / 100.0 * (self.range.max - self.range.min)
+        return float(self.deadband)
+
+
+class Backoff(Strict):
+    """Exponential backoff between reconnect attempts, in seconds."""
+
+    initial: float = Field(default=0.5, gt=0)
+    max: float = Field(default=10.0, gt=0)
+    factor: float = Field(default=2.0, ge=1)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Backoff:
+        if self.max < self.initial:
+            raise ValueError("backoff max must not be below initial")
+        return self
+
+
+def check_endpoint(url: str, scheme: str = "opc.tcp") -> str:
+    parts = urlsplit(url)
+    if parts.scheme != scheme:
+        raise ValueError(f"endpoint {url!r} must start with {scheme}://")
+    try:
+        port = parts.port
+    except ValueError:
+        raise ValueError(f"endpoint {url!r} has an invalid port") from None
+    if not parts.hostname:
+        raise ValueError(f"endpoint {url!r} has no host")
+    if port is None:
+        raise ValueError(f"endpoint {url!r} needs an explicit port, e.g. {scheme}://host:4840")
+    return url
+
+
+class OpcUaDriver(Strict):
+    """A controller with an OPC UA server (B&R, Siemens, Beckhoff, Fanuc with the option, the simulator)."""
+
+    type: Literal["opcua"] = "opcua"
+    endpoint: str
+    username: str | None = None
+    password: SecretStr | None = None
+    security: str = Field(
+        default="None", description="asyncua security string, e.g. Basic256Sha256,SignAndEncrypt,cert.pem,key.pem"
+    )
+    timeout: float = Field(default=5.0, gt=0, description="Seconds per request")
+    publishing_interval: float = Field(default=100.0, gt=0, description="Milliseconds")
+    watchdog_interval: float = Field(default=1.0, gt=0, description="Seconds between liveness probes")
+    reconnect: Backoff = Backoff()
+
+    @field_validator("endpoint")
+    @classmethod
+    def _endpoint(cls, url: str) -> str:
+        return check_endpoint(url)
+
+
+class VariableDefaults(Strict):
+    sampling_interval: float = Field(default=100.0, ge=0, description="Milliseconds")
+    queue_size: int = Field(default=1, ge=1, le=10000)
+
+
+class MachineMapping(Strict):
+    """One machine: its name, its controller, and the variables mirrored upstream."""
+
+    machine: Annotated[str, Field(description="Machine name: lower-case letters, digits, '-' and '_'")]
+    description: str = ""
+    driver: OpcUaDriver
+    defaults: VariableDefaults = VariableDefaults()
+    variables: list[VariableSpec] = Field(min_length=1)
+
+    @field_validator("machine")
+    @classmethod
+    def _machine_name(cls, name: str) -> str:
+        if not MACHINE_RE.match(name):
+            raise ValueError(
+                f"machine name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', starting with a letter or digit"
+            )
+        return name
+
+    def sampling_interval(self, var: VariableSpec) -> float:
+        return self.defaults.sampling_interval if var.sampling_interval is None else var.sampling_interval
+
+    def queue_size(self, var: VariableSpec) -> int:
+        return self.defaults.queue_size if var.queue_size is None else var.queue_size
+
+
+def tree_conflicts(paths: list[str]) -> list[tuple[int, str]]:
+    """Structural problems across variables: (index of offending entry, message).
+
+    Pydantic validates entries one by one; these need the whole list.
+    """
+    problems: list[tuple[int, str]] = []
+    first: dict[str, int] = {}
+    for index, path in enumerate(paths):
+        if path in first:
+            problems.append((index, f"duplicate path {path!r} (first used by variables[{first[path]}])"))
+        else:
+            first[path] = index
+    for index, path in enumerate(paths):
+        if first.get(path) != index:
+            continue
+        segments = path.split("/")
+        for cut in range(1, len(segments)):
+            folder = "/".join(segments[:cut])
+            if folder in first:
+                problems.append(
+                    (index, f"path {path!r} uses {folder!r} as a folder, but variables[{first[folder]}] is a variable")
+                )
+    return problems

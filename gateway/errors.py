@@ -1,0 +1,111 @@
+"""The gateway's own error hierarchy.
+
+Third-party errors (asyncua, paho, aioftp, pydantic, yaml) are translated into
+these at the adapter boundary, so the rest of the gateway never needs to know
+which library raised what. Write errors carry the OPC UA status code name that
+best describes them; every sink maps that name to its own wire form.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class GatewayError(Exception):
+    """Base of every error the gateway raises on purpose."""
+
+
+# --- configuration ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ConfigIssue:
+    """One problem in a configuration file, located as precisely as we can."""
+
+    file: str
+    line: int | None
+    key: str
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}" if self.line is not None else self.file
+        key = f" {self.key}:" if self.key else ""
+        return f"{where}:{key} {self.message}"
+
+
+class ConfigError(GatewayError):
+    """A configuration file is invalid. Carries every issue found, not only the first."""
+
+    def __init__(self, issues: list[ConfigIssue]) -> None:
+        self.issues = list(issues)
+        super().__init__("\n".join(str(i) for i in self.issues))
+
+
+# --- writes ----------------------------------------------------------------------------------
+
+
+class WriteError(GatewayError):
+    """A write was refused. `status` is the OPC UA StatusCode name for the refusal."""
+
+    status = "BadInternalError"
+
+    def __init__(self, reason: str, *, status: str | None = None) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        if status is not None:
+            self.status = status
+
+
+class UnknownVariable(WriteError):
+    status = "BadNodeIdUnknown"
+
+
+class NotWritable(WriteError):
+    status = "BadNotWritable"
+
+
+class AccessDenied(WriteError):
+    status = "BadUserAccessDenied"
+
+
+class TypeMismatch(WriteError):
+    status = "BadTypeMismatch"
+
+
+class OutOfRange(WriteError):
+    status = "BadOutOfRange"
+
+
+class ControllerRefused(WriteError):
+    """The controller answered the write with an error of its own."""
+
+    status = "BadWriteNotSupported"
+
+
+class ControllerUnavailable(WriteError):
+    """The controller could not be reached to carry out the write."""
+
+    status = "BadNotConnected"
+
+
+# --- sources and sinks -------------------------------------------------------------------------
+
+
+class SourceError(GatewayError):
+    """A controller driver could not do its job (connect, browse, subscribe)."""
+
+    def __init__(self, reason: str, *, status: str = "BadCommunicationError") -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.status = status
+
+
+class SinkError(GatewayError):
+    """A sink could not start or serve (port in use, bad certificate, ...)."""
+
+
+# --- codecs ------------------------------------------------------------------------------------
+
+
+class CodecError(GatewayError, ValueError):
+    """Bytes or text that do not follow the format they claim to."""

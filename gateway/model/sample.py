@@ -1,0 +1,51 @@
+"""A variable's latest value, with the controller's timestamp and a quality."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from enum import Enum
+from typing import Any
+
+
+class Quality(str, Enum):
+    GOOD = "good"
+    UNCERTAIN = "uncertain"
+    BAD = "bad"
+
+
+def quality_of(status: str) -> Quality:
+    """OPC UA status names start with their severity: Good…, Uncertain…, Bad…."""
+    if status.startswith("Good"):
+        return Quality.GOOD
+    if status.startswith("Uncertain"):
+        return Quality.UNCERTAIN
+    return Quality.BAD
+
+
+def utcnow() -> datetime:
+    return datetime.now(timezone.utc)
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One observation of a variable.
+
+    `status` is an OPC UA StatusCode name ("Good", "BadNotConnected", ...), so that
+    the OPC UA sink can report the real code and the other sinks a readable reason.
+    `value` is in engineering units (scaling already applied); when the quality is
+    bad it holds the last good value, which MQTT may still show beside the quality.
+    """
+
+    value: Any
+    source_ts: datetime
+    status: str = "Good"
+    reason: str = ""
+
+    @property
+    def quality(self) -> Quality:
+        return quality_of(self.status)
+
+    @property
+    def good(self) -> bool:
+        return self.status.startswith("Good")

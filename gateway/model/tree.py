@@ -1,0 +1,286 @@
+"""The variable tree: one node per mapped variable, holding its latest Sample.
+
+Sources push raw controller values in through `Machine.ingest`; scaling and
+deadband are applied here, once, and accepted changes go to the change hub.
+Writes from any sink come back through `Machine.write`, which checks access,
+type and range and undoes the scaling before asking the source. Nothing else
+talks to a controller.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Awaitable, Callable, Iterator
+from datetime import datetime
+from typing import Any, Protocol
+
+from gateway.config.mapping import MachineMapping, VariableSpec
+from gateway.errors import ControllerUnavailable, NotWritable, OutOfRange, UnknownVariable
+from gateway.model.hub import ChangeHub
+from gateway.model.sample import Sample, utcnow
+from gateway.model.status import MachineStatus
+from gateway.model.types import DataType, TypeSpec, check_int_bounds, coerce
+
+
+class Writer(Protocol):
+    """What the tree needs from a source to carry out a write: the raw value, to the controller."""
+
+    async def write(self, node: VariableNode, raw: Any) -> None: ...
+
+
+# A write hook sees every write before it reaches the source, and may refuse it
+# (role checks, audit). It receives the node, the engineering value and the caller.
+WriteHook = Callable[["VariableNode", Any, "WriteContext"], Awaitable[None]]
+
+
+class WriteContext:
+    """Who is writing, through which sink. Roles and audit build on this."""
+
+    __slots__ = ("origin", "user")
+
+    def __init__(self, origin: str, user: str | None = None) -> None:
+        self.origin = origin
+        self.user = user
+
+
+class VariableNode:
+    """A variable in the tree. Identity-hashed, so sinks can key their caches on it."""
+
+    __slots__ = (
+        "machine",
+        "spec",
+        "path",
+        "internal",
+        "sample",
+        "_published",
+        "_gain",
+        "_offset",
+        "_deadband",
+        "_scaled",
+        "_round",
+    )
+
+    def __init__(self, machine: Machine, spec: VariableSpec, *, internal: bool = False) -> None:
+        self.machine = machine
+        self.spec = spec
+        self.path = spec.path
+        self.internal = internal
+        self.sample: Sample = Sample(spec.type.default(), utcnow(), "BadWaitingForInitialData", "no value yet")
+        self._published: Any = None
+        scale = spec.scale
+        self._gain = scale.gain if scale else 1.0
+        self._offset = scale.offset if scale else 0.0
+        self._scaled = scale is not None and (self._gain != 1.0 or self._offset != 0.0)
+        self._deadband = spec.deadband_abs
+        self._round = spec.type.is_integer
+
+    def __repr__(self) -> str:
+        return f"<VariableNode {self.machine.name}/{self.path}>"
+
+    @property
+    def type(self) -> TypeSpec:
+        return self.spec.type
+
+    @property
+    def full_path(self) -> str:
+        return f"{self.machine.name}/{self.path}"
+
+    # --- scaling ---------------------------------------------------------------------------
+
+    def to_engineering(self, raw: Any) -> Any:
+        if not self._scaled or raw is None:
+            return raw
+        gain, offset = self._gain, self._offset
+        if isinstance(raw, list):
+            values = [v * gain + offset for v in raw]
+            return [round(v) for v in values] if self._round else values
+        value = raw * gain + offset
+        return round(value) if self._round else value
+
+    def to_raw(self, value: Any) -> Any:
+        """Engineering value to the controller's value and type (the inverse of scaling)."""
+        raw_type = self.spec.raw_type
+        if self._scaled:
+            gain, offset = self._gain, self._offset
+            if isinstance(value, list):
+                value = [(v - offset) / gain for v in value]
+            else:
+                value = (value - offset) / gain
+        if raw_type.is_integer:
+            items = value if isinstance(value, list) else [value]
+            rounded = [round(v) for v in items]
+            for v in rounded:
+                check_int_bounds(raw_type.base, v)
+            return rounded if isinstance(value, list) else rounded[0]
+        if raw_type.base in (DataType.FLOAT, DataType.DOUBLE):
+            return [float(v) for v in value] if isinstance(value, list) else float(value)
+        return value
+
+    # --- deadband --------------------------------------------------------------------------
+
+    def _changed(self, value: Any) -> bool:
+        last = self._published
+        if self._deadband <= 0.0 or last is None:
+            return value != last
+        if isinstance(value, list):
+            if not isinstance(last, list) or len(value) != len(last):
+                return True
+            db = self._deadband
+            return any(abs(a - b) > db for a, b in zip(value, last))
+        return abs(value - last) > self._deadband
+
+    def check_range(self, value: Any) -> None:
+        rng = self.spec.range
+        if rng is None:
+            return
+        for v in value if isinstance(value, list) else (value,):
+            if not rng.min <= v <= rng.max:
+                raise OutOfRange(f"{v} is outside the range {rng.min:g}..{rng.max:g} of {self.full_path}")
+
+
+class Machine:
+    """One machine's part of the tree: its variables, its status, and the way back to its controller."""
+
+    def __init__(self, tree: VariableTree, mapping: MachineMapping) -> None:
+        self.tree = tree
+        self.name = mapping.machine
+        self.mapping = mapping
+        self.nodes: dict[str, VariableNode] = {}
+        self.writer: Writer | None = None
+        self._hub = tree.hub
+        self._last_change_push = 0.0
+        for spec in mapping.variables:
+            self.nodes[spec.path] = VariableNode(self, spec)
+        self.status = MachineStatus(self)
+
+    def __repr__(self) -> str:
+        return f"<Machine {self.name}>"
+
+    @property
+    def mapped(self) -> Iterator[VariableNode]:
+        return (n for n in self.nodes.values() if not n.internal)
+
+    def add_internal(self, path: str, type_name: str, description: str, value: Any) -> VariableNode:
+        """A variable the gateway itself owns (status, jobs), published like any other."""
+        spec = VariableSpec.model_construct(
+            path=path,
+            source="gateway",
+            type=TypeSpec.parse(type_name),
+            source_type=None,
+            unit="",
+            access="read",
+            scale=None,
+            range=None,
+            deadband=None,
+            description=description,
+            sampling_interval=None,
+            queue_size=None,
+        )
+        node = VariableNode(self, spec, internal=True)
+        self.nodes[path] = node
+        self.set_internal(node, value)
+        return node
+
+    def set_internal(self, node: VariableNode, value: Any) -> None:
+        if node._published == value and node.sample.good:
+            return
+        sample = Sample(value, utcnow())
+        node.sample = sample
+        node._published = value
+        self._hub.publish(node, sample)
+
+    # --- from the source -------------------------------------------------------------------
+
+    def ingest(self, node: VariableNode, raw: Any, source_ts: datetime, status: str = "Good", reason: str = "") -> None:
+        """A value (or a bad status) reported by the controller for one variable."""
+        if status.startswith("Bad"):
+            self._publish_status(node, status, reason, source_ts)
+            return
+        try:
+            value = node.to_engineering(raw)
+        except TypeError:
+            self._publish_status(
+                node, "BadTypeMismatch", f"controller sent {type(raw).__name__}, mapping says {node.type}", source_ts
+            )
+            return
+        prev = node.sample
+        if prev.status == status and not node._changed(value):
+            return
+        sample = Sample(value, source_ts, status, reason)
+        node.sample = sample
+        node._published = value
+        self._hub.publish(node, sample)
+        now = time.monotonic()
+        if now - self._last_change_push >= 1.0:
+            self._last_change_push = now
+            self.status.changed(source_ts)
+
+    def invalidate(self, status: str, reason: str) -> None:
+        """Every mapped variable turns bad at once, e.g. when the controller is unreachable."""
+        now = utcnow()
+        for node in self.mapped:
+            self._publish_status(node, status, reason, now)
+
+    def _publish_status(self, node: VariableNode, status: str, reason: str, ts: datetime) -> None:
+        prev = node.sample
+        if prev.status == status and prev.reason == reason:
+            return
+        sample = Sample(prev.value, ts, status, reason)
+        node.sample = sample
+        self._hub.publish(node, sample)
+
+    # --- from a sink -----------------------------------------------------------------------
+
+    async def write(self, path: str, value: Any, ctx: WriteContext) -> None:
+        """Check and carry out a write. Raises a WriteError subclass with the reason if refused."""
+        node = self.nodes.get(path)
+        if node is None:
+            raise UnknownVariable(f"{self.name} has no variable {path!r}")
+        await self.write_node(node, value, ctx)
+
+    async def write_node(self, node: VariableNode, value: Any, ctx: WriteContext) -> None:
+        if node.internal or not node.spec.writable:
+            raise NotWritable(f"{node.full_path} is read-only")
+        engineering = coerce(node.type, value)
+        node.check_range(engineering)
+        for hook in self.tree.write_hooks:
+            await hook(node, engineering, ctx)
+        raw = node.to_raw(engineering)
+        writer = self.writer
+        if writer is None:
+            raise ControllerUnavailable(f"{self.name} has no controller connection")
+        await writer.write(node, raw)
+
+
+class VariableTree:
+    """All machines, and the hub their changes go through."""
+
+    def __init__(self, mappings: list[MachineMapping] | tuple[MachineMapping, ...] = ()) -> None:
+        self.hub = ChangeHub()
+        self.machines: dict[str, Machine] = {}
+        self.write_hooks: list[WriteHook] = []
+        for mapping in mappings:
+            self.add_machine(mapping)
+
+    def add_machine(self, mapping: MachineMapping) -> Machine:
+        if mapping.machine in self.machines:
+            raise ValueError(f"machine {mapping.machine!r} defined twice")
+        machine = Machine(self, mapping)
+        self.machines[mapping.machine] = machine
+        return machine
+
+    def nodes(self) -> Iterator[VariableNode]:
+        for machine in self.machines.values():
+            yield from machine.nodes.values()
+
+    def find(self, machine: str, path: str) -> VariableNode:
+        try:
+            return self.machines[machine].nodes[path]
+        except KeyError:
+            raise UnknownVariable(f"no variable {machine}/{path}") from None
+
+    async def write(self, machine: str, path: str, value: Any, ctx: WriteContext) -> None:
+        m = self.machines.get(machine)
+        if m is None:
+            raise UnknownVariable(f"no machine {machine!r}")
+        await m.write(path, value, ctx)

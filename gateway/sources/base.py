@@ -1,0 +1,40 @@
+"""The source interface: a driver that keeps one machine's variables up to date.
+
+A source is an async context manager with a long-running `run()`. It pushes
+values into the tree with `Machine.ingest`, turns them bad with
+`Machine.invalidate` when the controller is unreachable, reports its connection
+through `Machine.status`, and carries out writes the tree has already checked.
+It never raises out of `run()` for a controller problem: it retries with backoff.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, Self
+
+from gateway.model.tree import Machine, VariableNode
+
+
+class Source(Protocol):
+    machine: Machine
+
+    async def __aenter__(self) -> Self: ...
+
+    async def __aexit__(self, *exc_info: object) -> None: ...
+
+    async def run(self) -> None:
+        """Connect, subscribe, and reconnect with backoff, until cancelled."""
+        ...
+
+    async def write(self, node: VariableNode, raw: Any) -> None:
+        """Write a raw (already checked and unscaled) value. Raises ControllerRefused/ControllerUnavailable."""
+        ...
+
+
+def create_source(machine: Machine) -> Source:
+    """The driver named by the machine's mapping."""
+    driver = machine.mapping.driver
+    if driver.type == "opcua":
+        from gateway.sources.opcua_client import OpcUaSource
+
+        return OpcUaSource(machine)
+    raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable
