@@ -70,10 +70,7 @@ def read_yaml(path: Path, environ: Mapping[str, str] | None = None) -> Located:
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError([ConfigIssue(file, line, "", f"invalid YAML: {problem}")]) from None
+        raise ConfigError([_yaml_issue(file, exc)]) from None
     if node is None:
         raise ConfigError([ConfigIssue(file, 1, "", "the file is empty")])
     builder = _Builder(Located(file, None), env)
@@ -81,6 +78,22 @@ def read_yaml(path: Path, environ: Mapping[str, str] | None = None) -> Located:
     if builder.issues:
         raise ConfigError(builder.issues)
     return builder.located
+
+
+def _yaml_issue(file: str, exc: yaml.YAMLError) -> ConfigIssue:
+    """Locate a syntax error where the user can fix it: where the broken construct began
+    if the parser only noticed at the end of the file, else where it noticed."""
+    problem_mark = getattr(exc, "problem_mark", None)
+    context_mark = getattr(exc, "context_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc)
+    context = getattr(exc, "context", None)
+    mark = problem_mark
+    if context_mark is not None and (problem_mark is None or "<stream end>" in problem):
+        mark = context_mark
+    message = f"invalid YAML: {problem}"
+    if context and context_mark is not None:
+        message += f" ({context} at line {context_mark.line + 1})"
+    return ConfigIssue(file, mark.line + 1 if mark is not None else None, "", message)
 
 
 class _Builder:

@@ -1,0 +1,66 @@
+"""`cnc-gateway discover opc.tcp://…`: browse a controller and print a starting mapping file."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import sys
+from pathlib import Path
+
+from gateway.config.mapping import check_endpoint
+from gateway.errors import SourceError
+from gateway.logconfig import configure
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("discover", help="browse a controller's OPC UA server and print a starting mapping file")
+    p.add_argument("endpoint", help="opc.tcp://host:port of the controller")
+    p.add_argument("--machine", default="my-machine", help="machine name for the generated file")
+    p.add_argument("--user", default=None)
+    p.add_argument("--password", default=None, help="or set CNC_DISCOVER_PASSWORD")
+    p.add_argument("--security", default="None", help="asyncua security string (default None)")
+    p.add_argument("--start", default=None, help="node id to browse from (default: Objects)")
+    p.add_argument("--max-depth", type=int, default=12)
+    p.add_argument("--max-variables", type=int, default=5000)
+    p.add_argument("--timeout", type=float, default=5.0)
+    p.add_argument("-o", "--output", type=Path, default=None, help="write to this file instead of stdout")
+    p.set_defaults(handler=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    import os
+
+    from gateway.sources.opcua_discover import discover
+
+    configure("warning")
+    try:
+        check_endpoint(args.endpoint)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    password = args.password or os.environ.get("CNC_DISCOVER_PASSWORD")
+    try:
+        text = asyncio.run(
+            discover(
+                args.endpoint,
+                machine=args.machine,
+                username=args.user,
+                password=password,
+                security=args.security,
+                start=args.start,
+                max_depth=args.max_depth,
+                max_variables=args.max_variables,
+                timeout=args.timeout,
+            )
+        )
+    except SourceError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    if args.output:
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    logging.shutdown()
+    return 0

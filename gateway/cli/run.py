@@ -1,0 +1,52 @@
+"""`cnc-gateway run FILE...`: run the gateway from a gateway file or from mapping files."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+from pathlib import Path
+
+from gateway.app import Gateway, run_until_signalled
+from gateway.cli.check import report_config_error
+from gateway.config.loader import Config, load
+from gateway.errors import ConfigError, SinkError
+from gateway.logconfig import configure
+
+log = logging.getLogger("gateway")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="run the gateway (a gateway file, or one or more mapping files with defaults)")
+    p.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default=None)
+    p.set_defaults(handler=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    try:
+        config = load(args.files)
+    except ConfigError as exc:
+        report_config_error(exc)
+        return 2
+    configure(args.log_level or config.gateway.log_level)
+    return asyncio.run(serve(config))
+
+
+async def serve(config: Config) -> int:
+    try:
+        await run_until_signalled(_serve(config))
+    except SinkError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
+    return 0
+
+
+async def _serve(config: Config) -> None:
+    async with Gateway(config) as gw:
+        for sink in gw.sinks:
+            endpoint = getattr(sink, "endpoint", None)
+            if endpoint:
+                log.info("%s serving on %s", sink.name, endpoint)
+        log.info("mirroring %s", ", ".join(f"{m.machine} ({len(m.variables)} variables)" for m in config.machines))
+        await gw.run()

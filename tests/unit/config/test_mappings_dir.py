@@ -1,0 +1,39 @@
+"""Every file shipped in mappings/ loads, and the committed JSON Schemas are current."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from gateway.cli.schema import schema
+from gateway.config.loader import load, load_mapping, read_yaml, is_gateway_file
+
+MAPPINGS = Path(__file__).resolve().parents[3] / "mappings"
+YAML_FILES = sorted(MAPPINGS.glob("*.yaml"))
+
+
+def test_there_are_mapping_files() -> None:
+    assert any(p.name == "laser-sim.yaml" for p in YAML_FILES)
+
+
+@pytest.mark.parametrize("path", YAML_FILES, ids=[p.name for p in YAML_FILES])
+def test_shipped_file_is_valid(path: Path) -> None:
+    config = load([path], environ={})
+    assert config.machines
+    if not is_gateway_file(read_yaml(path, environ={})):
+        assert load_mapping(path, environ={}).machine == config.machines[0].machine
+
+
+@pytest.mark.parametrize(("name", "gateway"), [("mapping.schema.json", False), ("gateway.schema.json", True)])
+def test_committed_schema_matches_the_models(name: str, gateway: bool) -> None:
+    committed = json.loads((MAPPINGS / name).read_text(encoding="utf-8"))
+    assert committed == schema(gateway), f"mappings/{name} is stale: run `make schema`"
+
+
+def test_schema_rejects_unknown_keys_like_the_loader() -> None:
+    s = schema()
+    assert s["additionalProperties"] is False
+    assert s["$defs"]["VariableSpec"]["additionalProperties"] is False
+    assert "Double[]" in s["$defs"]["VariableSpec"]["properties"]["type"]["enum"]
