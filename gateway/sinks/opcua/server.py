@@ -1,0 +1,355 @@
+"""The OPC UA server sink: the address space SCADA clients browse, subscribe to and write through.
+
+This is the one module that touches asyncua's server API. It starts the server,
+adds the tree's nodes in batches through the internal session, mirrors every
+change from the hub into the address space, and routes client writes of our
+variables through the tree by replacing the server's attribute service.
+
+Seams for the work that builds on this server (alarms, commands, programs,
+users): `server` (the asyncua Server), `machine_node_id()`, `add_nodes()` for more
+nodes in our namespace, and `user_name`, which turns a session's user into the
+name passed to the tree in `WriteContext.user`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import logging
+import socket
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Self
+from urllib.parse import urlsplit
+
+from asyncua import Server, ua
+from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.address_space import AddressSpace, AttributeService
+
+from gateway import __version__
+from gateway.config.gateway import OpcUaServerConfig
+from gateway.errors import SinkError
+from gateway.model.hub import Change, Subscription
+from gateway.model.sample import utcnow
+from gateway.model.tree import VariableNode, VariableTree
+from gateway.sinks.opcua.address_space import AddressSpacePlan
+from gateway.sinks.opcua.values import ValueKind, ValueMismatch, value_kind
+from gateway.sinks.opcua.writes import write_node
+
+log = logging.getLogger(__name__)
+
+ADD_BATCH = 2000  # AddNodesItems per call; the loop gets a turn between batches
+YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
+
+SECURITY_POLICIES: dict[str, ua.SecurityPolicyType] = {
+    "None": ua.SecurityPolicyType.NoSecurity,
+}
+
+
+def session_user_name(user: Any) -> str | None:
+    """Default `OpcUaSink.user_name`: the name asyncua's user manager gave the session, if any."""
+    name = getattr(user, "name", None)
+    return name if isinstance(name, str) and name else None
+
+
+class _Variable:
+    """What the sink caches per tree variable."""
+
+    __slots__ = ("node", "nodeid", "kind")
+
+    def __init__(self, node: VariableNode, nodeid: ua.NodeId, kind: ValueKind) -> None:
+        self.node = node
+        self.nodeid = nodeid
+        self.kind = kind
+
+
+class _GatewayAttributeService(AttributeService):
+    """asyncua's attribute service, except that writes to our nodes go to the tree.
+
+    Writes from the server's own internal session (asyncua itself, other gateway
+    components writing locally) keep asyncua's behaviour.
+    """
+
+    def __init__(self, aspace: AddressSpace, sink: OpcUaSink, internal_user: User) -> None:
+        super().__init__(aspace)
+        self._sink = sink
+        self._internal_user = internal_user
+
+    async def write(self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)) -> list[ua.StatusCode]:
+        owned = self._sink._owned
+        items = params.NodesToWrite
+        if user is self._internal_user or not any(wv.NodeId in owned for wv in items):
+            return await super().write(params, user)
+        results: list[ua.StatusCode] = [ua.StatusCode()] * len(items)
+        ours = [(i, wv) for i, wv in enumerate(items) if wv.NodeId in owned]
+        others = [(i, wv) for i, wv in enumerate(items) if wv.NodeId not in owned]
+        if others:
+            theirs = await super().write(ua.WriteParameters(NodesToWrite=[wv for _, wv in others]), user)
+            for (i, _), status in zip(others, theirs):
+                results[i] = status
+        name = self._sink.user_name(user)
+        statuses = await asyncio.gather(*(self._sink._client_write(wv, name) for _, wv in ours))
+        for (i, _), status in zip(ours, statuses):
+            results[i] = status
+        return results
+
+
+class OpcUaSink:
+    """Mirrors the variable tree as an OPC UA server (implements gateway.sinks.base.Sink)."""
+
+    name = "opcua"
+
+    def __init__(self, tree: VariableTree, config: OpcUaServerConfig, state_dir: Path) -> None:
+        self.tree = tree
+        self.config = config
+        self.state_dir = state_dir  # for the server's certificates, once secure endpoints arrive
+        self.endpoint: str = config.endpoint
+        self.namespace_index: int = -1
+        self.application_uri = f"urn:{socket.gethostname()}:cnc-gateway"
+        self.user_name: Callable[[Any], str | None] = session_user_name
+        self._server: Server | None = None
+        self._plan: AddressSpacePlan | None = None
+        self._sub: Subscription | None = None
+        self._vars: dict[VariableNode, _Variable] = {}
+        self._by_id: dict[ua.NodeId, _Variable] = {}
+        self._owned: set[ua.NodeId] = set()
+        self._mismatched: set[VariableNode] = set()  # holding a value their type cannot carry
+        self._unplaceable: set[VariableNode] = set()  # late variables the server refused
+        self._failing: set[VariableNode] = set()  # whose last value write failed unexpectedly
+
+    # --- seams for other components ----------------------------------------------------------
+
+    @property
+    def server(self) -> Server:
+        if self._server is None:
+            raise RuntimeError("the OPC UA sink is not started")
+        return self._server
+
+    @property
+    def machines_node_id(self) -> ua.NodeId:
+        return self._require_plan().machines_id
+
+    def machine_node_id(self, machine: str) -> ua.NodeId:
+        """The machine's Object, under which alarms, commands and programs attach."""
+        if machine not in self.tree.machines:
+            raise KeyError(f"no machine {machine!r}")
+        return self._require_plan().machine_id(machine)
+
+    def node_id(self, node: VariableNode) -> ua.NodeId:
+        return self._require_plan().variable_id(node)
+
+    async def add_nodes(self, items: Sequence[ua.AddNodesItem]) -> list[ua.NodeId]:
+        """Add nodes in batches through the internal session; raises SinkError if any is refused."""
+        isession = self.server.iserver.isession
+        added: list[ua.NodeId] = []
+        for start in range(0, len(items), ADD_BATCH):
+            chunk = list(items[start : start + ADD_BATCH])
+            results = await isession.add_nodes(chunk)
+            for item, result in zip(chunk, results):
+                if not result.StatusCode.is_good():
+                    raise SinkError(
+                        f"OPC UA server refused node {item.RequestedNewNodeId.to_string()}: {result.StatusCode.name}"
+                    )
+                added.append(result.AddedNodeId)
+            await asyncio.sleep(0)
+        return added
+
+    # --- lifecycle ---------------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        host, port = self._bind_address()
+        _check_port_free(host, port, self.endpoint)
+        started = time.perf_counter()
+        with _gc_paused():
+            await self._start()
+        log.info(
+            "OPC UA server listening on %s: %d variables in namespace %s (ns=%d), started in %.2f s",
+            self.endpoint, len(self._vars), self.config.namespace, self.namespace_index,
+            time.perf_counter() - started,
+        )
+        return self
+
+    async def _start(self) -> None:
+        self._vars, self._by_id, self._owned = {}, {}, set()
+        self._mismatched, self._unplaceable, self._failing = set(), set(), set()
+        server = Server()
+        server.name = self.config.name
+        server.product_uri = "urn:cnc-gateway"
+        server.manufacturer_name = "cnc-gateway"
+        await server.init()
+        await server.set_application_uri(self.application_uri)
+        await server.set_build_info(server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow())
+        server.set_endpoint(self.endpoint)
+        server.set_server_name(self.config.name)
+        server.set_security_policy([SECURITY_POLICIES[mode] for mode in self.config.security])
+        server.allow_remote_admin(False)  # no remote AddNodes/DeleteNodes through the "admin" user name
+        self.namespace_index = await server.register_namespace(self.config.namespace)
+        iserver = server.iserver
+        iserver.attribute_service = _GatewayAttributeService(iserver.aspace, self, iserver.isession.user)
+        self._server = server
+        self._plan = AddressSpacePlan(self.namespace_index)
+        # Subscribe before reading the initial samples, so no change falls between the two.
+        self._sub = self.tree.hub.subscribe(self.name)
+        try:
+            await self._build()
+            await server.start()
+        except BaseException as exc:
+            await self._close()
+            self._server = self._plan = None
+            if isinstance(exc, OSError):
+                raise SinkError(f"OPC UA server cannot listen on {self.endpoint}: {exc.strerror or exc}") from None
+            raise
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._close()
+        server, self._server = self._server, None
+        if server is None:
+            return
+        iserver = server.iserver
+        clock = iserver.time_task
+        if clock is not None:
+            # asyncua's clock task sleeps a whole second between ticks; stop it now, not then.
+            clock.cancel()
+            await asyncio.wait({clock})
+            iserver.time_task = None
+        await server.stop()
+        log.info("OPC UA server on %s stopped", self.endpoint)
+
+    async def _close(self) -> None:
+        if self._sub is not None:
+            self._sub.close()
+            self._sub = None
+
+    async def run(self) -> None:
+        """Mirror every change from the hub into the address space, until cancelled."""
+        sub = self._sub
+        if sub is None:
+            raise RuntimeError("enter the OPC UA sink before running it")
+        while True:
+            batch = await sub.next_batch()
+            await self._push(batch)
+
+    # --- address space -----------------------------------------------------------------------
+
+    def _require_plan(self) -> AddressSpacePlan:
+        if self._plan is None:
+            raise RuntimeError("the OPC UA sink is not started")
+        return self._plan
+
+    def _bind_address(self) -> tuple[str, int]:
+        parts = urlsplit(self.endpoint)
+        assert parts.hostname is not None and parts.port is not None  # checked by the config
+        return parts.hostname, parts.port
+
+    async def _build(self) -> None:
+        plan = self._require_plan()
+        plan.add_machines(self.tree.machines.values())
+        await self.add_nodes(plan.take())
+        self._register(plan)
+        await self._push([(node, node.sample) for node in self._vars])
+
+    def _register(self, plan: AddressSpacePlan) -> None:
+        for node, nodeid in plan.variables.items():
+            if node not in self._vars:
+                var = _Variable(node, nodeid, value_kind(node.type))
+                self._vars[node] = var
+                self._by_id[nodeid] = var
+        self._owned |= plan.owned
+
+    async def _place(self, node: VariableNode) -> _Variable | None:
+        """A variable that appeared after start-up (a new internal variable, a new machine)."""
+        if node in self._unplaceable:
+            return None
+        plan = self._require_plan()
+        try:
+            plan.add_variable(node)
+            await self.add_nodes(plan.take())
+        except Exception as exc:  # a refused node must not stop the value loop
+            self._unplaceable.add(node)
+            log.error("cannot add %s to the OPC UA address space: %s", node.full_path, exc)
+            return None
+        self._register(plan)
+        return self._vars.get(node)
+
+    # --- values ------------------------------------------------------------------------------
+
+    async def _push(self, batch: list[Change]) -> None:
+        write = self.server.write_attribute_value
+        variables = self._vars
+        mismatched = self._mismatched
+        now = utcnow()
+        count = 0
+        for node, sample in batch:
+            var = variables.get(node)
+            if var is None:
+                var = await self._place(node)
+                if var is None:
+                    continue
+            try:
+                dv = var.kind.datavalue(sample, now)
+            except ValueMismatch as exc:
+                if node not in mismatched:
+                    mismatched.add(node)
+                    log.warning("%s holds %r, which OPC UA cannot carry as %s: %s",
+                                node.full_path, sample.value, node.type, exc)
+                dv = var.kind.mismatch(sample, now)
+            else:
+                if mismatched:
+                    mismatched.discard(node)
+            try:
+                await write(var.nodeid, dv)
+            except Exception:  # not expected; one variable must not stop the others
+                if node not in self._failing:
+                    self._failing.add(node)
+                    log.exception("cannot update %s in the OPC UA address space", node.full_path)
+            count += 1
+            if count % YIELD_EVERY == 0:
+                await asyncio.sleep(0)
+                now = utcnow()
+
+    # --- writes ------------------------------------------------------------------------------
+
+    async def _client_write(self, wv: ua.WriteValue, user: str | None) -> ua.StatusCode:
+        var = self._by_id.get(wv.NodeId)
+        if var is None:  # one of our folders, objects or properties
+            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+        return await write_node(var.node, var.kind, wv, user)
+
+
+@contextmanager
+def _gc_paused() -> Iterator[None]:
+    """Hold off the cyclic garbage collector while the address space is built.
+
+    Building creates about a million small objects next to the few hundred thousand
+    of asyncua's standard address space, and the full collections this triggers
+    took about half of the start-up time. Reference counting still frees what it
+    can at once; only cyclic garbage waits for the first collection afterwards.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+def _check_port_free(host: str, port: int, endpoint: str) -> None:
+    """Fail with a clear SinkError when the port is taken, rather than asyncua's logged traceback."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise SinkError(f"OPC UA endpoint {endpoint}: cannot resolve {host!r}: {exc.strerror}") from None
+    for family, socktype, proto, _, addr in infos:
+        try:
+            probe = socket.socket(family, socktype, proto)
+        except OSError:  # e.g. IPv6 disabled on this host; asyncio skips that family too
+            continue
+        with probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                probe.bind(addr)
+            except OSError as exc:
+                raise SinkError(f"OPC UA server cannot listen on {endpoint}: {exc.strerror or exc}") from None

@@ -1,0 +1,69 @@
+"""Client writes to the gateway's nodes: OPC UA strictness first, then the tree decides.
+
+A Write to one of our variables is checked the way an OPC UA client expects (the
+Variant's type must be the node's, no arrays into scalars, no Bad-status or null
+values, only the Value attribute), then handed to `Machine.write_node`, which checks
+access, range and roles, unscales, and asks the source. The answer's status name
+becomes the StatusCode returned to the client. An accepted write does not change
+the node: the new value comes back from the controller like any other change.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from asyncua import ua
+
+from gateway.errors import WriteError
+from gateway.model.tree import VariableNode, WriteContext
+from gateway.sinks.opcua.address_space import access_level
+from gateway.sinks.opcua.values import ValueKind, status_code
+
+log = logging.getLogger(__name__)
+
+ORIGIN = "opcua"
+
+
+def _bad(name: str) -> ua.StatusCode:
+    return ua.StatusCode(getattr(ua.StatusCodes, name))
+
+
+def precheck(node: VariableNode, kind: ValueKind, wv: ua.WriteValue) -> ua.StatusCode | None:
+    """The StatusCode that refuses this write before the tree sees it, or None to go on."""
+    if wv.AttributeId != ua.AttributeIds.Value:
+        return _bad("BadNotWritable")
+    if not access_level(node) & ua.AccessLevel.CurrentWrite.mask:
+        return _bad("BadNotWritable")
+    if wv.IndexRange:
+        return _bad("BadWriteNotSupported")
+    dv = wv.Value
+    if dv is None or (dv.StatusCode is not None and dv.StatusCode.is_bad()):
+        return _bad("BadTypeMismatch")
+    variant = dv.Value
+    if variant is None or variant.Value is None or variant.VariantType != kind.vtype:
+        return _bad("BadTypeMismatch")
+    is_array = bool(variant.is_array) or isinstance(variant.Value, (list, tuple))
+    if is_array != kind.spec.array:
+        return _bad("BadTypeMismatch")
+    if is_array and variant.Dimensions is not None and len(variant.Dimensions) > 1:
+        return _bad("BadTypeMismatch")
+    return None
+
+
+async def write_node(node: VariableNode, kind: ValueKind, wv: ua.WriteValue, user: str | None) -> ua.StatusCode:
+    """Carry out one client write to a tree variable; never raises."""
+    refused = precheck(node, kind, wv)
+    if refused is not None:
+        return refused
+    value = wv.Value.Value.Value
+    if isinstance(value, tuple):
+        value = list(value)
+    try:
+        await node.machine.write_node(node, value, WriteContext(ORIGIN, user))
+    except WriteError as exc:
+        log.info("OPC UA write to %s refused (%s): %s", node.full_path, exc.status, exc.reason)
+        return status_code(exc.status)
+    except Exception:
+        log.exception("OPC UA write to %s failed unexpectedly", node.full_path)
+        return _bad("BadInternalError")
+    return ua.StatusCode(ua.StatusCodes.Good)
