@@ -76,6 +76,26 @@ class OutOfRange(WriteError):
     status = "BadOutOfRange"
 
 
+class ArgumentsMissing(WriteError):
+    status = "BadArgumentsMissing"
+
+
+class TooManyArguments(WriteError):
+    status = "BadTooManyArguments"
+
+
+class InvalidState(WriteError):
+    """The machine is not in a state that allows this (e.g. start while in Alarm)."""
+
+    status = "BadInvalidState"
+
+
+class Timeout(WriteError):
+    """The controller did not confirm in time."""
+
+    status = "BadTimeout"
+
+
 class ControllerRefused(WriteError):
     """The controller answered the write with an error of its own."""
 

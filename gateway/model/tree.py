@@ -16,7 +16,9 @@ from typing import Any, Protocol
 
 from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ControllerUnavailable, NotWritable, OutOfRange, UnknownVariable
+from gateway.model.events import EventBus
 from gateway.model.hub import ChangeHub
+from gateway.model.methods import Method
 from gateway.model.sample import Sample, utcnow
 from gateway.model.status import MachineStatus
 from gateway.model.types import DataType, TypeSpec, check_int_bounds, coerce
@@ -147,6 +149,7 @@ class Machine:
         self.mapping = mapping
         self.nodes: dict[str, VariableNode] = {}
         self.writer: Writer | None = None
+        self.methods: dict[tuple[str, str], Method] = {}
         self._hub = tree.hub
         self._last_change_push = 0.0
         for spec in mapping.variables:
@@ -180,6 +183,13 @@ class Machine:
         self.nodes[path] = node
         self.set_internal(node, value)
         return node
+
+    def add_method(self, method: Method) -> None:
+        """Register an operation (see gateway/model/methods.py); sinks expose it."""
+        key = (method.object, method.name)
+        if key in self.methods:
+            raise ValueError(f"{self.name} already has {method.object}.{method.name}")
+        self.methods[key] = method
 
     def set_internal(self, node: VariableNode, value: Any) -> None:
         if node._published == value and node.sample.good:
@@ -257,6 +267,7 @@ class VariableTree:
 
     def __init__(self, mappings: list[MachineMapping] | tuple[MachineMapping, ...] = ()) -> None:
         self.hub = ChangeHub()
+        self.events = EventBus()
         self.machines: dict[str, Machine] = {}
         self.write_hooks: list[WriteHook] = []
         for mapping in mappings:

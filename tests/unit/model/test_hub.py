@@ -70,3 +70,17 @@ async def test_unsubscribed_sinks_get_nothing() -> None:
     sub.close()
     hub.publish(Node(), sample(1))
     assert sub.backlog == 0 and hub.subscriptions == ()
+
+
+async def test_event_bus_bounds_each_subscriber_and_counts_drops() -> None:
+    from gateway.model.events import Event, EventBus
+
+    bus = EventBus()
+    slow = bus.subscribe("slow", limit=3)
+    fast = bus.subscribe("fast", limit=100)
+    for i in range(5):
+        bus.publish(Event("m1", "jobs/events", {"n": i}))
+    assert [e.payload["n"] for e in slow.take()] == [2, 3, 4]
+    assert slow.dropped == 2
+    assert [e.payload["n"] for e in await asyncio.wait_for(fast.next_batch(), 1)] == [0, 1, 2, 3, 4]
+    assert fast.dropped == 0
