@@ -1,0 +1,137 @@
+"""`cnc-simulator`: run the simulated laser cutter until SIGINT/SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from simulator.errors import SimulatorError
+from simulator.runner import Simulator
+from simulator.variables import NAMESPACE_URI
+
+log = logging.getLogger("simulator")
+
+NOISY = ("asyncua", "aioftp")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="cnc-simulator",
+        description="A simulated laser cutter that runs G-code, with OPC UA and an FTP program store.",
+    )
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 for all)"
+    )
+    p.add_argument("--opcua-port", type=int, default=4841, help="OPC UA port (default 4841)")
+    p.add_argument("--ftp-port", type=int, default=2122, help="FTP port (default 2122)")
+    p.add_argument(
+        "--speed", type=_positive, default=1.0, help="simulated seconds per real second (default 1)"
+    )
+    p.add_argument(
+        "--tick", type=_positive, default=0.02, help="seconds between updates (default 0.02, 50 Hz)"
+    )
+    p.add_argument(
+        "--store", type=Path, default=None, help="program store folder (default: a fresh temporary one)"
+    )
+    p.add_argument(
+        "--loop", metavar="NAME", default=None, help="select and start NAME, and restart it after each end"
+    )
+    p.add_argument("--ftp-user", default=None, help="FTP user (default $CNC_SIM_FTP_USER or 'cnc')")
+    p.add_argument(
+        "--ftp-password", default=None, help="FTP password (default $CNC_SIM_FTP_PASSWORD or 'simulator')"
+    )
+    p.add_argument("--opcua-user", default=None, help="require this OPC UA user (default: anonymous access)")
+    p.add_argument("--opcua-password", default=None, help="password of --opcua-user")
+    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
+    return p
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError("must be > 0")
+    return value
+
+
+def configure_logging(level: str) -> None:
+    logging.basicConfig(
+        level=getattr(logging, level.upper()),
+        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
+        datefmt="%Y-%m-%d %H:%M:%S",
+        stream=sys.stderr,
+        force=True,
+    )
+    for name in NOISY:
+        logging.getLogger(name).setLevel(logging.DEBUG if level == "debug" else logging.WARNING)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if (args.opcua_user is None) != (args.opcua_password is None):
+        build_parser().error("--opcua-user and --opcua-password go together")
+    configure_logging(args.log_level)
+    try:
+        return asyncio.run(serve(args))
+    except KeyboardInterrupt:  # a signal before the handlers were installed
+        return 0
+
+
+async def serve(args: argparse.Namespace) -> int:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):  # Windows has no signal handlers
+            loop.add_signal_handler(sig, stop.set)
+    simulator = Simulator(
+        host=args.host,
+        opcua_port=args.opcua_port,
+        ftp_port=args.ftp_port,
+        speed=args.speed,
+        tick=args.tick,
+        store=args.store,
+        loop_program=args.loop,
+        ftp_user=args.ftp_user,
+        ftp_password=args.ftp_password,
+        opcua_user=args.opcua_user,
+        opcua_password=args.opcua_password,
+    )
+    try:
+        async with simulator:
+            print_banner(simulator, args)
+            await stop.wait()
+            log.info("shutting down")
+    except SimulatorError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
+    return 0
+
+
+def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
+    programs = ", ".join(sim.programs.names()) or "(none)"
+    auth = f"user {args.opcua_user}" if args.opcua_user else "anonymous"
+    lines = [
+        "",
+        "cnc-simulator: laser cutter, X 0..3000 Y 0..1500 Z -5..100 mm",
+        f"  OPC UA   {sim.opcua_endpoint}  (security None, {auth}; {NAMESPACE_URI} is ns=2)",
+        "           e.g. ns=2;s=::AsGlobalPV:gAxis[0].ActPos, write ns=2;s=::AsGlobalPV:gCmd.Start",
+        f"  FTP      ftp://{sim.host}:{sim.ftp_port}/DATA/Programs  (user {sim.ftp_user})",
+        f"  store    {sim.store}",
+        f"  programs {programs}",
+        f"  speed    {sim.speed:g}x" + (f", looping {sim.loop_program}" if sim.loop_program else ""),
+        "  stop     Ctrl-C",
+        "",
+    ]
+    print("\n".join(lines), flush=True)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

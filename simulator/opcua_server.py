@@ -1,0 +1,259 @@
+"""The simulator's OPC UA server: the PLC's variables, answering writes like a controller does.
+
+asyncua's default attribute service answers every refused client write with
+BadUserAccessDenied. A controller is more specific, and the gateway must cope
+with what controllers say, so writes to our namespace go through
+`_ControllerAttributeService`: BadNotWritable for read-only variables,
+BadTypeMismatch for the wrong Variant type, and whatever the machine's command
+raises (BadOutOfRange, BadInvalidState, BadInvalidArgument).
+
+Values are pushed by `publish()`, which the runner calls every tick: only the
+variables that changed are written, stamped with the machine's clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import logging
+from collections.abc import Callable, Iterable
+from datetime import UTC, datetime
+from typing import Any, Self
+
+from asyncua import Server, ua
+from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.address_space import AttributeService
+
+from gateway.errors import WriteError
+from simulator.errors import SimulatorError
+from simulator.machine import Machine
+from simulator.variables import GLOBAL_FOLDER, NAMESPACE_URI, PLC_FOLDER, TASKS_FOLDER, Variable
+
+log = logging.getLogger("simulator.opcua")
+
+Clock = Callable[[], datetime]
+_UNSET = object()
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+def variant_type(type_name: str) -> tuple[ua.VariantType, bool]:
+    """`"UInt32[]"` -> (VariantType.UInt32, True)."""
+    array = type_name.endswith("[]")
+    return getattr(ua.VariantType, type_name.removesuffix("[]")), array
+
+
+class _PasswordUsers:
+    """One user name and password; everything else (anonymous included) is refused."""
+
+    def __init__(self, user: str, password: str) -> None:
+        self.user = user
+        self.password = password
+
+    def get_user(
+        self, iserver: Any, username: str | None = None, password: str | None = None, certificate: Any = None
+    ) -> User | None:
+        if username is None or password is None:
+            return None
+        if username == self.user and hmac.compare_digest(password.encode(), self.password.encode()):
+            return User(role=UserRole.User, name=username)
+        return None
+
+
+class _ControllerAttributeService(AttributeService):
+    """Client writes to the PLC namespace are judged by the variable table and the machine."""
+
+    def __init__(self, base: AttributeService, plc: PlcServer) -> None:
+        super().__init__(base._aspace)
+        self._plc = plc
+
+    async def write(self, params: ua.WriteParameters, user: User | None = None) -> list[ua.StatusCode]:
+        user = user if user is not None else User(role=UserRole.Admin)
+        results: list[ua.StatusCode] = []
+        for wv in params.NodesToWrite:
+            if wv.NodeId.NamespaceIndex != self._plc.ns:
+                one = ua.WriteParameters()
+                one.NodesToWrite = [wv]
+                results.extend(await super().write(one, user))
+            else:
+                results.append(await self._plc.client_write(wv))
+        return results
+
+
+class PlcServer:
+    """An asyncua Server holding the PLC variables of one machine. Async context manager."""
+
+    def __init__(
+        self,
+        machine: Machine,
+        variables: Iterable[Variable],
+        *,
+        host: str = "127.0.0.1",
+        port: int = 4841,
+        user: str | None = None,
+        password: str | None = None,
+        clock: Clock = utcnow,
+    ) -> None:
+        if (user is None) != (password is None):
+            raise ValueError("give both an OPC UA user and a password, or neither")
+        self.machine = machine
+        self.variables = list(variables)
+        self.host = host
+        self.port = port
+        self._auth = (user, password) if user is not None and password is not None else None
+        self._clock = clock
+        self._server: Server | None = None
+        self.ns = 2
+        self._by_id: dict[ua.NodeId, tuple[Variable, ua.VariantType, bool]] = {}
+        self._objects: set[ua.NodeId] = set()
+        self._cache: dict[ua.NodeId, Any] = {}
+        self._lock = asyncio.Lock()
+
+    @property
+    def endpoint(self) -> str:
+        return f"opc.tcp://{self.host}:{self.port}"
+
+    async def __aenter__(self) -> Self:
+        users = _PasswordUsers(*self._auth) if self._auth else None
+        server = Server(user_manager=users)  # type: ignore[arg-type]
+        self._server = server
+        await server.init()
+        server.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
+        server.set_server_name("cnc-simulator (simulated B&R-style PLC)")
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        server.set_identity_tokens([ua.UserNameIdentityToken] if self._auth else [ua.AnonymousIdentityToken])
+        self.ns = await server.register_namespace(NAMESPACE_URI)
+        await self._build()
+        server.iserver.attribute_service = _ControllerAttributeService(server.iserver.attribute_service, self)
+        try:
+            await server.start()
+        except OSError as exc:
+            await self._stop()
+            raise SimulatorError(
+                f"OPC UA server cannot listen on {self.host}:{self.port}: {exc.strerror or exc}"
+            ) from None
+        if server.bserver is not None and self.port == 0:
+            self.port = server.bserver.port or 0
+        await self.publish()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._stop()
+
+    async def _stop(self) -> None:
+        server = self._server
+        if server is None:
+            return
+        self._server = None
+        # asyncua's clock task sleeps 1 s between updates; cancel it rather than wait for it.
+        task = getattr(server.iserver, "time_task", None)
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+            server.iserver.time_task = None
+        await server.stop()
+
+    # --- address space -------------------------------------------------------------------------
+
+    async def _build(self) -> None:
+        assert self._server is not None
+        ns = self.ns
+        objects = self._server.nodes.objects
+        plc = await objects.add_folder(ua.NodeId(PLC_FOLDER, ns), ua.QualifiedName("PLC", ns))
+        nodes = {PLC_FOLDER: plc}
+        for folder_id, name in ((GLOBAL_FOLDER, "Global"), (TASKS_FOLDER, "Tasks")):
+            nodes[folder_id] = await plc.add_folder(ua.NodeId(folder_id, ns), ua.QualifiedName(name, ns))
+        self._objects = {n.nodeid for n in nodes.values()}
+        for var in self.variables:
+            parent = plc
+            for node_id, name in var.ancestors:
+                if node_id not in nodes:
+                    nodes[node_id] = await parent.add_object(
+                        ua.NodeId(node_id, ns), ua.QualifiedName(name, ns)
+                    )
+                    self._objects.add(nodes[node_id].nodeid)
+                parent = nodes[node_id]
+            vtype, array = variant_type(var.type)
+            initial = var.read(self.machine)
+            node = await parent.add_variable(
+                ua.NodeId(var.node_id, ns),
+                ua.QualifiedName(var.name, ns),
+                ua.Variant(initial, vtype, is_array=array),
+                datatype=ua.NodeId(getattr(ua.ObjectIds, vtype.name)),
+            )
+            if array:
+                await node.write_attribute(
+                    ua.AttributeIds.ValueRank, ua.DataValue(ua.Variant(1, ua.VariantType.Int32))
+                )
+                dims = ua.Variant([var.array_length], ua.VariantType.UInt32)
+                await node.write_attribute(ua.AttributeIds.ArrayDimensions, ua.DataValue(dims))
+            if var.description:
+                text = ua.Variant(ua.LocalizedText(var.description), ua.VariantType.LocalizedText)
+                await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(text))
+            if var.writable:
+                await node.set_writable()
+            self._by_id[node.nodeid] = (var, vtype, array)  # the first publish stamps every value
+
+    # --- values --------------------------------------------------------------------------------
+
+    async def publish(self, *, skip: ua.NodeId | None = None) -> None:
+        """Write every variable whose value changed since the last publish, stamped with the machine clock."""
+        server = self._server
+        if server is None:
+            return
+        async with self._lock:
+            stamp = self._clock()
+            for node_id, (var, vtype, array) in self._by_id.items():
+                if node_id == skip:
+                    continue
+                value = var.read(self.machine)
+                if self._cache.get(node_id, _UNSET) == value:
+                    continue
+                self._cache[node_id] = value
+                dv = ua.DataValue(
+                    ua.Variant(value, vtype, is_array=array), SourceTimestamp=stamp, ServerTimestamp=utcnow()
+                )
+                await server.write_attribute_value(node_id, dv)
+
+    async def client_write(self, wv: ua.WriteValue) -> ua.StatusCode:
+        """Judge one client write to the PLC namespace like a controller, and carry it out."""
+        entry = self._by_id.get(wv.NodeId)
+        if entry is None:
+            if wv.NodeId in self._objects:
+                return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+            return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+        var, vtype, array = entry
+        if wv.AttributeId != ua.AttributeIds.Value or var.write is None:
+            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+        if wv.IndexRange:
+            return ua.StatusCode(ua.StatusCodes.BadWriteNotSupported)
+        variant = wv.Value.Value if wv.Value is not None else None
+        if (
+            variant is None
+            or variant.VariantType != vtype
+            or bool(variant.is_array) != array
+            or variant.Value is None
+        ):
+            got = "null" if variant is None else variant.VariantType.name + ("[]" if variant.is_array else "")
+            log.info("write to %s refused: expected %s, got %s", var.node_id, var.type, got)
+            return ua.StatusCode(ua.StatusCodes.BadTypeMismatch)
+        try:
+            var.write(self.machine, variant.Value)
+        except WriteError as exc:
+            log.info("write %s = %r refused: %s (%s)", var.node_id, variant.Value, exc.reason, exc.status)
+            return ua.StatusCode(getattr(ua.StatusCodes, exc.status, ua.StatusCodes.BadInternalError))
+        log.info("write %s = %r accepted", var.node_id, variant.Value)
+        async with self._lock:
+            # Show what the client wrote (a command bit reads true) until the next tick
+            # puts the machine's own value back, as a PLC cycle would.
+            stamp = self._clock()
+            dv = ua.DataValue(variant, SourceTimestamp=stamp, ServerTimestamp=utcnow())
+            assert self._server is not None
+            await self._server.write_attribute_value(wv.NodeId, dv)
+            self._cache[wv.NodeId] = _UNSET
+        await self.publish(skip=wv.NodeId)  # the command's effects show at once
+        return ua.StatusCode(ua.StatusCodes.Good)

@@ -1,0 +1,43 @@
+%
+O1001 (DEMO LASER JOB)
+(cnc-simulator sample: three contours on a sheet at X100..330 Y100..150)
+(about 40 s at speed 1: cutting at 10-15 mm/s, 0.4-0.5 s pierce dwells)
+N10 G21 G90 G17 G94
+N20 G0 Z10
+(contour 1: rounded rectangle 80 x 50, corner radius 5, by I/J arcs)
+N30 G0 X105 Y100
+N40 G0 Z1
+N50 S2000 M3
+N60 G4 P0.5 (pierce)
+N70 G1 X175 F900
+N80 G3 X180 Y105 I0 J5
+N90 G1 Y145
+N100 G3 X175 Y150 I-5 J0
+N110 G1 X105
+N120 G3 X100 Y145 I0 J-5
+N130 G1 Y105
+N140 G3 X105 Y100 I5 J0
+N150 M5
+N160 G0 Z10
+(contour 2: hole of diameter 24, one full circle)
+N170 G0 X238 Y125
+N180 G0 Z1
+N190 S1500 M3
+N200 G4 P0.4
+N210 G2 X238 Y125 I-12 J0 F600
+N220 M5
+N230 G0 Z10
+(contour 3: slot 40 x 12, by R arcs)
+N240 G0 X280 Y119
+N250 G0 Z1
+N260 S1800 M3
+N270 G4 P0.4
+N280 G1 X320 F600
+N290 G3 X320 Y131 R6
+N300 G1 X280
+N310 G3 X280 Y119 R6
+N320 M5
+N330 G0 Z10
+N340 G0 X0 Y0
+N350 M30
+%

@@ -1,0 +1,205 @@
+"""`Simulator`: the machine model, its OPC UA server, its FTP store and the tick that drives them.
+
+Used by the `cnc-simulator` command, by tests and by `cnc-gateway demo`. Each tick
+advances the model by the real time elapsed times `speed`, then publishes the
+values that changed. The machine's clock (OPC UA SourceTimestamp) is the wall
+clock at the tick: a PLC's clock runs in real time however fast the process does.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import shutil
+import socket
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Self
+
+from gateway.errors import WriteError
+from simulator.errors import SimulatorError
+from simulator.ftp_store import FtpStore
+from simulator.machine import Machine, MachineState
+from simulator.opcua_server import PlcServer, utcnow
+from simulator.store import DirectoryStore
+from simulator.variables import Variable, build_variables
+
+log = logging.getLogger("simulator")
+
+DEFAULT_FTP_USER = "cnc"
+DEFAULT_FTP_PASSWORD = "simulator"  # a simulator-only default; set CNC_SIM_FTP_PASSWORD elsewhere
+LOOP_RESTART_DELAY = 1.0  # s (real time) between the end of a looped program and its restart
+
+
+class Simulator:
+    """Async context manager: starts OPC UA, FTP and the tick task; leaving stops them within a second."""
+
+    def __init__(
+        self,
+        *,
+        host: str = "127.0.0.1",
+        opcua_port: int = 4841,
+        ftp_port: int = 2122,
+        speed: float = 1.0,
+        store: Path | None = None,
+        loop_program: str | None = None,
+        ftp_user: str | None = None,
+        ftp_password: str | None = None,
+        tick: float = 0.02,
+        opcua_user: str | None = None,
+        opcua_password: str | None = None,
+        extra_variables: Sequence[Variable] = (),
+        clock: Callable[[], datetime] = utcnow,
+    ) -> None:
+        if speed <= 0:
+            raise ValueError("speed must be > 0")
+        if tick <= 0:
+            raise ValueError("tick must be > 0")
+        self.host = host
+        self.opcua_port = opcua_port
+        self.ftp_port = ftp_port
+        self.speed = speed
+        self.tick = tick
+        self.loop_program = loop_program
+        self.ftp_user = ftp_user or os.environ.get("CNC_SIM_FTP_USER") or DEFAULT_FTP_USER
+        self.ftp_password = ftp_password or os.environ.get("CNC_SIM_FTP_PASSWORD") or DEFAULT_FTP_PASSWORD
+        self._given_store = store
+        self.store: Path = store if store is not None else Path()
+        self.programs = DirectoryStore(self.store)
+        self.machine = Machine(self.programs)
+        # The variable table; a later benchmark "noise mode" appends its own variables here.
+        self.variables: list[Variable] = build_variables() + list(extra_variables)
+        self._opcua_auth = (opcua_user, opcua_password)
+        self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
+        self._stack: contextlib.AsyncExitStack | None = None
+        self._opcua: PlcServer | None = None
+        self._idle_since: float | None = None
+
+    @property
+    def opcua_endpoint(self) -> str:
+        return f"opc.tcp://{self.host}:{self.opcua_port}"
+
+    async def __aenter__(self) -> Self:
+        stack = contextlib.AsyncExitStack()
+        await stack.__aenter__()
+        try:
+            await self._start(stack)
+        except BaseException:
+            await stack.aclose()
+            raise
+        self._stack = stack
+        return self
+
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        if self._given_store is None:
+            self.store = Path(tempfile.mkdtemp(prefix="cnc-simulator-"))
+            stack.callback(shutil.rmtree, self.store, ignore_errors=True)
+            self.programs = DirectoryStore(self.store)
+            self.machine.store = self.programs
+        try:
+            self.programs.prepare()
+        except OSError as exc:
+            raise SimulatorError(f"cannot use {self.store} as the program store: {exc}") from None
+        # Fail fast and in one line (asyncua logs a traceback, after a second of set-up, otherwise).
+        _check_port(self.host, self.opcua_port, "OPC UA server")
+        _check_port(self.host, self.ftp_port, "FTP server")
+        user, password = self._opcua_auth
+        self._opcua = await stack.enter_async_context(
+            PlcServer(
+                self.machine,
+                self.variables,
+                host=self.host,
+                port=self.opcua_port,
+                user=user,
+                password=password,
+                clock=self.clock,
+            )
+        )
+        self.opcua_port = self._opcua.port
+        ftp = await stack.enter_async_context(
+            FtpStore(
+                self.store, host=self.host, port=self.ftp_port, user=self.ftp_user, password=self.ftp_password
+            )
+        )
+        self.ftp_port = ftp.port
+        if self.loop_program:
+            try:
+                self.machine.select_program(self.loop_program)
+                self.machine.start()
+            except WriteError as exc:
+                raise SimulatorError(f"cannot loop {self.loop_program!r}: {exc.reason}") from None
+        task = asyncio.create_task(self._tick_loop(), name="cnc-simulator:tick")
+        stack.push_async_callback(_cancel, task)
+        log.info(
+            "simulator serving OPC UA on %s and FTP on %s:%d (store %s, speed %g)",
+            self.opcua_endpoint,
+            self.host,
+            self.ftp_port,
+            self.store,
+            self.speed,
+        )
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        stack, self._stack = self._stack, None
+        if stack is not None:
+            await stack.aclose()
+
+    async def _tick_loop(self) -> None:
+        assert self._opcua is not None
+        last = time.monotonic()
+        while True:
+            now = time.monotonic()
+            try:
+                self.machine.step((now - last) * self.speed)
+                self._keep_looping(now)
+                await self._opcua.publish()
+            except Exception:  # a model bug must not stop the server; say so loudly, once per tick
+                log.exception("simulator tick failed")
+            last = now
+            await asyncio.sleep(max(0.0, self.tick - (time.monotonic() - now)))
+
+    def _keep_looping(self, now: float) -> None:
+        """With `loop_program`, restart the program about a second after it ends (or after a reset)."""
+        if not self.loop_program or self.machine.state is not MachineState.IDLE:
+            self._idle_since = None
+            return
+        if self._idle_since is None:
+            self._idle_since = now
+        elif now - self._idle_since >= LOOP_RESTART_DELAY:
+            self._idle_since = None
+            try:
+                if self.machine.program.name != self.loop_program:
+                    self.machine.select_program(self.loop_program)
+                self.machine.start()
+            except WriteError as exc:
+                log.warning("cannot restart %s: %s", self.loop_program, exc.reason)
+
+
+def _check_port(host: str, port: int, what: str) -> None:
+    """Raise SimulatorError if nothing could listen on host:port (bound the way asyncio binds)."""
+    if port == 0:
+        return
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise SimulatorError(f"{what} cannot listen on {host}:{port}: {exc}") from None
+    for family, kind, proto, _name, address in infos:
+        with socket.socket(family, kind, proto) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                probe.bind(address)
+            except OSError as exc:
+                raise SimulatorError(
+                    f"{what} cannot listen on {host}:{port}: {exc.strerror or exc}"
+                ) from None
+
+
+async def _cancel(task: asyncio.Task[None]) -> None:
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task

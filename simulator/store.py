@@ -1,0 +1,107 @@
+"""The program store: where the controller keeps its part programs.
+
+The machine model only needs `exists` and `read`; `DirectoryStore` serves them
+from `<root>/DATA/Programs` on disk, the folder the FTP server exposes, and reads
+a program afresh each time it is selected or started, so programs uploaded over
+FTP are runnable at once. `MemoryStore` serves unit tests.
+"""
+
+from __future__ import annotations
+
+import logging
+from importlib import resources
+from importlib.resources.abc import Traversable
+from pathlib import Path
+from typing import Protocol
+
+log = logging.getLogger("simulator.store")
+
+PROGRAMS_DIR = ("DATA", "Programs")
+MAX_NAME = 255
+
+
+class ProgramNotFound(LookupError):
+    """No program of that name in the store."""
+
+
+class ProgramStore(Protocol):
+    def exists(self, name: str) -> bool: ...
+
+    def read(self, name: str) -> str:
+        """The program's text; raises ProgramNotFound."""
+        ...
+
+
+def check_name(name: str) -> None:
+    """A program name is a plain file name in the programs folder; raise ValueError if not."""
+    if not name or not name.strip():
+        raise ValueError("program name is empty")
+    if len(name) > MAX_NAME:
+        raise ValueError(f"program name is longer than {MAX_NAME} characters")
+    if "/" in name or "\\" in name or name in (".", "..") or "\x00" in name:
+        raise ValueError(f"program name {name!r} must be a plain file name, without folders")
+
+
+class MemoryStore:
+    """Programs held in a dict, for tests."""
+
+    def __init__(self, programs: dict[str, str] | None = None) -> None:
+        self.programs = dict(programs or {})
+
+    def exists(self, name: str) -> bool:
+        return name in self.programs
+
+    def read(self, name: str) -> str:
+        try:
+            return self.programs[name]
+        except KeyError:
+            raise ProgramNotFound(name) from None
+
+
+class DirectoryStore:
+    """Programs as files in `<root>/DATA/Programs`."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.programs = root.joinpath(*PROGRAMS_DIR)
+
+    def prepare(self) -> None:
+        """Create the folders and copy in the sample programs that are not there yet."""
+        self.programs.mkdir(parents=True, exist_ok=True)
+        for sample in sample_programs():
+            target = self.programs / sample.name
+            if not target.exists():
+                target.write_bytes(sample.read_bytes())
+                log.debug("installed sample program %s", target)
+
+    def _path(self, name: str) -> Path | None:
+        try:
+            check_name(name)
+        except ValueError:
+            return None
+        return self.programs / name
+
+    def exists(self, name: str) -> bool:
+        path = self._path(name)
+        return path is not None and path.is_file()
+
+    def read(self, name: str) -> str:
+        path = self._path(name)
+        if path is None:
+            raise ProgramNotFound(name)
+        try:
+            # Undecodable bytes become U+FFFD, which the lexer reports with its line.
+            return path.read_bytes().decode("utf-8", errors="replace")
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+            raise ProgramNotFound(name) from None
+
+    def names(self) -> list[str]:
+        if not self.programs.is_dir():
+            return []
+        return sorted(p.name for p in self.programs.iterdir() if p.is_file())
+
+
+def sample_programs() -> list[Traversable]:
+    """The programs shipped in simulator/programs (package data)."""
+    folder = resources.files("simulator").joinpath("programs")
+    return sorted((p for p in folder.iterdir() if p.name.endswith(".nc")), key=lambda p: p.name)
