@@ -54,7 +54,7 @@ def handle(args: argparse.Namespace) -> int:
                 timeout=args.timeout,
             )
         )
-    except SourceError as exc:
+    except (SourceError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     if args.output:

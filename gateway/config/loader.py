@@ -241,6 +241,26 @@ def _structure_issues(located: Located) -> list[ConfigIssue]:
     for pos, message in tree_conflicts(paths):
         loc: Loc = ("variables", indices[pos], "path")
         issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
+    driver = located.data.get("driver")
+    if isinstance(driver, dict) and driver.get("type", "opcua") == "opcua":
+        issues.extend(_address_issues(located, variables))
+    return issues
+
+
+def _address_issues(located: Located, variables: Sequence[Any]) -> list[ConfigIssue]:
+    """Catch a typo in a node id at load time, not as a Bad variable at run time."""
+    from gateway.sources.opcua_address import AddressError, parse_address
+
+    issues = []
+    for index, var in enumerate(variables):
+        source = var.get("source") if isinstance(var, dict) else None
+        if not isinstance(source, str) or not source:
+            continue
+        try:
+            parse_address(source)
+        except AddressError as exc:
+            loc: Loc = ("variables", index, "source")
+            issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), str(exc)))
     return issues
 
 

@@ -1,0 +1,616 @@
+"""The OPC UA client driver: keeps one machine's variables in step with its controller.
+
+Covers controllers with an OPC UA server (B&R, Siemens, Beckhoff, Fanuc with the
+option) and the simulator. Design choices, and why:
+
+* **Own reconnect loop.** asyncua runs with `auto_reconnect=False`; its supervisor
+  only reports a loss (`connection_lost_callback`), and this driver tears the
+  client down and starts over with backoff. A fresh session after every loss is
+  what controllers handle best, and it re-resolves `nsu=` namespaces each time.
+* **Own publish loop.** asyncua's loop hands every notification to a new task (or
+  a queue) and logs stack traces when the socket drops. Here one task sends the
+  Publish requests and feeds each DataChangeNotification straight into
+  `Machine.ingest`, synchronously, through a ClientHandle → node dict. That keeps
+  the cost per change to a few attribute reads and one call.
+* **Errors stop here.** asyncua's exceptions are translated into gateway.errors
+  (writes) or into a Bad status plus one readable log line (connection), never
+  a traceback for something as ordinary as a controller being switched off.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Callable, Coroutine, Iterator, Sequence
+from datetime import datetime
+from typing import Any, Self
+
+from asyncua import Client, ua
+from asyncua.client.ua_client import UaClientState
+from asyncua.crypto import uacrypto
+from asyncua.ua.uaerrors import (
+    BadTimeout,
+    BadTooManyPublishRequests,
+    UaStatusCodeError,
+    UaStructParsingError,
+)
+from cryptography import x509
+
+from gateway.errors import ControllerRefused, ControllerUnavailable
+from gateway.model.sample import utcnow
+from gateway.model.tree import Machine, VariableNode
+from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
+from gateway.sources.asyncua_logs import quiet_asyncua_logging
+from gateway.sources.backoff import backoff_delays
+from gateway.sources.opcua_address import AddressError, OpcUaAddress, parse_address
+from gateway.sources.opcua_status import describe_error, status_doc, status_name
+
+log = logging.getLogger(__name__)
+
+# Unless the application set the asyncua loggers up itself, keep them to errors.
+quiet_asyncua_logging(logging.ERROR if logging.getLogger("asyncua").level == logging.NOTSET else None)
+
+BATCH_SIZE = 500  # monitored items per CreateMonitoredItems request
+SESSION_TIMEOUT_MS = 60_000  # the server drops our session a minute after we vanish
+CLOSE_BUDGET = 0.5  # seconds allowed for a polite CloseSession on the way out
+KEEPALIVE_MS = 5_000  # the server sends an empty publish response at least this often
+
+_NODE_ID_TYPES = {
+    "i": ua.NodeIdType.Numeric,
+    "s": ua.NodeIdType.String,
+    "g": ua.NodeIdType.Guid,
+    "b": ua.NodeIdType.ByteString,
+}
+
+_PY_TYPES: dict[DataType, type] = {
+    DataType.BOOLEAN: bool,
+    DataType.FLOAT: float,
+    DataType.DOUBLE: float,
+    DataType.STRING: str,
+    DataType.DATETIME: datetime,
+    **{t: int for t in INT_BOUNDS},
+}
+
+Lost = Callable[[str, str], None]
+
+
+# --- client set-up and tear-down (shared with discover) ----------------------------------------
+
+
+async def open_client(
+    endpoint: str,
+    *,
+    timeout: float,
+    username: str | None = None,
+    password: str | None = None,
+    security: str = "None",
+    watchdog_interval: float = 1.0,
+    on_lost: Callable[[Exception], Coroutine[Any, Any, None]] | None = None,
+) -> Client:
+    """Connect and activate a session. Raises what asyncua raises; closes the client on failure."""
+    client = Client(endpoint, timeout=timeout, watchdog_intervall=watchdog_interval, auto_reconnect=False)
+    client.name = client.description = "cnc-gateway"
+    client.application_uri = "urn:cnc-gateway:client"
+    client.product_uri = "urn:cnc-gateway"
+    client.session_timeout = SESSION_TIMEOUT_MS
+    client.connection_lost_callback = on_lost
+    if username:
+        client.set_user(username)
+    if password:
+        client.set_password(password)
+    try:
+        if security and security.strip() != "None":
+            uri = await certificate_uri(security)
+            if uri:  # the session must announce the URI its certificate carries, or servers refuse it
+                client.application_uri = uri
+            await client.set_security_string(security.strip())
+        await client.connect()
+    except BaseException:
+        await close_client(client, polite=False)
+        raise
+    return client
+
+
+async def close_client(client: Client, *, polite: bool) -> None:
+    """Tear a client down quickly, without raising and without asyncua logging a traceback.
+
+    `polite` sends CloseSession (which also deletes our subscription on the
+    server) when the connection is up, within CLOSE_BUDGET; otherwise, or if that
+    fails, the socket is simply aborted and the client's tasks stopped.
+    """
+    # asyncua's own task cancelling swallows a CancelledError aimed at *our* task while it
+    # waits; notice that by the task's cancel count and raise it again afterwards.
+    current = asyncio.current_task()
+    cancels = current.cancelling() if current is not None else 0
+    await _teardown(client, polite)
+    if current is not None and current.cancelling() > cancels:
+        raise asyncio.CancelledError
+
+
+async def _teardown(client: Client, polite: bool) -> None:
+    uaclient = client.uaclient
+    if polite and uaclient.state is UaClientState.CONNECTED:
+        try:
+            async with asyncio.timeout(CLOSE_BUDGET):
+                await client.disconnect()
+            return
+        except Exception:
+            pass
+    proto = uaclient.protocol
+    if proto is not None and proto.transport is not None:
+        proto.transport.abort()
+        await asyncio.sleep(0)  # let connection_lost run, so closing sends nothing on a dead socket
+    try:
+        async with asyncio.timeout(CLOSE_BUDGET):
+            await client.close_session()
+    except Exception:
+        pass
+    try:
+        uaclient.disconnect_socket()
+    except Exception:
+        pass
+
+
+async def certificate_uri(security: str) -> str | None:
+    """The application URI in the client certificate a security string names (Policy,Mode,cert,key)."""
+    parts = [p.strip() for p in security.split(",")]
+    if len(parts) < 3 or not parts[2]:
+        return None
+    try:
+        cert = await uacrypto.load_certificate(parts[2])
+        san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    except Exception:
+        return None  # set_security_string reports an unreadable certificate itself
+    uris = san.value.get_values_for_type(x509.UniformResourceIdentifier)
+    return uris[0] if uris else None
+
+
+def _no_publish_loop() -> None:
+    """Replaces asyncua's publish loop starter: OpcUaSource runs its own."""
+
+
+# --- the driver --------------------------------------------------------------------------------
+
+
+class OpcUaSource:
+    """One machine's OPC UA connection: subscribe, ingest, reconnect, write."""
+
+    def __init__(self, machine: Machine) -> None:
+        self.machine = machine
+        self.driver = machine.mapping.driver
+        self._client: Client | None = None
+        self._connected = False
+        self._publish_task: asyncio.Task[None] | None = None
+        self._last_reason = "not connected yet"
+        self._down_logged = False
+        # Parsed once; resolved to NodeIds at every connect (namespace indexes may change).
+        self._addresses: dict[VariableNode, OpcUaAddress] = {}
+        self._address_errors: dict[VariableNode, str] = {}
+        self._node_ids: dict[VariableNode, ua.NodeId] = {}
+        self._handles: dict[int, tuple[VariableNode, type]] = {}
+        self._failed: set[VariableNode] = set()  # variables whose value made ingest fail (logged once)
+        for handle, node in enumerate(machine.mapped, start=1):
+            try:
+                self._addresses[node] = parse_address(node.spec.source)
+            except AddressError as exc:
+                self._address_errors[node] = str(exc)
+                continue
+            raw = node.spec.raw_type
+            self._handles[handle] = (node, list if raw.array else _PY_TYPES[raw.base])
+
+    def __repr__(self) -> str:
+        return f"<OpcUaSource {self.machine.name} {self.driver.endpoint}>"
+
+    # --- lifecycle -------------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        self.machine.writer = self
+        self._mark_bad_addresses()
+        for node, reason in self._address_errors.items():
+            log.warning("%s: %s is not subscribed: %s", self.machine.name, node.path, reason)
+        if self._address_errors:
+            self.machine.status.error(
+                f"{len(self._address_errors)} variable(s) have an invalid address: "
+                + _first(n.path for n in self._address_errors)
+            )
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._stop()
+        if self.machine.writer is self:
+            self.machine.writer = None
+
+    async def _stop(self) -> None:
+        """Close politely; the status says so, the values keep their last status until a restart."""
+        was_connected = self._connected
+        await self._close(polite=True)
+        if was_connected:
+            self.machine.status.disconnected("gateway stopped")
+
+    async def run(self) -> None:
+        """Connect, subscribe, reconnect with backoff, until cancelled. Never raises for controller trouble."""
+        delays = self._delays()
+        try:
+            while True:
+                self.machine.status.connecting()
+                try:
+                    loss = await self._connect()
+                except Exception as exc:
+                    status, reason, expected = describe_error(exc)
+                    await self._drop(status, reason, None if expected else exc)
+                else:
+                    delays = self._delays()
+                    status, reason = await loss
+                    await self._drop(status, reason, None)
+                await asyncio.sleep(next(delays))
+        finally:
+            await self._stop()
+
+    def _delays(self) -> Iterator[float]:
+        r = self.driver.reconnect
+        return backoff_delays(r.initial, r.factor, r.max)
+
+    # --- connecting ------------------------------------------------------------------------
+
+    async def _connect(self) -> asyncio.Future[tuple[str, str]]:
+        """Open a session and subscribe everything; returns a future that resolves on loss."""
+        loss: asyncio.Future[tuple[str, str]] = asyncio.get_running_loop().create_future()
+
+        def lost(status: str, reason: str) -> None:
+            if not loss.done():
+                loss.set_result((status, reason))
+
+        async def on_connection_lost(exc: Exception) -> None:
+            status, reason, _ = describe_error(exc)
+            if isinstance(exc, TimeoutError):
+                reason = "controller stopped answering (watchdog timeout)"
+            lost(status, reason)
+
+        d = self.driver
+        client = await open_client(
+            d.endpoint,
+            timeout=d.timeout,
+            username=d.username,
+            password=d.password.get_secret_value() if d.password is not None else None,
+            security=d.security,
+            watchdog_interval=d.watchdog_interval,
+            on_lost=on_connection_lost,
+        )
+        self._client = client
+        namespaces = await client.get_namespace_array()
+        unresolved = self._resolve(namespaces)
+        session = client.uaclient.session
+        session.ensure_publish_loop = _no_publish_loop  # type: ignore[method-assign]
+        requested = self._subscription_parameters()
+        result = await session.create_subscription(requested, callback=self._on_informed(lost))
+        refused = await self._create_items(session, result.SubscriptionId)
+        interval = result.RevisedPublishingInterval or requested.RequestedPublishingInterval
+        keepalive_s = (
+            interval * (result.RevisedMaxKeepAliveCount or requested.RequestedMaxKeepAliveCount) / 1000.0
+        )
+        self._publish_task = asyncio.create_task(
+            self._publish_loop(session, lost, stall_after=2 * keepalive_s + d.timeout),
+            name=f"opcua-publish:{self.machine.name}",
+        )
+        self._connected = True
+        self._down_logged = False
+        self.machine.status.connected()
+        problems = unresolved + refused
+        log.info(
+            "%s: connected to %s, %d variables subscribed%s",
+            self.machine.name,
+            d.endpoint,
+            len(self._node_ids) - len(refused),
+            f", {len(problems)} not available" if problems else "",
+        )
+        if problems:
+            message = f"{len(problems)} variable(s) not available: {_first(problems)}"
+            log.warning("%s: %s", self.machine.name, message)
+            self.machine.status.error(message)
+        return loss
+
+    def _resolve(self, namespaces: Sequence[str]) -> list[str]:
+        """NodeIds for this server's namespace array; variables whose namespace is missing turn Bad."""
+        self._node_ids.clear()
+        problems = []
+        now = utcnow()
+        for node, address in self._addresses.items():
+            try:
+                index = address.resolve(list(namespaces))
+            except AddressError as exc:
+                self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.spec.source}: {exc}")
+                problems.append(f"{node.path} (BadNodeIdUnknown)")
+                continue
+            self._node_ids[node] = ua.NodeId(address.identifier, index, _NODE_ID_TYPES[address.kind])
+        return problems
+
+    def _subscription_parameters(self) -> ua.CreateSubscriptionParameters:
+        interval = self.driver.publishing_interval
+        keepalive = max(1, math.ceil(KEEPALIVE_MS / interval))
+        return ua.CreateSubscriptionParameters(
+            RequestedPublishingInterval=interval,
+            RequestedLifetimeCount=keepalive * 6,
+            RequestedMaxKeepAliveCount=keepalive,
+            MaxNotificationsPerPublish=0,
+            PublishingEnabled=True,
+            Priority=0,
+        )
+
+    async def _create_items(self, session: Any, subscription_id: int) -> list[str]:
+        """Monitored items in batches; an item the server refuses turns only its variable Bad."""
+        mapping = self.machine.mapping
+        wanted = [(h, node) for h, (node, _) in self._handles.items() if node in self._node_ids]
+        refused: list[str] = []
+        for start in range(0, len(wanted), BATCH_SIZE):
+            batch = wanted[start : start + BATCH_SIZE]
+            requests = [
+                ua.MonitoredItemCreateRequest(
+                    ItemToMonitor=ua.ReadValueId(
+                        NodeId=self._node_ids[node], AttributeId=ua.AttributeIds.Value
+                    ),
+                    MonitoringMode=ua.MonitoringMode.Reporting,
+                    RequestedParameters=ua.MonitoringParameters(
+                        ClientHandle=handle,
+                        SamplingInterval=mapping.sampling_interval(node.spec),
+                        QueueSize=mapping.queue_size(node.spec),
+                        DiscardOldest=True,
+                    ),
+                )
+                for handle, node in batch
+            ]
+            params = ua.CreateMonitoredItemsParameters(
+                SubscriptionId=subscription_id,
+                TimestampsToReturn=ua.TimestampsToReturn.Both,
+                ItemsToCreate=requests,
+            )
+            results = await session.create_monitored_items(params)
+            now = utcnow()
+            for (_, node), res in zip(batch, results):
+                code = res.StatusCode.value
+                if code & 0x80000000:
+                    name = status_name(code)
+                    self.machine.ingest(
+                        node, None, now, name, f"{node.spec.source}: {name} ({status_doc(code)})"
+                    )
+                    refused.append(f"{node.path} ({name})")
+        return refused
+
+    # --- losing the connection -------------------------------------------------------------
+
+    async def _drop(self, status: str, reason: str, unexpected: BaseException | None) -> None:
+        """Tear down after a failed attempt or a loss: variables Bad, status, one log line per transition."""
+        was_connected = self._connected
+        await self._close(polite=False)
+        self.machine.invalidate(status, reason)
+        self._mark_bad_addresses()
+        self.machine.status.disconnected(reason)
+        name, endpoint = self.machine.name, self.driver.endpoint
+        if unexpected is not None and (was_connected or not self._down_logged or reason != self._last_reason):
+            log.error("%s: %s; retrying", name, reason, exc_info=unexpected)
+        elif was_connected:
+            log.warning("%s: lost connection to %s: %s; reconnecting", name, endpoint, reason)
+        elif not self._down_logged:
+            log.warning("%s: cannot connect to %s: %s; will keep retrying", name, endpoint, reason)
+        elif reason != self._last_reason:
+            log.info("%s: still cannot connect to %s: %s", name, endpoint, reason)
+        else:
+            log.debug("%s: connect attempt to %s failed: %s", name, endpoint, reason)
+        self._down_logged = True
+        self._last_reason = reason
+
+    async def _close(self, *, polite: bool) -> None:
+        self._connected = False
+        task, self._publish_task = self._publish_task, None
+        if task is not None:
+            task.cancel()
+            await asyncio.wait([task])
+        client, self._client = self._client, None
+        if client is not None:
+            await close_client(client, polite=polite)
+
+    def _mark_bad_addresses(self) -> None:
+        now = utcnow()
+        for node, reason in self._address_errors.items():
+            self.machine.ingest(node, None, now, "BadNodeIdInvalid", reason)
+
+    # --- receiving -------------------------------------------------------------------------
+
+    async def _publish_loop(self, session: Any, lost: Lost, *, stall_after: float) -> None:
+        """One Publish request in flight at a time; each answer goes straight into the tree.
+
+        Every way out of this loop except cancellation reports a loss, so a dead
+        subscription never leaves the machine looking connected.
+        """
+        try:
+            await self._receive(session, lost, stall_after)
+        except Exception as exc:  # a bug, not a controller problem: say so with the traceback, then reconnect
+            log.error("%s: receiving failed", self.machine.name, exc_info=exc)
+            lost("BadInternalError", f"unexpected error: {type(exc).__name__}: {exc}")
+
+    async def _receive(self, session: Any, lost: Lost, stall_after: float) -> None:
+        acks: list[ua.SubscriptionAcknowledgement] = []
+        while True:
+            try:
+                async with asyncio.timeout(stall_after):
+                    response = await session.publish(acks)
+            except (BadTimeout, BadTooManyPublishRequests):
+                acks = []
+                await asyncio.sleep(0.05)
+                continue
+            except UaStructParsingError:
+                acks = []  # one undecodable message (asyncua has logged it); the next one may be fine
+                continue
+            except TimeoutError:
+                lost("BadCommunicationError", "subscription stalled (no publish response)")
+                return
+            except Exception as exc:
+                status, reason, _ = describe_error(exc)
+                lost(status, reason)
+                return
+            header_status = response.ResponseHeader.ServiceResult.value
+            if header_status & 0x80000000:
+                lost(*describe_error(UaStatusCodeError(header_status))[:2])
+                return
+            result = response.Parameters
+            message = result.NotificationMessage
+            acks = []
+            if message.NotificationData:
+                acks.append(
+                    ua.SubscriptionAcknowledgement(
+                        SubscriptionId=result.SubscriptionId, SequenceNumber=message.SequenceNumber
+                    )
+                )
+                self._process(message.NotificationData, lost)
+
+    def _on_informed(self, lost: Lost) -> Callable[[ua.PublishResult], None]:
+        """The callback asyncua calls when its supervisor tells subscriptions the connection is gone."""
+
+        def callback(result: ua.PublishResult) -> None:
+            data = result.NotificationMessage.NotificationData
+            if data:
+                self._process(data, lost)
+
+        return callback
+
+    def _process(self, notifications: list[Any], lost: Lost) -> None:
+        """Hot path: every data change goes straight to `Machine.ingest`."""
+        handles = self._handles
+        ingest = self.machine.ingest
+        for notification in notifications:
+            if type(notification) is ua.DataChangeNotification:
+                for item in notification.MonitoredItems:
+                    entry = handles.get(item.ClientHandle)
+                    if entry is None:
+                        continue
+                    node, expected = entry
+                    dv = item.Value
+                    variant = dv.Value
+                    value = None if variant is None else variant.Value
+                    ts = dv.SourceTimestamp or dv.ServerTimestamp
+                    if ts is None or ts.year < 1971:
+                        ts = utcnow()
+                    code = dv.StatusCode
+                    try:
+                        if (code is None or code.value == 0) and type(value) is expected:
+                            ingest(node, value, ts)
+                        else:
+                            self._ingest_other(node, value, ts, 0 if code is None else code.value)
+                    except Exception as exc:  # one odd value must not stop the others
+                        self._ingest_failed(node, value, exc)
+            elif isinstance(notification, ua.StatusChangeNotification):
+                code = notification.Status.value
+                if code & 0x80000000:
+                    status, reason, _ = describe_error(UaStatusCodeError(code))
+                    lost(status, reason)
+
+    def _ingest_failed(self, node: VariableNode, value: Any, exc: Exception) -> None:
+        reason = f"cannot take {value!r:.40}: {type(exc).__name__}: {exc}"
+        if node not in self._failed:
+            self._failed.add(node)
+            log.error("%s: %s: %s", self.machine.name, node.path, reason, exc_info=exc)
+        self.machine.ingest(node, None, utcnow(), "BadInternalError", reason)
+
+    def _ingest_other(self, node: VariableNode, value: Any, ts: datetime, code: int) -> None:
+        """The slow path: a non-Good status, or a value whose Python type is not the mapped one."""
+        name = status_name(code)
+        if code & 0x80000000:
+            self.machine.ingest(node, None, ts, name, f"controller reports {name} ({status_doc(code)})")
+            return
+        converted, problem = _convert(node.spec.raw_type, value)
+        if problem:
+            self.machine.ingest(
+                node, None, ts, "BadTypeMismatch", f"{problem}, mapping says {node.spec.raw_type}"
+            )
+        else:
+            self.machine.ingest(node, converted, ts, name)
+
+    # --- writing ---------------------------------------------------------------------------
+
+    async def write(self, node: VariableNode, raw: Any) -> None:
+        """Write one raw value as a Variant of the mapped type, value only (no timestamps, no status)."""
+        client = self._client
+        if client is None or not self._connected:
+            raise ControllerUnavailable(
+                f"{self.machine.name} is not connected to its controller ({self._last_reason})"
+            )
+        node_id = self._node_ids.get(node)
+        if node_id is None:
+            bad = node.sample.status if node.sample.status.startswith("Bad") else "BadNodeIdUnknown"
+            raise ControllerRefused(f"{node.spec.source} is not available: {node.sample.reason}", status=bad)
+        raw_type = node.spec.raw_type
+        try:
+            variant = ua.Variant(
+                list(raw) if raw_type.array else raw,
+                ua.VariantType[raw_type.base.value],
+                is_array=raw_type.array,
+            )
+        except Exception as exc:
+            raise ControllerRefused(
+                f"cannot encode {raw!r} as {raw_type}: {exc}", status="BadTypeMismatch"
+            ) from None
+        params = ua.WriteParameters(
+            NodesToWrite=[
+                ua.WriteValue(
+                    NodeId=node_id,
+                    AttributeId=ua.AttributeIds.Value,
+                    Value=ua.DataValue(variant, StatusCode=None),
+                )
+            ]
+        )
+        timeout = self.driver.timeout
+        try:
+            async with asyncio.timeout(timeout):
+                results = await client.uaclient.session.write(params)
+        except TimeoutError:
+            raise ControllerUnavailable(
+                f"the controller did not answer the write within {timeout:g} s", status="BadTimeout"
+            ) from None
+        except UaStatusCodeError as exc:
+            name = status_name(exc.code)
+            raise ControllerRefused(
+                f"controller refused: {name} ({status_doc(exc.code)})", status=name
+            ) from None
+        except (ConnectionError, OSError):
+            raise ControllerUnavailable(
+                "the connection to the controller was lost during the write"
+            ) from None
+        except Exception as exc:
+            raise ControllerUnavailable(f"write failed: {type(exc).__name__}: {exc}") from None
+        code = results[0].value if results else 0x80010000
+        if code & 0x80000000:
+            name = status_name(code)
+            raise ControllerRefused(f"controller refused: {name} ({status_doc(code)})", status=name)
+
+
+def _convert(spec: TypeSpec, value: Any) -> tuple[Any, str]:
+    """Reconcile a controller value with the mapped type: (value, "") or (None, what is wrong)."""
+    if value is None:
+        if spec.array:
+            return [], ""
+        if spec.base is DataType.STRING:
+            return "", ""
+        return None, "controller sent no value"
+    if spec.array:
+        if isinstance(value, (list, tuple)):
+            return list(value), ""
+        return None, f"controller sent a scalar {type(value).__name__}"
+    base = spec.base
+    if base in (DataType.FLOAT, DataType.DOUBLE) and type(value) is int:
+        return float(value), ""
+    if base is DataType.STRING and isinstance(value, ua.LocalizedText):
+        return value.Text or "", ""
+    expected = _PY_TYPES[base]
+    if type(value) is expected or (
+        expected is not bool and expected is not int and isinstance(value, expected)
+    ):
+        return value, ""
+    if isinstance(value, list):
+        return None, "controller sent an array"
+    return None, f"controller sent {type(value).__name__} {value!r:.40}"
+
+
+def _first(items: Sequence[str] | Any, limit: int = 5) -> str:
+    items = list(items)
+    text = ", ".join(str(i) for i in items[:limit])
+    return text + (f" and {len(items) - limit} more" if len(items) > limit else "")
