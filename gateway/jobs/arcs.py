@@ -1,0 +1,109 @@
+"""Arc geometry for the run-time estimator: G2/G3 arcs in any plane, by centre or by radius.
+
+Coordinates are plane coordinates (u, v), with w the axis normal to the plane
+(G17: X, Y and Z; G18: Z, X and Y; G19: Y, Z and X), so one set of formulas
+serves all three planes with the same sense of clockwise. The estimator needs
+only an arc's length and the points where it reaches its extremes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+TAU = 2.0 * math.pi
+#: Start and end closer than this (mm) make a full circle.
+SAME_POINT = 1e-6
+#: How far (mm) an end point may lie off the circle before the estimator says so.
+TOLERANCE = 0.005
+
+Point2 = tuple[float, float]
+
+
+class ArcProblem(ValueError):
+    """Arc words that describe no arc; the message becomes an estimator note."""
+
+
+@dataclass(frozen=True, slots=True)
+class PlaneArc:
+    """An arc around `center` swept by `sweep` radians (> 0) from angle `a0`.
+
+    The radius may change linearly from r0 to r1 (an end point off the circle:
+    the controller may refuse it, the estimator reads it as a spiral), and w
+    changes linearly by `dw` (a helix).
+    """
+
+    center: Point2
+    a0: float
+    sweep: float
+    clockwise: bool
+    r0: float
+    r1: float
+    dw: float = 0.0
+
+    @property
+    def length(self) -> float:
+        return math.hypot(0.5 * (self.r0 + self.r1) * self.sweep, self.dw)
+
+    @property
+    def mismatch(self) -> float:
+        """How far (mm) the end point lies off the circle through the start point."""
+        return abs(self.r1 - self.r0)
+
+    def extremes(self) -> list[Point2]:
+        """The points where the arc crosses the ±u and ±v directions from its centre."""
+        out: list[Point2] = []
+        for k in range(4):
+            angle = k * math.pi / 2
+            offset = (self.a0 - angle) % TAU if self.clockwise else (angle - self.a0) % TAU
+            if offset <= self.sweep:
+                f = offset / self.sweep if self.sweep else 0.0
+                r = self.r0 + (self.r1 - self.r0) * min(f, 1.0)
+                out.append((self.center[0] + r * math.cos(angle), self.center[1] + r * math.sin(angle)))
+        return out
+
+
+def _sweep(start: Point2, end: Point2, center: Point2, clockwise: bool, turns: int) -> tuple[float, float]:
+    a0 = math.atan2(start[1] - center[1], start[0] - center[0])
+    a1 = math.atan2(end[1] - center[1], end[0] - center[0])
+    if math.dist(start, end) < SAME_POINT:
+        sweep = TAU
+    else:
+        sweep = (a0 - a1) % TAU if clockwise else (a1 - a0) % TAU
+    return a0, sweep + TAU * (turns - 1)
+
+
+def arc_from_center(
+    start: Point2, end: Point2, center: Point2, clockwise: bool, *, turns: int = 1, dw: float = 0.0
+) -> PlaneArc:
+    """An arc by its centre (already absolute). Start == end is a full circle."""
+    r0 = math.dist(start, center)
+    r1 = math.dist(end, center)
+    if r0 < SAME_POINT:
+        raise ArcProblem("the arc centre coincides with its start point")
+    a0, sweep = _sweep(start, end, center, clockwise, turns)
+    return PlaneArc(center, a0, sweep, clockwise, r0, r1, dw)
+
+
+def arc_from_radius(
+    start: Point2, end: Point2, radius: float, clockwise: bool, *, turns: int = 1, dw: float = 0.0
+) -> PlaneArc:
+    """An arc by radius: R > 0 takes the arc of at most 180 degrees, R < 0 the longer one."""
+    du, dv = end[0] - start[0], end[1] - start[1]
+    chord = math.hypot(du, dv)
+    r = abs(radius)
+    if chord < SAME_POINT:
+        raise ArcProblem("an R arc cannot be a full circle (its end point equals its start)")
+    if r < SAME_POINT:
+        raise ArcProblem("arc radius R is 0")
+    if chord > 2 * r + TOLERANCE:
+        raise ArcProblem(f"arc radius {r:g} mm is too small for a chord of {chord:.4f} mm")
+    h = math.sqrt(max(r * r - (chord / 2) ** 2, 0.0))
+    # The centre of the shorter arc lies left of the chord for G3 (counter-clockwise), right for G2.
+    left = (-dv / chord, du / chord)
+    side = -1.0 if clockwise else 1.0
+    if radius < 0:
+        side = -side
+    center = (start[0] + du / 2 + side * h * left[0], start[1] + dv / 2 + side * h * left[1])
+    a0, sweep = _sweep(start, end, center, clockwise, turns)
+    return PlaneArc(center, a0, sweep, clockwise, r, r, dw)

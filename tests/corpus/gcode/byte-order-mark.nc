@@ -1,0 +1,4 @@
+﻿(expect: character 1:1)
+G21 G90
+G1 X10 F1500
+M30

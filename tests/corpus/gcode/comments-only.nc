@@ -1,0 +1,3 @@
+(expect: empty -)
+(this job lost its body somewhere)
+; nothing but comments

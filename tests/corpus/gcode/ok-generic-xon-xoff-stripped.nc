@@ -1,0 +1,6 @@
+(expect: accepted)
+(rules: {dialect: generic})
+G21 G90
+G1 X10 F1500
+M30
+

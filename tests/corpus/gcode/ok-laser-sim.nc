@@ -1,0 +1,19 @@
+%
+O1001 (DEMO – TWO HOLES)
+(expect: accepted)
+(rules: {dialect: laser-sim})
+(name: demo-holes.nc)
+N10 G21 G90 G17 G94
+N20 G0 X110 Y110 Z1
+N30 S2000 M3
+N40 G4 P0.4
+N50 G2 X110 Y110 I-10 J0 F600
+N60 M5
+N70 G0 X160
+N80 M3
+N90 G4 P0.4
+N100 G2 X160 Y110 I-10 J0
+N110 M5
+N120 G0 Z10
+N130 M30
+%
