@@ -137,7 +137,57 @@ def lex_lines(text: str) -> Iterator[Block | GcodeError]:
 
 def lex_line(raw: str, line: int = 1) -> Block:
     """Lex one line (without its line end). Raises GcodeError naming the column."""
-    return _LineLexer(raw, line).run()
+    block = _fast_line(raw, line)
+    return block if block is not None else _LineLexer(raw, line).run()
+
+
+# One token of an ordinary line: a word (letter, optional sign, number), a (comment) or a ;comment.
+_TOKEN = re.compile(
+    r"[ \t]*(?:(?P<letter>[A-Za-z^@])[ \t]*(?P<number>[+-]?[ \t]*(?:[0-9]+\.?[0-9]*|\.[0-9]+))"
+    r"|\((?P<comment>[^()]*)\)|;(?P<tail>.*))"
+)
+_SIMPLE_END = re.compile(r"[ \t]*")
+
+
+def _fast_line(raw: str, line: int) -> Block | None:
+    """The common case in one regex pass per token; None sends the line to the exact lexer.
+
+    Anything unusual (a marker, block delete, N or O words, a character that is not
+    a word or a comment, a number too large) takes the slow path, which also owns
+    every error message, so both paths agree on what a line means.
+    """
+    words: list[Word] = []
+    comments: list[str] = []
+    pos = 0
+    end = len(raw)
+    match = _TOKEN.match
+    while True:
+        m = match(raw, pos)
+        if m is None:
+            if _SIMPLE_END.match(raw, pos).end() != end:  # type: ignore[union-attr]
+                return None
+            break
+        letter = m.group("letter")
+        if letter is not None:
+            upper = letter.upper()
+            if upper in "NO":
+                return None
+            number = m.group("number")
+            value = float(number.replace(" ", "").replace("\t", ""))
+            if value in (math.inf, -math.inf):
+                return None
+            start = m.start("letter")
+            words.append(Word(upper, value, raw[start : m.end()], start + 1))
+        else:
+            tail = m.group("tail")
+            if tail is not None:
+                comments.append(tail)
+                break
+            comments.append(m.group("comment"))
+        pos = m.end()
+        if pos >= end:
+            break
+    return Block(line, None, tuple(words), tuple(comments), raw)
 
 
 class _LineLexer:

@@ -204,3 +204,13 @@ def test_gcode_like_text_raises_nothing_but_gcode_error(text: str) -> None:
         parse_program(text)
     except GcodeError as exc:
         assert exc.line >= 1 and exc.column >= 1
+
+
+@given(st.text(alphabet="GXYZgxyzFIJKMNOS0123456789.+- \t();%/#[]", max_size=40))
+def test_fast_path_agrees_with_the_exact_lexer(line: str) -> None:
+    from gateway.codecs.gcode import _LineLexer, _fast_line
+
+    fast = _fast_line(line, 7)
+    if fast is None:
+        return
+    assert fast == _LineLexer(line, 7).run()
