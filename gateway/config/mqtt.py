@@ -1,0 +1,202 @@
+"""MQTT settings: the broker connection (gateway file), and how machines and variables appear there.
+
+The gateway file's `mqtt:` section says which broker to reach and how; without
+it the gateway does not use MQTT at all. Mapping files may refine, per machine
+and per variable, the QoS, the retain flag, the payload form, the topic and
+whether writes over MQTT are allowed (they are off unless a mapping says so).
+
+These models do not derive from `gateway.config.mapping.Strict` only because
+the mapping models embed them (a circular import); the rules are the same:
+unknown keys are errors and loaded settings are immutable.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    SecretStr,
+    field_validator,
+    model_validator,
+)
+
+QoS = Literal[0, 1, 2]
+PayloadMode = Literal["json", "raw"]
+
+_TOPIC_FORBIDDEN = re.compile(r"[+#\x00]")
+
+
+class MqttStrict(BaseModel):
+    """Same rules as mapping.Strict: unknown keys are errors, loaded settings are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def check_topic_part(text: str, what: str) -> str:
+    """A topic or topic prefix we publish under: no wildcards, no empty levels, no NUL."""
+    if not text:
+        raise ValueError(f"{what} must not be empty")
+    if _TOPIC_FORBIDDEN.search(text):
+        raise ValueError(f"{what} {text!r} must not contain the MQTT wildcards '+' or '#' or a NUL character")
+    if text.startswith("/") or text.endswith("/") or "//" in text:
+        raise ValueError(f"{what} {text!r} must be levels joined by '/', without empty levels")
+    if text.startswith("$"):
+        raise ValueError(f"{what} {text!r} must not start with '$' (brokers reserve such topics)")
+    if len(text.encode("utf-8")) > 32_000:
+        raise ValueError(f"{what} is too long")
+    return text
+
+
+def _protocol(value: Any) -> Any:
+    """YAML reads `protocol: 5` as a number; accept it, and 3.1.1 written as text."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
+    return value
+
+
+class MqttTls(MqttStrict):
+    """TLS towards the broker. The broker's certificate and host name are verified unless `verify: false`."""
+
+    ca: str | None = Field(
+        default=None, description="CA certificate file (PEM); default: the system's trusted CAs"
+    )
+    cert: str | None = Field(
+        default=None, description="Client certificate file (PEM), for brokers that require one"
+    )
+    key: str | None = Field(default=None, description="Client private key file (PEM); default: inside `cert`")
+    key_password: SecretStr | None = None
+    verify: bool = Field(
+        default=True, description="Verify the broker's certificate and host name (keep this on)"
+    )
+
+    @model_validator(mode="after")
+    def _key_needs_cert(self) -> MqttTls:
+        if self.key is not None and self.cert is None:
+            raise ValueError("tls.key needs tls.cert")
+        return self
+
+
+class MqttReconnect(MqttStrict):
+    """Exponential backoff between connection attempts to the broker, in seconds."""
+
+    initial: float = Field(default=1.0, gt=0)
+    max: float = Field(default=30.0, gt=0)
+    factor: float = Field(default=2.0, ge=1)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> MqttReconnect:
+        if self.max < self.initial:
+            raise ValueError("reconnect max must not be below initial")
+        return self
+
+
+class MqttBuffer(MqttStrict):
+    """Store-and-forward while the broker is unreachable (or slower than the machines)."""
+
+    limit: int = Field(
+        default=100_000,
+        ge=1,
+        le=10_000_000,
+        description="QoS 1/2 messages kept, in order, while they cannot be sent; beyond it the oldest are "
+        "dropped "
+        "and counted. Retained state keeps its latest value per topic on top of this.",
+    )
+    persist: bool = Field(
+        default=False,
+        description="Also keep the backlog in <state_dir>/mqtt-backlog.sqlite3: it survives a restart",
+    )
+
+
+class MqttConfig(MqttStrict):
+    """The MQTT broker the gateway publishes to (gateway file). Absent: MQTT is off."""
+
+    host: str = Field(default="127.0.0.1", min_length=1)
+    port: int = Field(default=1883, ge=1, le=65535, description="1883, or usually 8883 with TLS")
+    client_id: str = Field(
+        default="",
+        max_length=128,
+        description="Default: cnc-gateway-<host name>; keep it stable for broker ACLs",
+    )
+    username: str | None = None
+    password: SecretStr | None = Field(
+        default=None, description="Use ${NAME} to take it from the environment"
+    )
+    protocol: Annotated[Literal["3.1.1", "5"], BeforeValidator(_protocol)] = Field(
+        default="3.1.1", description="MQTT protocol version: 3.1.1 or 5"
+    )
+    keepalive: int = Field(default=30, ge=5, le=65535, description="Seconds")
+    connect_timeout: float = Field(default=5.0, gt=0, le=120, description="Seconds for TCP, TLS and CONNACK")
+    tls: MqttTls | None = None
+    prefix: str = Field(default="cnc", description="First topic level(s): <prefix>/<machine>/<path>")
+    qos: QoS = Field(default=1, description="Default QoS of value topics")
+    retain: bool = Field(
+        default=True, description="Retain value topics by default (dashboards see the value at once)"
+    )
+    payload: PayloadMode = Field(
+        default="json", description="json: value, ts, quality, unit; raw: the value as text"
+    )
+    max_inflight: int = Field(
+        default=200, ge=1, le=65000, description="QoS 1/2 messages awaiting the broker's ack"
+    )
+    max_set_payload: int = Field(default=65536, ge=16, description="Largest accepted /set payload, in bytes")
+    max_pending_writes: int = Field(
+        default=64, ge=1, le=100_000, description="Queued /set writes per machine"
+    )
+    reconnect: MqttReconnect = MqttReconnect()
+    buffer: MqttBuffer = MqttBuffer()
+
+    @field_validator("prefix")
+    @classmethod
+    def _prefix(cls, prefix: str) -> str:
+        return check_topic_part(prefix, "prefix")
+
+    @field_validator("client_id")
+    @classmethod
+    def _client_id(cls, value: str) -> str:
+        if _TOPIC_FORBIDDEN.search(value) or any(ch.isspace() for ch in value):
+            raise ValueError(f"client_id {value!r} must not contain spaces, '+', '#' or NUL")
+        return value
+
+
+class MachineMqtt(MqttStrict):
+    """Per machine (mapping file): defaults for this machine's topics."""
+
+    qos: QoS | None = Field(default=None, description="Default: the gateway file's mqtt.qos")
+    retain: bool | None = Field(default=None, description="Default: the gateway file's mqtt.retain")
+    payload: PayloadMode | None = Field(default=None, description="Default: the gateway file's mqtt.payload")
+    writable: bool = Field(
+        default=False,
+        description="Accept <topic>/set writes for this machine's `access: readwrite` variables",
+    )
+
+
+class VariableMqtt(MqttStrict):
+    """Per variable (mapping file): overrides of the machine's MQTT settings."""
+
+    topic: str | None = Field(
+        default=None, description="Topic below <prefix>/<machine>/, instead of the lower-cased path"
+    )
+    qos: QoS | None = None
+    retain: bool | None = None
+    payload: PayloadMode | None = None
+    writable: bool | None = Field(
+        default=None,
+        description="Accept <topic>/set writes (needs access: readwrite); default: the machine's setting",
+    )
+    publish: bool = Field(default=True, description="false: keep this variable out of MQTT altogether")
+
+    @field_validator("topic")
+    @classmethod
+    def _topic(cls, topic: str | None) -> str | None:
+        if topic is None:
+            return None
+        check_topic_part(topic, "topic")
+        levels = topic.split("/")
+        if topic == "status" or levels[-1] == "set" or levels[-2:] == ["set", "result"]:
+            raise ValueError(f"topic {topic!r} would clash with the gateway's own set/result/status topics")
+        return topic

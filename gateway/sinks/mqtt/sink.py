@@ -1,0 +1,490 @@
+"""The MQTT sink: every machine's variables as topics, with liveness, store-and-forward and write-back.
+
+Flow of one change: the hub hands over a batch (every change, in order); each
+change becomes a topic (cached per variable in `Route`) and a payload; it is
+given to paho straight away when the broker is connected, nothing is waiting
+and the window of unacknowledged messages has room, and otherwise goes to the
+`Backlog`. Broker acknowledgements free the window and pull the next messages
+from the backlog, oldest first. When the connection drops, the unacknowledged
+messages go back to the front of the backlog; on reconnect they are sent again,
+then the rest. The hot path never awaits per message.
+
+Liveness: `<prefix>/status` (online, with a last will saying offline) and one
+retained status document per machine. `Status/MqttState` and
+`Status/MqttDropped` show the broker link and the drop count to OPC UA as well.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from pathlib import Path
+from typing import Self
+
+from gateway import __version__
+from gateway.config.mqtt import MqttConfig
+from gateway.errors import BrokerError, BrokerRefused, SinkError
+from gateway.model.hub import Change, Subscription
+from gateway.model.sample import utcnow
+from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
+from gateway.sinks.mqtt.client import (
+    BrokerSettings,
+    Connected,
+    MqttClient,
+    Will,
+    default_client_id,
+    tls_context,
+)
+from gateway.sinks.mqtt.payloads import encode_json, encode_raw
+from gateway.sinks.mqtt.routes import Route, Routes
+from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
+from gateway.sinks.mqtt.topics import TopicClash, set_filters
+from gateway.sinks.mqtt.writes import WriteBack
+from gateway.sources.backoff import backoff_delays
+
+log = logging.getLogger(__name__)
+
+BACKLOG_FILE = "mqtt-backlog.sqlite3"
+YIELD_EVERY = 2000  # changes encoded between turns for the rest of the loop
+STABLE_AFTER = 10.0  # s a connection must last before the reconnect backoff starts again from `initial`
+SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to acknowledge what is in flight
+PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before QoS 0 changes are shed
+REMIND_EVERY = 60.0  # s between "still buffering" log lines during an outage
+
+STATE_CONNECTING, STATE_CONNECTED, STATE_DISCONNECTED = "connecting", "connected", "disconnected"
+
+
+class MqttSink:
+    """Mirrors the variable tree into MQTT topics (implements gateway.sinks.base.Sink)."""
+
+    name = "mqtt"
+
+    def __init__(
+        self, tree: VariableTree, config: MqttConfig, state_dir: Path, *, base_dir: Path | None = None
+    ) -> None:
+        self.tree = tree
+        self.config = config
+        self.state_dir = state_dir
+        self.started = utcnow()
+        # Gateway-owned variables, added now so that every sink (OPC UA too) sees them from the start.
+        self._link_nodes: dict[str, VariableNode] = {}
+        self._dropped_nodes: dict[str, VariableNode] = {}
+        for machine in tree.machines.values():
+            self._add_status_variables(machine)
+        try:
+            self.routes = Routes(tree, config)
+        except TopicClash as exc:
+            raise SinkError(f"MQTT topics: {exc}") from None
+        self._status_nodes = {name: status_nodes(m) for name, m in tree.machines.items()}
+        self._status_owner = {n: name for name, nodes in self._status_nodes.items() for n in nodes}
+        self._last_status: dict[str, bytes] = {}
+        self._dirty: set[str] = set()
+        tls = tls_context(config.tls, base_dir or Path.cwd()) if config.tls is not None else None
+        self.settings = BrokerSettings(
+            host=config.host,
+            port=config.port,
+            client_id=config.client_id or default_client_id(),
+            username=config.username,
+            password=config.password.get_secret_value() if config.password is not None else None,
+            protocol=config.protocol,
+            keepalive=config.keepalive,
+            connect_timeout=config.connect_timeout,
+            tls=tls,
+            tls_verify=config.tls.verify if config.tls is not None else True,
+            will=Will(
+                self.routes.status_topic, gateway_offline(__version__, "connection to the gateway lost")
+            ),
+        )
+        self.writes = WriteBack(tree, self.routes, config, self._answer)
+        self.backlog: Backlog | None = None
+        self.state = STATE_CONNECTING
+        self.last_error = ""
+        self.connects = 0  # successful connections
+        self.attempts = 0  # failed ones
+        self.last_delay = 0.0  # the backoff before the latest retry
+        self.discarded = 0  # QoS 0 changes not sent because the broker was away (QoS 0 promises no more)
+        self._client: MqttClient | None = None
+        self._sub: Subscription | None = None
+        self._inflight: dict[int, Message] = {}
+        self._window = config.max_inflight
+        self._online = False
+        self._lost = asyncio.Event()
+        self._pump_scheduled = False
+        self._dropped_reported = 0
+        self._last_log: tuple[str, float] = ("", 0.0)
+
+    def _add_status_variables(self, machine: Machine) -> None:
+        self._link_nodes[machine.name] = machine.add_internal(
+            "Status/MqttState", "String", "The gateway's link to the MQTT broker: connected, connecting or "
+            "disconnected with the reason", STATE_CONNECTING,
+        )  # fmt: skip
+        self._dropped_nodes[machine.name] = machine.add_internal(
+            "Status/MqttDropped", "UInt64", "Changes of this machine that MQTT store-and-forward had to drop "
+            "(the broker was away longer than the buffer holds)", 0,
+        )  # fmt: skip
+
+    @property
+    def endpoint(self) -> str:
+        return self.settings.address
+
+    @property
+    def online(self) -> bool:
+        return self._online
+
+    @property
+    def in_flight(self) -> int:
+        return len(self._inflight)
+
+    @property
+    def settled(self) -> bool:
+        """Nothing left to do: every change taken from the hub, sent and acknowledged."""
+        sub = self._sub
+        return sub is not None and not sub.backlog and not self._inflight and not self.backlog
+
+    # --- lifecycle -----------------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        journal = Journal(self.state_dir / BACKLOG_FILE) if self.config.buffer.persist else None
+        self.backlog = Backlog(self.config.buffer.limit, journal)
+        self._client = MqttClient(
+            self.settings, on_message=self.writes.handle, on_published=self._published, on_lost=self._on_lost
+        )
+        # Subscribe before reading the current samples, so no change falls between the two.
+        self._sub = self.tree.hub.subscribe(
+            self.name, every_change=True, limit=max(self.config.buffer.limit, 1000)
+        )
+        snapshot = [(n, n.sample) for n in self.tree.nodes() if n.sample.status != "BadWaitingForInitialData"]
+        await self._encode(snapshot)
+        self._dirty.update(self.tree.machines)
+        self._flush_statuses()
+        self._commit()
+        log.info(
+            "MQTT: %d topics under %s/ for %s; broker %s",
+            len(self.routes.by_topic), self.config.prefix, ", ".join(self.tree.machines), self.endpoint,
+        )  # fmt: skip
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        client, backlog = self._client, self.backlog
+        try:
+            if client is not None and self._online:
+                await self._say_goodbye(client)
+            elif client is not None:
+                client.close()
+        finally:
+            self._online = False
+            if backlog is not None:
+                backlog.put_front(list(self._inflight.values()))
+                self._inflight.clear()
+                if backlog.journal is not None:
+                    waiting = backlog.counted
+                    backlog.journal.close()
+                    if waiting:
+                        log.info(
+                            "MQTT: %d messages kept in %s for the next start", waiting, backlog.journal.path
+                        )
+                elif backlog.counted:
+                    log.warning(
+                        "MQTT: %d messages were not delivered (buffer.persist is off)", backlog.counted
+                    )
+            if self._sub is not None:
+                self._sub.close()
+                self._sub = None
+
+    async def _say_goodbye(self, client: MqttClient) -> None:
+        """Deliver what is waiting (briefly), then say offline, then disconnect cleanly."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + SHUTDOWN_FLUSH
+        while (self._inflight or self.backlog) and self._online and loop.time() < deadline:
+            await asyncio.sleep(0.02)
+        payload = gateway_offline(__version__, "gateway stopped", utcnow())
+        self._publish_now(self.routes.status_topic, payload, 1, True, None, True)
+        deadline = loop.time() + SHUTDOWN_FLUSH / 2
+        while self._inflight and self._online and loop.time() < deadline:
+            await asyncio.sleep(0.01)
+        await client.disconnect()
+
+    async def run(self) -> None:
+        """Keep the broker connection, mirror the changes, carry out writes; until cancelled."""
+        if self._sub is None or self._client is None:
+            raise RuntimeError("enter the MQTT sink before running it")
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(self._connection(), name="mqtt:connection")
+            tg.create_task(self._drain(self._sub), name="mqtt:publish")
+            tg.create_task(self._tick(), name="mqtt:tick")
+            for machine in self.tree.machines:
+                tg.create_task(self.writes.worker(machine), name=f"mqtt:writes:{machine}")
+
+    # --- the broker connection ------------------------------------------------------------------
+
+    async def _connection(self) -> None:
+        assert self._client is not None
+        client = self._client
+        cfg = self.config.reconnect
+        loop = asyncio.get_running_loop()
+        delays = backoff_delays(cfg.initial, cfg.factor, cfg.max)
+        while True:
+            self._set_state(STATE_CONNECTING, self.last_error)
+            try:
+                info = await client.connect()
+            except BrokerError as exc:
+                delay = next(delays)
+                self.attempts += 1
+                self.last_delay = delay
+                self._connect_failed(exc, delay)
+                await asyncio.sleep(delay)
+                continue
+            since = loop.time()
+            self._on_connected(info)
+            await self._lost.wait()
+            self._lost.clear()
+            if loop.time() - since >= STABLE_AFTER:
+                delays = backoff_delays(cfg.initial, cfg.factor, cfg.max)
+            else:  # a broker that drops us at once (ACL, a twin with our client id) is not hammered
+                await asyncio.sleep(next(delays))
+
+    def _connect_failed(self, exc: BrokerError, delay: float) -> None:
+        reason = exc.reason
+        self._set_state(STATE_DISCONNECTED, reason)
+        now = asyncio.get_running_loop().time()
+        last_reason, last_time = self._last_log
+        if reason != last_reason or now - last_time >= REMIND_EVERY:
+            self._last_log = (reason, now)
+            waiting = len(self.backlog) if self.backlog is not None else 0
+            if isinstance(exc, BrokerRefused):
+                log.error(
+                    "MQTT: %s; check mqtt.username/password and the broker's ACL. Retrying in %.1f s "
+                    "(%d messages waiting)",
+                    reason,
+                    delay,
+                    waiting,
+                )
+            else:
+                log.warning("MQTT: %s; retrying in %.1f s (%d messages waiting)", reason, delay, waiting)
+        else:
+            log.debug("MQTT: %s; retrying in %.1f s", reason, delay)
+
+    def _on_connected(self, info: Connected) -> None:
+        assert self._client is not None and self.backlog is not None
+        client = self._client
+        self.connects += 1
+        self._window = min(self.config.max_inflight, info.receive_maximum or self.config.max_inflight)
+        self._online = True
+        self._last_log = ("", 0.0)
+        self._set_state(STATE_CONNECTED, "")
+        try:
+            client.subscribe(set_filters(self.config.prefix, self.routes.depths()), qos=1)
+        except BrokerError as exc:
+            log.error("MQTT: %s; writes over MQTT will not arrive", exc.reason)
+        # Liveness first: a dashboard should learn that the gateway is back before the backlog arrives.
+        self.backlog.discard_latest(self.routes.status_topic)
+        self._publish_now(self.routes.status_topic, self._online_payload(), 1, True, None, True)
+        waiting = len(self.backlog)
+        log.info(
+            "MQTT: connected to %s as %s%s",
+            self.endpoint,
+            self.settings.client_id,
+            f"; delivering {waiting} buffered messages" if waiting else "",
+        )
+        self._pump()
+        self._commit()
+
+    def _on_lost(self, reason: str) -> None:
+        """The connection dropped: what the broker did not acknowledge goes back to the backlog."""
+        assert self._client is not None and self.backlog is not None
+        self._online = False
+        unacked = list(self._inflight.values())
+        self._inflight.clear()
+        self._client.take_back()
+        self.backlog.put_front(unacked)
+        self._commit()
+        self._set_state(STATE_DISCONNECTED, f"connection lost: {reason}")
+        log.warning(
+            "MQTT: connection to %s lost (%s); keeping %d messages until it is back",
+            self.endpoint,
+            reason,
+            len(self.backlog),
+        )
+        self._lost.set()
+
+    def _set_state(self, state: str, reason: str) -> None:
+        self.state, self.last_error = state, reason
+        text = state if not reason or state == STATE_CONNECTED else f"{state}: {reason}"
+        for name, node in self._link_nodes.items():
+            self.tree.machines[name].set_internal(node, text)
+
+    # --- publishing ------------------------------------------------------------------------------
+
+    async def _drain(self, sub: Subscription) -> None:
+        while True:
+            batch = await sub.next_batch()
+            await self._encode(batch)
+            self._flush_statuses()
+            self._commit()
+
+    async def _encode(self, batch: list[Change]) -> None:
+        by_node = self.routes.by_node
+        emit = self._emit
+        count = 0
+        for node, sample in batch:
+            route = by_node.get(node)
+            if route is None:
+                route = self._late(node)
+                if route is None:
+                    continue
+            payload = encode_raw(sample.value) if route.raw else encode_json(sample, route.suffix)
+            emit(route.topic, payload, route.qos, route.retain, route.machine, route.latest_only)
+            count += 1
+            if count % YIELD_EVERY == 0:
+                self._flush_statuses()
+                self._commit()
+                await asyncio.sleep(0)
+
+    def _late(self, node: VariableNode) -> Route | None:
+        """A node without a route: a status variable (folded into the status document), one kept out
+        of MQTT, or one that appeared after start-up."""
+        owner = self._status_owner.get(node)
+        if owner is not None:
+            self._dirty.add(owner)
+            return None
+        if node in self.routes.unrouted:
+            if node.internal and node.path.startswith("Status/"):  # a status variable added later
+                name = node.machine.name
+                self._status_nodes.setdefault(name, []).append(node)
+                self._status_owner[node] = name
+                self._dirty.add(name)
+            return None
+        try:
+            return self.routes.add(node)
+        except TopicClash as exc:
+            log.error("MQTT: %s is not published: %s", node.full_path, exc)
+            self.routes.unrouted.add(node)
+            return None
+
+    def _emit(
+        self, topic: str, payload: bytes, qos: int, retain: bool, machine: str | None, latest: bool
+    ) -> None:
+        """Send now if nothing is waiting and the window has room; else keep it in order."""
+        backlog = self.backlog
+        assert backlog is not None
+        if self._online and not backlog and len(self._inflight) < self._window:
+            self._publish_now(topic, payload, qos, retain, machine, latest)
+            return
+        if qos == 0 and not retain:
+            if (
+                self._online
+                and self._client is not None
+                and self._client.queued_bytes_pending < PAHO_QUEUE_LIMIT
+            ):
+                self._publish_now(topic, payload, qos, retain, machine, latest)
+            else:
+                self.discarded += 1
+            return
+        backlog.put(Message(backlog.next_seq(), topic, payload, qos, retain, machine, latest))
+
+    def _publish_now(
+        self, topic: str, payload: bytes, qos: int, retain: bool, machine: str | None, latest: bool
+    ) -> None:
+        client, backlog = self._client, self.backlog
+        assert client is not None and backlog is not None
+        try:
+            mid = client.publish(topic, payload, qos, retain)
+        except BrokerError as exc:  # a topic the broker library rejects; the config checks make this rare
+            log.error("MQTT: %s", exc.reason)
+            return
+        if qos or retain:
+            self._inflight[mid] = Message(backlog.next_seq(), topic, payload, qos, retain, machine, latest)
+
+    def _published(self, mid: int) -> None:
+        """paho: the broker acknowledged `mid` (QoS 1/2), or it was written (QoS 0)."""
+        msg = self._inflight.pop(mid, None)
+        if msg is not None and msg.stored and self.backlog is not None:
+            self.backlog.done(msg)
+        if not self._pump_scheduled and self.backlog:
+            self._pump_scheduled = True
+            asyncio.get_running_loop().call_soon(self._pump_soon)
+
+    def _pump_soon(self) -> None:
+        self._pump_scheduled = False
+        self._pump()
+        self._commit()
+
+    def _pump(self) -> None:
+        """Hand the oldest waiting messages to paho, as many as the window allows."""
+        backlog, client = self.backlog, self._client
+        if not self._online or backlog is None or client is None:
+            return
+        room = self._window - len(self._inflight)
+        if room <= 0 or not backlog:
+            return
+        inflight = self._inflight
+        for msg in backlog.take(room):
+            try:
+                mid = client.publish(msg.topic, msg.payload, msg.qos, msg.retain)
+            except BrokerError as exc:
+                log.error("MQTT: %s", exc.reason)
+                backlog.done(msg)
+                continue
+            if msg.qos or msg.retain:
+                inflight[mid] = msg
+            else:
+                backlog.done(msg)
+
+    def _commit(self) -> None:
+        backlog = self.backlog
+        if backlog is not None and backlog.journal is not None:
+            backlog.journal.commit()
+
+    def _answer(self, topic: str, payload: bytes, correlation: bytes | None) -> None:
+        """A write result: sent at once if connected (the asker is waiting now), else dropped."""
+        client = self._client
+        if not self._online or client is None:
+            return
+        try:
+            client.publish_reply(topic, payload, correlation)
+        except BrokerError as exc:
+            log.info("MQTT: cannot answer on %s: %s", topic[:200], exc.reason)
+
+    # --- status --------------------------------------------------------------------------------
+
+    def _flush_statuses(self) -> None:
+        if not self._dirty:
+            return
+        dirty, self._dirty = self._dirty, set()
+        for name in dirty:
+            topic = self.routes.machine_status.get(name)
+            nodes = self._status_nodes.get(name)
+            if topic is None or not nodes:
+                continue
+            payload = machine_payload(nodes)
+            if self._last_status.get(name) != payload:
+                self._last_status[name] = payload
+                self._emit(topic, payload, 1, True, name, True)
+
+    def _online_payload(self) -> bytes:
+        dropped = self.backlog.dropped_total if self.backlog is not None else 0
+        return gateway_online(__version__, self.started, list(self.tree.machines), dropped)
+
+    async def _tick(self) -> None:
+        """Once a second: drop counts into Status/MqttDropped and the status topic; reminders."""
+        loop = asyncio.get_running_loop()
+        last_reminder = loop.time()
+        while True:
+            await asyncio.sleep(1.0)
+            backlog = self.backlog
+            if backlog is None:
+                continue
+            if backlog.dropped_total != self._dropped_reported:
+                self._dropped_reported = backlog.dropped_total
+                for name, node in self._dropped_nodes.items():
+                    self.tree.machines[name].set_internal(node, backlog.dropped.get(name, 0))
+                self._emit(self.routes.status_topic, self._online_payload(), 1, True, None, True)
+            if not self._online and backlog and loop.time() - last_reminder >= REMIND_EVERY:
+                last_reminder = loop.time()
+                log.warning(
+                    "MQTT: still no broker; %d messages waiting, %d dropped so far",
+                    len(backlog),
+                    backlog.dropped_total,
+                )
+            self._commit()

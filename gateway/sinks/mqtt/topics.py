@@ -1,0 +1,114 @@
+"""Topic names: `<prefix>/<machine>/<path in lower-case segments>`, and the gateway's own topics.
+
+Pure functions, no I/O. Segments are lower-cased so that topics read the same
+way whatever case the controller's programmer liked; characters that MQTT gives
+a meaning to (`+`, `#`, `/` inside a segment) or that tools choke on (NUL,
+white space) become `_`. Lower-casing can make two paths meet on one topic, so
+`plan_topics` checks the whole set at once and names both variables.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+
+_UNSAFE = re.compile(r"[+#/\x00\s]")
+MAX_TOPIC_BYTES = 65535
+
+SET = "set"
+RESULT = "result"
+STATUS = "status"
+
+
+class TopicClash(ValueError):
+    """Two variables (or a variable and a gateway topic) would publish to the same topic."""
+
+
+def clean_segment(segment: str) -> str:
+    """One topic level from one path segment: lower-case, MQTT-unsafe characters replaced by '_'."""
+    cleaned = _UNSAFE.sub("_", segment.lower())
+    return cleaned or "_"
+
+
+def path_topic(path: str) -> str:
+    """A tree path as topic levels: `Axes/X/Position` → `axes/x/position`."""
+    return "/".join(clean_segment(s) for s in path.split("/"))
+
+
+def machine_root(prefix: str, machine: str) -> str:
+    return f"{prefix}/{clean_segment(machine)}"
+
+
+def variable_topic(prefix: str, machine: str, path: str, override: str | None = None) -> str:
+    """The topic a variable's values go to; `override` replaces the path part, verbatim."""
+    return f"{machine_root(prefix, machine)}/{override if override is not None else path_topic(path)}"
+
+
+def gateway_status_topic(prefix: str) -> str:
+    return f"{prefix}/{STATUS}"
+
+
+def machine_status_topic(prefix: str, machine: str) -> str:
+    return f"{machine_root(prefix, machine)}/{STATUS}"
+
+
+def set_topic(topic: str) -> str:
+    return f"{topic}/{SET}"
+
+
+def result_topic(topic: str) -> str:
+    """Where the answer to a write on `topic`/set goes."""
+    return f"{topic}/{SET}/{RESULT}"
+
+
+def target_of_set(topic: str) -> str | None:
+    """`cnc/m/feed/override/set` → `cnc/m/feed/override`; None for anything that is not a write request."""
+    head, sep, last = topic.rpartition("/")
+    if not sep or last != SET or not head:
+        return None
+    return head
+
+
+def set_filters(prefix: str, depths: Iterable[int]) -> list[str]:
+    """Subscription filters that catch `<prefix>/<machine>/<depth levels>/set` for each depth.
+
+    One filter per depth rather than `<prefix>/#`, so that the gateway does not
+    receive its own value stream back (MQTT 3.1.1 has no "no local" option).
+    """
+    return [f"{prefix}/+/{'+/' * depth}{SET}" for depth in sorted(set(depths)) if depth >= 1]
+
+
+def topic_depth(topic: str, prefix: str) -> int:
+    """How many levels a topic has below `<prefix>/<machine>/`."""
+    return topic.count("/") - prefix.count("/") - 1
+
+
+def valid_publish_topic(topic: str) -> bool:
+    """Whether a client-supplied topic (an MQTT v5 response topic) may be published to."""
+    if not topic or "+" in topic or "#" in topic or "\x00" in topic:
+        return False
+    return len(topic.encode("utf-8", "surrogatepass")) <= MAX_TOPIC_BYTES
+
+
+def plan_topics(
+    entries: Iterable[tuple[object, str, str]], reserved: Iterable[str] = ()
+) -> dict[object, str]:
+    """Map keys to topics, refusing any topic claimed twice.
+
+    `entries` are (key, topic, who) where `who` names the claimant in the error
+    (for example `laser-sim/Axes/X/Position`); `reserved` are the gateway's own
+    topics (status), which no variable may take.
+    """
+    owners: dict[str, str] = {topic: "the gateway's status topic" for topic in reserved}
+    out: dict[object, str] = {}
+    for key, topic, who in entries:
+        if len(topic.encode("utf-8")) > MAX_TOPIC_BYTES:
+            raise TopicClash(f"{who}: topic {topic[:60]!r}… is longer than MQTT allows")
+        first = owners.get(topic)
+        if first is not None:
+            raise TopicClash(
+                f"{who} and {first} would both publish to {topic!r}; give one of them an mqtt.topic"
+            )
+        owners[topic] = who
+        out[key] = topic
+    return out

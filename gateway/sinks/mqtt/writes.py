@@ -1,0 +1,180 @@
+"""Write-back: `<topic>/set` requests through the tree's one write path, answers on `<topic>/set/result`.
+
+Everything that can be refused without the controller (unknown topic, oversized,
+read-only, writes not enabled, unreadable payload, retained requests) is answered
+at once, on the loop, from the paho callback. What is left goes through a
+bounded queue per machine to a worker that calls `Machine.write_node`, so that
+writes to one machine stay in order, a slow controller holds up only its own
+machine, and a flood cannot queue more than `max_pending_writes` per machine.
+Refusals are counted and logged with a quota, so junk cannot flood the log either.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+
+from gateway.config.mqtt import MqttConfig
+from gateway.errors import (
+    AccessDenied,
+    BadWriteRequest,
+    NotWritable,
+    UnknownVariable,
+    WriteError,
+)
+from gateway.model.tree import VariableTree, WriteContext
+from gateway.sinks.mqtt.client import Incoming
+from gateway.sinks.mqtt.payloads import decode_set, encode_result
+from gateway.sinks.mqtt.routes import Route, Routes
+from gateway.sinks.mqtt.topics import result_topic, target_of_set, valid_publish_topic
+
+log = logging.getLogger(__name__)
+
+# (topic to answer on, payload, MQTT v5 correlation data)
+Answer = Callable[[str, bytes, "bytes | None"], None]
+
+
+class TooManyWrites(WriteError):
+    status = "BadTooManyOperations"
+
+
+class LogQuota:
+    """At most `per_minute` lines a minute; the rest are counted and summarised."""
+
+    def __init__(self, per_minute: int = 10) -> None:
+        self.per_minute = per_minute
+        self._window = 0.0
+        self._used = 0
+        self._suppressed = 0
+
+    def allow(self) -> bool:
+        now = time.monotonic()
+        if now - self._window >= 60.0:
+            if self._suppressed:
+                log.warning(
+                    "%d more refused MQTT writes in the last minute (not logged one by one)", self._suppressed
+                )
+            self._window, self._used, self._suppressed = now, 0, 0
+        if self._used < self.per_minute:
+            self._used += 1
+            return True
+        self._suppressed += 1
+        return False
+
+
+class _Request:
+    __slots__ = ("route", "value", "reply", "correlation")
+
+    def __init__(self, route: Route, value: object, reply: str, correlation: bytes | None) -> None:
+        self.route = route
+        self.value = value
+        self.reply = reply
+        self.correlation = correlation
+
+
+class WriteBack:
+    """Turns `/set` messages into tree writes and answers every one of them."""
+
+    def __init__(self, tree: VariableTree, routes: Routes, cfg: MqttConfig, answer: Answer) -> None:
+        self.tree = tree
+        self.routes = routes
+        self.cfg = cfg
+        self.answer = answer
+        self.queues: dict[str, asyncio.Queue[_Request]] = {
+            name: asyncio.Queue(maxsize=cfg.max_pending_writes) for name in tree.machines
+        }
+        self.received = 0
+        self.accepted = 0
+        self.refused = 0
+        self._quota = LogQuota()
+        self._own_prefix = cfg.prefix + "/"
+
+    # --- from paho, on the loop ----------------------------------------------------------------
+
+    def handle(self, msg: Incoming) -> None:
+        topic = msg.topic
+        if topic in self.routes.by_topic:
+            return  # our own value topic that happens to end in /set (a variable named Set)
+        target = target_of_set(topic)
+        if target is None:
+            return
+        self.received += 1
+        reply = self._reply_topic(target, msg.response_topic)
+        corr = msg.correlation_data
+        route = self.routes.by_topic.get(target)
+        try:
+            if msg.retain:
+                raise BadWriteRequest(
+                    "retained write requests are ignored: publish /set without the retain flag"
+                )
+            if route is None:
+                raise UnknownVariable(f"no variable is published at {target!r}")
+            if len(msg.payload) > self.cfg.max_set_payload:
+                raise BadWriteRequest(
+                    f"the payload has {len(msg.payload)} bytes, "
+                    f"more than the {self.cfg.max_set_payload} allowed",
+                    status="BadRequestTooLarge",
+                )
+            node = route.node
+            if node.internal or not node.spec.writable:
+                raise NotWritable(f"{node.full_path} is read-only")
+            if not route.writable:
+                raise AccessDenied(
+                    f"writes over MQTT are not enabled for {node.full_path} (mapping: mqtt.writable: true)"
+                )
+            value = decode_set(msg.payload, node.type)
+            queue = self.queues.get(route.machine)
+            if queue is None:  # pragma: no cover - every machine has its queue
+                raise UnknownVariable(f"no machine {route.machine!r}")
+            try:
+                queue.put_nowait(_Request(route, value, reply, corr))
+            except asyncio.QueueFull:
+                raise TooManyWrites(
+                    f"{self.cfg.max_pending_writes} writes to {route.machine} are already waiting; try again"
+                ) from None
+        except WriteError as exc:
+            self._refuse(target, reply, corr, exc)
+
+    def _reply_topic(self, target: str, requested: str | None) -> str:
+        """The v5 response topic when it is usable, else `<target>/set/result`.
+
+        A response topic under our own prefix must be a result topic: a client may
+        not make the gateway publish onto its own value or status topics.
+        """
+        if requested and valid_publish_topic(requested):
+            if not requested.startswith(self._own_prefix) or requested.endswith("/set/result"):
+                return requested
+        return result_topic(target)
+
+    def _refuse(self, target: str, reply: str, corr: bytes | None, exc: WriteError) -> None:
+        self.refused += 1
+        if self._quota.allow():
+            log.info("MQTT write to %s refused: %s (%s)", target[:200], exc.reason[:300], exc.status)
+        self.answer(reply, encode_result(exc.reason, exc.status), corr)
+
+    # --- workers ------------------------------------------------------------------------------
+
+    async def worker(self, machine_name: str) -> None:
+        """Carry out one machine's queued writes, in order, until cancelled."""
+        queue = self.queues[machine_name]
+        machine = self.tree.machines[machine_name]
+        ctx = WriteContext("mqtt", user=None)
+        while True:
+            req = await queue.get()
+            node = req.route.node
+            try:
+                await machine.write_node(node, req.value, ctx)
+            except WriteError as exc:
+                self._refuse(req.route.topic, req.reply, req.correlation, exc)
+                continue
+            except Exception as exc:  # a bug below must not end write-back for this machine
+                log.exception("MQTT write to %s failed unexpectedly", node.full_path)
+                self._refuse(
+                    req.route.topic, req.reply, req.correlation, WriteError(f"internal error: {exc}")
+                )
+                continue
+            self.accepted += 1
+            log.info("MQTT write: %s = %r", node.full_path, req.value)
+            self.answer(req.reply, encode_result(), req.correlation)

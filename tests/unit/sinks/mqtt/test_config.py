@@ -1,0 +1,81 @@
+"""MQTT settings in gateway and mapping files: defaults, precedence, secrets from the environment."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gateway.config.loader import load
+from gateway.config.mapping import MachineMapping
+from gateway.config.mqtt import MqttConfig
+from gateway.errors import ConfigError
+from gateway.model.tree import VariableTree
+from gateway.sinks.mqtt.routes import Routes
+
+ROOT = Path(__file__).resolve().parents[4]
+
+
+def test_a_gateway_file_without_mqtt_has_no_broker(tmp_path: Path) -> None:
+    (tmp_path / "g.yaml").write_text(
+        "machines: [../../mappings/laser-sim.yaml]\n".replace("../../", f"{ROOT}/")
+    )
+    assert load([tmp_path / "g.yaml"], environ={}).gateway.mqtt is None
+    assert load([ROOT / "mappings" / "laser-sim.yaml"], environ={}).gateway.mqtt is None
+
+
+def test_mqtt_section_with_a_password_from_the_environment(tmp_path: Path) -> None:
+    (tmp_path / "g.yaml").write_text(
+        f"machines: [{ROOT}/mappings/laser-sim.yaml]\n"
+        "mqtt:\n  host: broker.local\n  port: 8883\n  username: gw\n  password: ${MQTT_PASSWORD}\n"
+        "  protocol: 5\n  tls: {ca: ca.pem}\n"
+    )
+    cfg = load([tmp_path / "g.yaml"], environ={"MQTT_PASSWORD": "s3cret"}).gateway.mqtt
+    assert cfg is not None and cfg.password is not None
+    assert cfg.password.get_secret_value() == "s3cret" and "s3cret" not in repr(cfg)
+    assert cfg.protocol == "5" and cfg.tls is not None and cfg.tls.verify is True
+    with pytest.raises(ConfigError, match="MQTT_PASSWORD is not set"):
+        load([tmp_path / "g.yaml"], environ={})
+
+
+def test_the_compose_gateway_file_loads() -> None:
+    config = load([ROOT / "mappings" / "compose" / "gateway.yaml"], environ={"MQTT_HOST": "mosquitto"})
+    assert config.gateway.mqtt is not None and config.gateway.mqtt.host == "mosquitto"
+    assert config.machines[0].machine == "laser-sim"
+
+
+def test_settings_precedence_variable_then_machine_then_gateway() -> None:
+    mapping = MachineMapping.model_validate(
+        {
+            "machine": "m1",
+            "driver": {"endpoint": "opc.tcp://h:1"},
+            "mqtt": {"qos": 2, "writable": True},
+            "variables": [
+                {"path": "A", "source": "a", "type": "Double"},
+                {
+                    "path": "B",
+                    "source": "b",
+                    "type": "Double",
+                    "access": "readwrite",
+                    "mqtt": {"qos": 0, "retain": False},
+                },
+                {
+                    "path": "C",
+                    "source": "c",
+                    "type": "Double",
+                    "access": "readwrite",
+                    "mqtt": {"writable": False},
+                },
+                {"path": "D", "source": "d", "type": "Double", "mqtt": {"payload": "raw"}},
+            ],
+        }
+    )
+    tree = VariableTree([mapping])
+    routes = Routes(tree, MqttConfig(qos=1, retain=True, prefix="plant"))
+    r = {n.path: routes.by_node[n] for n in tree.machines["m1"].mapped}
+    assert (r["A"].qos, r["A"].retain, r["A"].writable, r["A"].raw) == (2, True, False, False)  # read-only
+    assert (r["B"].qos, r["B"].retain, r["B"].writable) == (0, False, True)
+    assert r["C"].writable is False and r["D"].raw is True
+    assert r["A"].topic == "plant/m1/a"
+    assert routes.machine_status["m1"] == "plant/m1/status" and routes.status_topic == "plant/status"
+    assert not any(n.path.startswith("Status/") for n in routes.by_node)
