@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 from asyncua import Client, ua
 
 from gateway.app import Gateway
@@ -175,9 +176,13 @@ async def test_controller_outage_turns_values_bad_and_back_good(rig: Rig) -> Non
     assert (await rig.read("Status/ReconnectCount")).Value.Value == 1
 
 
-MISSING_NODE = (ROOT / "mappings" / "laser-sim.yaml").read_text() + (
-    '  - {path: Extra/Missing, source: "ns=2;s=::AsGlobalPV:gNoSuchThing", type: Double}\n'
-)
+def with_extra_variable(entry: dict[str, str]) -> str:
+    data = yaml.safe_load((ROOT / "mappings" / "laser-sim.yaml").read_text())
+    data["variables"].append(entry)
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+MISSING_NODE = with_extra_variable({"path": "Extra/Missing", "source": "ns=2;s=::AsGlobalPV:gNoSuchThing", "type": "Double"})
 
 
 @pytest.mark.parametrize("rig", [MISSING_NODE], indirect=True)
