@@ -19,6 +19,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from gateway.errors import BadWriteRequest
+from gateway.model.events import Event
 from gateway.model.sample import Sample
 from gateway.model.types import TypeSpec, parse_text
 
@@ -45,6 +46,8 @@ def plain(value: Any) -> Any:
         return iso(value)
     if isinstance(value, (list, tuple)):
         return [plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, (bytes, bytearray)):
         return value.hex()
     if isinstance(value, float):
@@ -104,6 +107,11 @@ def encode_result(error: str | None = None, status: str | None = None) -> bytes:
 def encode_document(doc: dict[str, Any]) -> bytes:
     """A status document (gateway or machine) as compact JSON."""
     return _dumps(plain_dict(doc)).encode()
+
+
+def encode_event(event: Event) -> bytes:
+    """An event's payload with its time: `{"ts": …, …payload}` as compact JSON."""
+    return _dumps({"ts": iso(event.ts), **plain_dict(dict(event.payload))}).encode()
 
 
 def plain_dict(doc: dict[str, Any]) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from typing import Self
 from gateway import __version__
 from gateway.config.mqtt import MqttConfig
 from gateway.errors import BrokerError, BrokerRefused, SinkError
+from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
@@ -36,10 +37,10 @@ from gateway.sinks.mqtt.client import (
     default_client_id,
     tls_context,
 )
-from gateway.sinks.mqtt.payloads import encode_json, encode_raw
+from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
-from gateway.sinks.mqtt.topics import TopicClash, set_filters
+from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
 from gateway.sinks.mqtt.writes import WriteBack
 from gateway.sources.backoff import backoff_delays
 
@@ -106,6 +107,7 @@ class MqttSink:
         self.discarded = 0  # QoS 0 changes not sent because the broker was away (QoS 0 promises no more)
         self._client: MqttClient | None = None
         self._sub: Subscription | None = None
+        self._events: EventSubscription | None = None
         self._inflight: dict[int, Message] = {}
         self._window = config.max_inflight
         self._online = False
@@ -154,6 +156,7 @@ class MqttSink:
         self._sub = self.tree.hub.subscribe(
             self.name, every_change=True, limit=max(self.config.buffer.limit, 1000)
         )
+        self._events = self.tree.events.subscribe(self.name)
         snapshot = [(n, n.sample) for n in self.tree.nodes() if n.sample.status != "BadWaitingForInitialData"]
         await self._encode(snapshot)
         self._dirty.update(self.tree.machines)
@@ -191,6 +194,9 @@ class MqttSink:
             if self._sub is not None:
                 self._sub.close()
                 self._sub = None
+            if self._events is not None:
+                self._events.close()
+                self._events = None
 
     async def _say_goodbye(self, client: MqttClient) -> None:
         """Deliver what is waiting (briefly), then say offline, then disconnect cleanly."""
@@ -212,6 +218,8 @@ class MqttSink:
         async with asyncio.TaskGroup() as tg:
             tg.create_task(self._connection(), name="mqtt:connection")
             tg.create_task(self._drain(self._sub), name="mqtt:publish")
+            if self._events is not None:
+                tg.create_task(self._drain_events(self._events), name="mqtt:events")
             tg.create_task(self._tick(), name="mqtt:tick")
             for machine in self.tree.machines:
                 tg.create_task(self.writes.worker(machine), name=f"mqtt:writes:{machine}")
@@ -321,6 +329,19 @@ class MqttSink:
             batch = await sub.next_batch()
             await self._encode(batch)
             self._flush_statuses()
+            self._commit()
+
+    async def _drain_events(self, sub: EventSubscription) -> None:
+        """Job progress, alarms, feedback: JSON on `<prefix>/<machine>/<channel>` at QoS 1.
+
+        State-like events are retained and only the newest per topic is kept while
+        the broker is away; stream events are kept in order like QoS 1 changes.
+        """
+        prefix = self.config.prefix
+        while True:
+            for event in await sub.next_batch():
+                topic = event_topic(prefix, event.machine, event.channel)
+                self._emit(topic, encode_event(event), 1, event.retain, event.machine, event.retain)
             self._commit()
 
     async def _encode(self, batch: list[Change]) -> None:

@@ -44,6 +44,12 @@ def variable_topic(prefix: str, machine: str, path: str, override: str | None = 
     return f"{machine_root(prefix, machine)}/{override if override is not None else path_topic(path)}"
 
 
+def event_topic(prefix: str, machine: str | None, channel: str) -> str:
+    """Where an event goes: `<prefix>/<machine>/<channel>` (channel case kept: it may hold ids)."""
+    levels = "/".join(_UNSAFE.sub("_", s) or "_" for s in channel.split("/"))
+    return f"{machine_root(prefix, machine)}/{levels}" if machine else f"{prefix}/{levels}"
+
+
 def gateway_status_topic(prefix: str) -> str:
     return f"{prefix}/{STATUS}"
 

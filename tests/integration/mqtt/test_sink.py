@@ -100,6 +100,28 @@ async def test_values_are_retained_for_a_late_subscriber(
         assert m.nodes["Status/MqttState"].sample.value == "connected"
 
 
+async def test_events_go_out_as_json_retained_state_and_an_ordered_stream(
+    mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path
+) -> None:
+    from gateway.model.events import Event
+
+    tree = make_tree()
+    async with running(tree, mqtt_config(mosquitto.port), tmp_path) as sink:
+        await wait_until(lambda: sink.online, message="the sink to connect")
+        live = subscriber(recorders, mosquitto.port, topics=["cnc/m1/jobs/#"])
+        for state in ("QUEUED", "SENDING", "DELIVERED"):
+            tree.events.publish(Event("m1", "jobs/J000007", {"id": "J000007", "state": state, "at": NOW}, retain=True))
+            tree.events.publish(Event("m1", "jobs/events", {"id": "J000007", "to": state}))
+        await wait_until(lambda: sink.settled and len(live.on("cnc/m1/jobs/events")) == 3, message="3 events")
+        assert [r.json()["to"] for r in live.on("cnc/m1/jobs/events")] == ["QUEUED", "SENDING", "DELIVERED"]
+        late = subscriber(recorders, mosquitto.port, topics=["cnc/m1/jobs/#"])
+        await wait_until(lambda: late.last("cnc/m1/jobs/J000007"), message="the retained job record")
+        record = late.last("cnc/m1/jobs/J000007")
+        assert record.retain and record.json()["state"] == "DELIVERED"
+        assert record.json()["at"] == "2026-05-06T07:08:09.000Z" and "ts" in record.json()
+        assert late.on("cnc/m1/jobs/events") == []  # the stream is not retained
+
+
 async def test_quality_turns_bad_with_the_reason_and_the_status_follows(
     mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path
 ) -> None:
