@@ -1,0 +1,334 @@
+"""`cnc-gateway jobs list|show|retry|cancel|priority|submit`: the job queue from the command line.
+
+list/show/retry/cancel/priority open the queue file in the state directory
+directly, so they work whether the gateway runs or not; a running gateway
+notices their changes within about a second. `submit` uploads through the
+FTP inbox, like nesting software does, and prints the gateway's verdict.
+"""
+
+from __future__ import annotations
+
+import argparse
+import getpass
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from gateway.cli.check import report_config_error
+from gateway.config.loader import Config, load
+from gateway.errors import ConfigError, JobError
+from gateway.jobs.queue import Job, JobQueue, JobState, parse_job_id
+
+DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
+PASSWORD_ENV = "CNC_INBOX_PASSWORD"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("jobs", help="list, inspect, retry, cancel and submit jobs of the FTP job queue")
+    jobs = p.add_subparsers(dest="jobs_command", metavar="ACTION", required=True)
+
+    def common(q: argparse.ArgumentParser) -> None:
+        q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
+                       help="gateway or mapping file(s) the gateway runs with (to find its state directory)")
+        q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+
+    q = jobs.add_parser("list", help="recent jobs, newest first")
+    common(q)
+    q.add_argument("--machine", default=None)
+    q.add_argument("--state", action="append", choices=[s.value for s in JobState], type=str.upper, default=None)
+    q.add_argument("--limit", type=int, default=30)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(handler=handle_list)
+
+    q = jobs.add_parser("show", help="one job: its record and every state change")
+    common(q)
+    q.add_argument("job", help="job id, e.g. J000042 or 42")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(handler=handle_show)
+
+    q = jobs.add_parser("retry", help="put FAILED or CANCELLED jobs back in the queue")
+    common(q)
+    q.add_argument("job", nargs="+")
+    q.set_defaults(handler=handle_retry)
+
+    q = jobs.add_parser("cancel", help="take waiting jobs out of the queue")
+    common(q)
+    q.add_argument("job", nargs="+")
+    q.set_defaults(handler=handle_cancel)
+
+    q = jobs.add_parser("priority", help="change a waiting job's priority (higher goes first)")
+    common(q)
+    q.add_argument("job")
+    q.add_argument("priority", type=int)
+    q.set_defaults(handler=handle_priority)
+
+    q = jobs.add_parser("submit", help="upload a program through the FTP inbox, as nesting software does")
+    common(q)
+    q.add_argument("file", type=Path)
+    q.add_argument("--machine", required=True)
+    q.add_argument("--name", default=None, help="file name on the controller (default: the file's name)")
+    q.add_argument("--host", default=None, help="inbox host (default: from the config, else 127.0.0.1)")
+    q.add_argument("--port", type=int, default=None, help="inbox port (default: from the config, else 2121)")
+    q.add_argument("--user", default=os.environ.get("CNC_INBOX_USER"), help="inbox login (or CNC_INBOX_USER)")
+    q.add_argument("--password", default=None, help=f"or set {PASSWORD_ENV}; asked for when missing")
+    q.add_argument("--priority", type=int, default=None)
+    q.add_argument("--tls", action="store_true", help="implicit FTPS (default: when the config has inbox.tls)")
+    q.add_argument("--insecure", action="store_true", help="with --tls: do not check the certificate")
+    q.add_argument("--timeout", type=float, default=30.0)
+    q.set_defaults(handler=handle_submit)
+
+
+# --- finding the queue ------------------------------------------------------------------------------
+
+
+def load_config(args: argparse.Namespace) -> Config | None:
+    if not args.config:
+        return None
+    try:
+        return load(args.config)
+    except ConfigError as exc:
+        report_config_error(exc)
+        raise SystemExit(2) from None
+
+
+def state_dir(args: argparse.Namespace) -> Path:
+    if args.state_dir is not None:
+        return args.state_dir
+    config = load_config(args)
+    if config is not None:
+        return config.state_dir
+    env = os.environ.get("CNC_GATEWAY_STATE_DIR")
+    if env:
+        return Path(env)
+    found = [c for c in DEFAULT_STATE_DIRS if (c / "jobs" / "queue.sqlite3").is_file()]
+    if not found:
+        return DEFAULT_STATE_DIRS[0]
+    chosen = max(found, key=_last_written)  # ./state (cnc-gateway run) or ./state/demo (make demo)
+    print(f"(queue: {chosen / 'jobs' / 'queue.sqlite3'}; -c FILE or --state-dir to choose)", file=sys.stderr)
+    return chosen
+
+
+def _last_written(state: Path) -> float:
+    files = [state / "jobs" / "queue.sqlite3", state / "jobs" / "queue.sqlite3-wal"]
+    return max(f.stat().st_mtime for f in files if f.exists())
+
+
+def open_queue(args: argparse.Namespace) -> JobQueue:
+    from gateway.jobs.service import queue_path
+
+    path = queue_path(state_dir(args))
+    if not path.is_file():
+        print(f"error: no job queue at {path} (give -c FILE or --state-dir)", file=sys.stderr)
+        raise SystemExit(2)
+    try:
+        return JobQueue(path).open()
+    except JobError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def _seq(text: str) -> int:
+    try:
+        return parse_job_id(text)
+    except JobError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+# --- reading ------------------------------------------------------------------------------------------
+
+
+def handle_list(args: argparse.Namespace) -> int:
+    with open_queue(args) as queue:
+        states = [JobState(s) for s in args.state] if args.state else []
+        jobs = queue.list(machine=args.machine, states=states, limit=args.limit)
+    if args.json:
+        print(json.dumps([j.as_dict() for j in jobs], indent=2))
+        return 0
+    print_table(jobs, sys.stdout)
+    return 0
+
+
+def print_table(jobs: list[Job], out: TextIO) -> None:
+    if not jobs:
+        print("no jobs", file=out)
+        return
+    rows = [("JOB", "MACHINE", "STATE", "FILE", "SIZE", "RECEIVED", "TRIES", "REASON")]
+    for j in jobs:
+        rows.append((
+            j.id, j.machine, j.state.value, j.filename, _size(j.size),
+            j.received_at.astimezone().strftime("%Y-%m-%d %H:%M:%S"), str(j.attempts), _short(j.reason, 60),
+        ))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
+    for row in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[-1], file=out)
+
+
+def handle_show(args: argparse.Namespace) -> int:
+    seq = _seq(args.job)
+    with open_queue(args) as queue:
+        try:
+            job = queue.get(seq)
+        except JobError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        history = queue.history(seq)
+    if args.json:
+        record = job.as_dict()
+        record["history"] = [
+            {"state": t.state.value, "previous": t.previous.value if t.previous else None, "reason": t.reason,
+             "ts": t.ts.isoformat()} for t in history
+        ]
+        print(json.dumps(record, indent=2))
+        return 0
+    fields: list[tuple[str, Any]] = [
+        ("job", job.id), ("machine", job.machine), ("state", job.state.value), ("reason", job.reason),
+        ("file", job.filename), ("size", f"{job.size} bytes"), ("sha256", job.sha256), ("from", f"{job.user} ({job.origin})"),
+        ("priority", job.priority), ("attempts", job.attempts),
+        ("received", job.received_at.astimezone().isoformat(timespec="seconds")),
+    ]
+    if job.program_name:
+        fields.append(("program", job.program_name))
+    if job.estimate:
+        seconds = job.estimate.get("seconds")
+        fields.append(("estimate", f"{seconds:.1f} s" if isinstance(seconds, (int, float)) else "not estimated"))
+        extents = job.estimate.get("extents")
+        if extents:
+            fields.append((
+                "extents",
+                "X {min_x:g}..{max_x:g}  Y {min_y:g}..{max_y:g}  Z {min_z:g}..{max_z:g}".format(**extents),
+            ))
+    if job.delivered_at:
+        fields.append(("delivered", f"{job.delivered_name} at {job.delivered_at.astimezone().isoformat(timespec='seconds')}"))
+    for warning in job.warnings:
+        fields.append(("warning", warning))
+    for key, value in fields:
+        print(f"{key:<10} {value}")
+    print("history:")
+    for t in history:
+        when = t.ts.astimezone().strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
+        print(f"  {when}  {t.state.value:<10} {t.reason}")
+    return 0
+
+
+# --- changing -------------------------------------------------------------------------------------
+
+
+def _each(args: argparse.Namespace, action: str) -> int:
+    user = getpass.getuser()
+    failures = 0
+    with open_queue(args) as queue:
+        for text in args.job:
+            try:
+                job = getattr(queue, action)(_seq(text), by=f"{user} (cli)")
+            except JobError as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                failures += 1
+                continue
+            print(f"{job.id} {job.state.value}: {job.reason}")
+    return 1 if failures else 0
+
+
+def handle_retry(args: argparse.Namespace) -> int:
+    return _each(args, "retry")
+
+
+def handle_cancel(args: argparse.Namespace) -> int:
+    return _each(args, "cancel")
+
+
+def handle_priority(args: argparse.Namespace) -> int:
+    with open_queue(args) as queue:
+        try:
+            job = queue.set_priority(_seq(args.job), args.priority)
+        except JobError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+    print(f"{job.id} priority {job.priority}")
+    return 0
+
+
+# --- submitting ----------------------------------------------------------------------------------
+
+
+def handle_submit(args: argparse.Namespace) -> int:
+    from gateway.cli.upload import UploadFailed, upload
+
+    if not args.file.is_file():
+        print(f"error: {args.file}: no such file", file=sys.stderr)
+        return 2
+    config = load_config(args)
+    inbox = config.gateway.inbox if config is not None else None
+    host = args.host or (inbox.host if inbox is not None and inbox.host not in ("0.0.0.0", "::") else "127.0.0.1")
+    port = args.port or (inbox.port if inbox is not None else 2121)
+    tls = args.tls or (inbox is not None and inbox.tls is not None)
+    user = args.user or input("inbox user: ")
+    password = args.password or os.environ.get(PASSWORD_ENV) or getpass.getpass(f"password for {user}: ")
+    name = args.name or args.file.name
+    progress = Progress(args.file.stat().st_size, sys.stderr)
+    try:
+        ok, reply = upload(
+            host, port, user, password, args.machine, args.file, name,
+            priority=args.priority, tls=tls, verify=not args.insecure, timeout=args.timeout, progress=progress,
+        )
+    except UploadFailed as exc:
+        progress.done()
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    progress.done()
+    print(reply)
+    return 0 if ok else 1
+
+
+class Progress:
+    """`[#########           ]  45%  9.0/20.0 MB  3.1 MB/s` on a terminal, for files over a megabyte."""
+
+    def __init__(self, total: int, out: TextIO, *, threshold: int = 1024 * 1024) -> None:
+        self.total = total
+        self.out = out
+        self.enabled = total >= threshold and out.isatty()
+        self.started = time.monotonic()
+        self._last = 0.0
+        self._shown = False
+
+    def __call__(self, sent: int) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if sent < self.total and now - self._last < 0.1:
+            return
+        self._last = now
+        self.out.write("\r" + self.line(sent, now - self.started))
+        self.out.flush()
+        self._shown = True
+
+    def line(self, sent: int, elapsed: float, width: int = 30) -> str:
+        share = sent / self.total if self.total else 1.0
+        filled = int(share * width)
+        rate = sent / elapsed if elapsed > 0 else 0.0
+        return (f"[{'#' * filled}{' ' * (width - filled)}] {share * 100:5.1f}%  "
+                f"{sent / 1e6:.1f}/{self.total / 1e6:.1f} MB  {rate / 1e6:.1f} MB/s")
+
+    def done(self) -> None:
+        if self._shown:
+            self.out.write("\n")
+            self.out.flush()
+
+
+def _size(n: int) -> str:
+    if n < 1000:
+        return f"{n} B"
+    value = float(n)
+    for unit in ("kB", "MB", "GB"):
+        value /= 1000
+        if value < 1000 or unit == "GB":
+            break
+    return f"{value:.1f} {unit}"
+
+
+def _short(text: str, width: int) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= width else text[: width - 1] + "…"

@@ -1,0 +1,131 @@
+"""The machine's `Programs` methods: list, fetch, back up, delete and put controller programs.
+
+Registered on each machine with a `jobs:` section (gateway.model.methods), so
+OPC UA shows them as Method nodes under the machine's `Programs` object. They
+talk to the controller's FTP program store directly, except `Put`, which goes
+through validation and the queue like an inbox upload: no back door.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from datetime import datetime, timezone
+from typing import TYPE_CHECKING, Any
+
+from gateway.errors import (
+    ControllerRefused,
+    ControllerUnavailable,
+    DeliveryError,
+    ProgramNotFound,
+    WriteError,
+)
+from gateway.jobs.paths import PathRefused, check_file_name
+from gateway.model.methods import Argument, Method
+from gateway.model.types import TypeSpec
+
+if TYPE_CHECKING:
+    from gateway.jobs.service import JobService
+    from gateway.model.tree import WriteContext
+
+OBJECT = "Programs"
+GET_LIMIT = 16 * 1024 * 1024  # bytes a Get may return through OPC UA
+
+STRING = TypeSpec.parse("String")
+NAME = Argument("Name", STRING, "Program file name in the controller's program folder")
+
+
+class InvalidArgument(WriteError):
+    status = "BadInvalidArgument"
+
+
+class NotFound(WriteError):
+    status = "BadNotFound"
+
+
+def as_write_error(exc: DeliveryError) -> WriteError:
+    """A program store error, as the status code a method call answers with."""
+    if isinstance(exc, ProgramNotFound):
+        return NotFound(exc.reason)
+    if exc.reply is None:
+        return ControllerUnavailable(exc.reason)
+    return ControllerRefused(exc.reason)
+
+
+def _name(value: Any) -> str:
+    try:
+        return check_file_name(str(value))
+    except PathRefused as exc:
+        raise InvalidArgument(exc.reason) from None
+
+
+def program_methods(service: JobService, machine: str) -> list[Method]:
+    """The methods for one machine, bound to the service."""
+
+    async def listing(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
+        try:
+            async with service.store(machine) as store:
+                files = await store.list()
+        except DeliveryError as exc:
+            raise as_write_error(exc) from None
+        return [[f.name for f in files], [f.size if f.size is not None else 0 for f in files]]
+
+    async def fetch(name: str) -> bytes:
+        try:
+            async with service.store(machine) as store:
+                return await store.get(name, limit=GET_LIMIT)
+        except DeliveryError as exc:
+            raise as_write_error(exc) from None
+
+    async def get(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
+        data = await fetch(_name(args[0]))
+        return [data.decode("utf-8", errors="replace")]
+
+    async def backup(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
+        name = _name(args[0])
+        data = await fetch(name)
+        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        folder = service.backups_dir / machine
+        folder.mkdir(parents=True, exist_ok=True)
+        target = folder / f"{stamp}-{name}"
+        target.write_bytes(data)
+        return [str(target)]
+
+    async def delete(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
+        name = _name(args[0])
+        try:
+            async with service.store(machine) as store:
+                await store.delete(name)
+        except DeliveryError as exc:
+            raise as_write_error(exc) from None
+        return []
+
+    async def put(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
+        name = _name(args[0])
+        content = str(args[1]).encode("utf-8")
+        user = ctx.user or ctx.origin
+        reply = await service.submit_bytes(machine, name, content, user=user, origin=ctx.origin)
+        if reply.job_id is None and not reply.ok:
+            raise InvalidArgument(reply.message)
+        return [reply.job_id or "", reply.message]  # a rejection is a job too: its id and the reason
+
+    job = Argument("JobId", STRING, "The job that will deliver it")
+    return [
+        Method(
+            OBJECT, "List", "The programs in the controller's program folder, with their sizes in bytes",
+            (), (Argument("Names", TypeSpec.parse("String[]")), Argument("Sizes", TypeSpec.parse("UInt64[]"))),
+            listing,
+        ),
+        Method(OBJECT, "Get", "A program's text", (NAME,), (Argument("Content", STRING),), get),
+        Method(
+            OBJECT, "Backup", "Copy a program into the gateway's backups folder; returns the file's path",
+            (NAME,), (Argument("Path", STRING),), backup,
+        ),
+        Method(OBJECT, "Delete", "Delete a program from the controller", (NAME,), (), delete, role="operator"),
+        Method(
+            OBJECT, "Put", "Queue a program for delivery: validated and delivered like an inbox upload",
+            (NAME, Argument("Content", STRING, "The program text")),
+            (job, Argument("Message", STRING, "queued, or why it was rejected")),
+            put,
+            role="operator",
+        ),
+    ]

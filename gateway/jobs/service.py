@@ -1,0 +1,414 @@
+"""JobService: inbox -> validation -> durable queue -> delivery, for every machine with `jobs:`.
+
+An async context manager like every long-running part of the gateway. Built
+before the sinks start (it adds each machine's `Jobs/...` variables and its
+`Programs` methods to the tree, which the sinks then show); entered after the
+sinks and sources; `run()` runs one delivery worker per machine and a watcher
+that follows the queue file, so that changes made by `cnc-gateway jobs …` from
+another process are published and acted upon.
+
+Files under the state directory:
+
+    inbox/<machine>/[tmp/]      the FTP inbox's folders (empty when nothing is uploading)
+    jobs/queue.sqlite3          the queue
+    jobs/spool/<id>.received    an upload between arrival and validation
+    jobs/spool/<id>.program     a validated program waiting for delivery (kept for FAILED/CANCELLED: retry)
+    rejected/<id>-<name>        a rejected upload, and <id>-<name>.reason saying why
+    backups/<machine>/          programs fetched with Programs.Backup
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import logging
+import os
+import uuid
+from collections.abc import Awaitable, Callable, Mapping
+from contextlib import AbstractAsyncContextManager
+from pathlib import Path
+from typing import Any, Self, TypeVar
+
+from gateway.config.jobs import JobsConfig
+from gateway.config.loader import Config
+from gateway.errors import ConfigError, JobError, SinkError
+from gateway.jobs.accounts import Accounts
+from gateway.jobs.autostart import AutoStarter
+from gateway.jobs.controller_ftp import ProgramStore
+from gateway.jobs.delivery import DeliveryWorker
+from gateway.jobs.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
+from gateway.jobs.paths import PathRefused, check_file_name
+from gateway.jobs.programs import program_methods
+from gateway.jobs.publish import JobPublisher
+from gateway.jobs.queue import Job, JobQueue, JobState
+from gateway.jobs.threads import JobThreads
+from gateway.jobs.validation import Verdict, validate_program
+from gateway.model.tree import VariableTree
+
+log = logging.getLogger("gateway.jobs")
+
+T = TypeVar("T")
+WATCH_INTERVAL = 1.0  # s between looks for changes made by other processes (the CLI)
+
+
+class Spool:
+    """Where job files live between arrival and delivery."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+
+    def received(self, job: Job) -> Path:
+        return self.root / f"{job.id}.received"
+
+    def program(self, job: Job) -> Path:
+        return self.root / f"{job.id}.program"
+
+    def discard(self, job: Job) -> None:
+        self.received(job).unlink(missing_ok=True)
+        self.program(job).unlink(missing_ok=True)
+
+
+def queue_path(state_dir: Path) -> Path:
+    return state_dir / "jobs" / "queue.sqlite3"
+
+
+def summarize(verdict: Verdict) -> str:
+    """One line for the FTP reply and the job's reason: the first rejection and how many more."""
+    first = verdict.rejections[0]  # the validator's reasons say where: "line 12, column 3: …"
+    more = len(verdict.rejections) - 1
+    return first.reason + (f" (and {more} more)" if more else "")
+
+
+class JobService:
+    """The job queue of every machine that has a `jobs:` section."""
+
+    def __init__(self, config: Config, tree: VariableTree, *, environ: Mapping[str, str] | None = None) -> None:
+        self.config = config
+        self.tree = tree
+        self.environ = environ
+        self.machines: dict[str, JobsConfig] = {m.machine: m.jobs for m in config.machines if m.jobs is not None}
+        state = config.state_dir
+        self.spool = Spool(state / "jobs" / "spool")
+        self.rejected_dir = state / "rejected"
+        self.backups_dir = state / "backups"
+        self.inbox_root = state / "inbox"
+        self.queue = JobQueue(queue_path(state))
+        self.threads = JobThreads()
+        self.publisher = JobPublisher(tree, self.machines)
+        self.autostarters: dict[str, AutoStarter] = {}
+        self.workers: dict[str, DeliveryWorker] = {}
+        for name, jobs in self.machines.items():
+            machine = tree.machines[name]
+            if jobs.auto is not None:
+                self.autostarters[name] = AutoStarter(machine, jobs.auto, jobs.controller.folder)
+            self.workers[name] = DeliveryWorker(
+                name, jobs, self.queue, self.spool, self.publisher, self._q,
+                autostart=self.autostarters.get(name),
+            )
+            for method in program_methods(self, name):
+                machine.add_method(method)
+        self.inbox: Inbox | None = None
+        self._changed = asyncio.Event()
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self._processing: dict[str, int] = {name: 0 for name in self.machines}
+        self._rev = 0
+        self._transition = 0
+        self._opened = False
+
+    # --- lifecycle ---------------------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        for folder in (self.spool.root, self.rejected_dir, self.backups_dir):
+            folder.mkdir(parents=True, exist_ok=True)
+        try:
+            await self.threads.queue(self.queue.open)
+        except JobError as exc:
+            raise SinkError(str(exc)) from None
+        self._opened = True
+        try:
+            await self._publish_all()
+            await self._resume()
+            self.inbox = self._build_inbox()
+            if self.inbox is not None:
+                await self.inbox.__aenter__()
+        except BaseException:
+            await self.__aexit__(None, None, None)
+            raise
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        inbox, self.inbox = self.inbox, None
+        if inbox is not None:
+            await inbox.__aexit__(None, None, None)
+        tasks = list(self._tasks)
+        for task in tasks:
+            task.cancel()
+        if tasks:
+            await asyncio.wait(tasks)
+        if self._opened:
+            self._opened = False
+            await self.threads.queue(self.queue.close)
+        await self.threads.shutdown()
+
+    def _build_inbox(self) -> Inbox | None:
+        cfg = self.config.gateway.inbox
+        if not cfg.enabled:
+            log.info("the FTP inbox is disabled (inbox.enabled: false); jobs arrive only through Programs.Put")
+            return None
+        try:
+            accounts = Accounts.from_config(cfg, self.machines, self.environ)
+        except ConfigError as exc:
+            raise SinkError(f"FTP inbox: {exc}") from None
+        if not len(accounts):
+            log.warning("the FTP inbox is not started: the gateway file's inbox section has no accounts")
+            return None
+        tls = tls_context(self.config.state_dir, cfg.tls.cert, cfg.tls.key) if cfg.tls is not None else None
+        return Inbox(cfg, root=self.inbox_root, machines=self.machines, accounts=accounts, submit=self.submit, tls=tls)
+
+    async def run(self) -> None:
+        """Deliver and publish until cancelled."""
+        async with asyncio.TaskGroup() as tg:
+            for name, worker in self.workers.items():
+                tg.create_task(worker.run(), name=f"jobs:deliver:{name}")
+            tg.create_task(self._watch(), name="jobs:watch")
+
+    # --- arrivals ----------------------------------------------------------------------------------
+
+    async def submit(self, upload: Upload) -> UploadReply:
+        """A complete upload (the service now owns `upload.path`). Answers within `reply_within` seconds."""
+        if upload.machine not in self.machines:
+            upload.path.unlink(missing_ok=True)
+            return UploadReply(False, f"{upload.machine} takes no jobs")
+        holder: dict[str, Job] = {}
+        task = self._spawn(self._take(upload, holder), f"jobs:take:{upload.machine}")
+        try:
+            async with asyncio.timeout(self.config.gateway.inbox.reply_within):
+                return await asyncio.shield(task)
+        except TimeoutError:
+            job = holder.get("job")
+            if job is None:
+                return UploadReply(True, "received; still being stored")
+            return UploadReply(True, f"{job.id} received; validation continues (cnc-gateway jobs show {job.id})", job.id)
+
+    async def submit_bytes(self, machine: str, filename: str, data: bytes, *, user: str, origin: str) -> UploadReply:
+        """A program that arrives other than through the inbox (Programs.Put): the same checks, the same queue."""
+        try:
+            check_file_name(filename)
+        except PathRefused as exc:
+            return UploadReply(False, exc.reason)
+        staging = self.inbox_root / STAGING / uuid.uuid4().hex
+        staging.parent.mkdir(parents=True, exist_ok=True)
+        await self.threads.work(staging.write_bytes, data)
+        upload = Upload(machine, filename, staging, len(data), hashlib.sha256(data).hexdigest(), user, origin)
+        return await self.submit(upload)
+
+    async def _take(self, upload: Upload, holder: dict[str, Job]) -> UploadReply:
+        self._processing[upload.machine] += 1
+        try:
+            try:
+                job = await self._q(
+                    self.queue.receive, upload.machine, upload.filename, upload.size, upload.sha256,
+                    user=upload.user, origin=upload.client, priority=upload.priority,
+                )
+            except BaseException:
+                upload.path.unlink(missing_ok=True)
+                raise
+            await self.threads.work(os.replace, upload.path, self.spool.received(job))
+            holder["job"] = job
+            log.info("%s: %s received %s (%d bytes) from %s@%s", job.machine, job.id, job.filename, job.size,
+                     upload.user, upload.client)
+            return await self._process(job)
+        finally:
+            self._processing[upload.machine] -= 1
+
+    async def _process(self, job: Job) -> UploadReply:
+        """RECEIVED -> validated and QUEUED, or REJECTED with the reason (the file kept in rejected/)."""
+        try:
+            return await self._validate_and_queue(job)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            log.exception("%s: %s could not be processed", job.machine, job.id)
+            try:
+                await self._q(self.queue.reject, job.seq, f"internal error while checking the program: {exc}")
+            except JobError:
+                pass
+            return UploadReply(False, f"{job.id} could not be processed: {exc}", job.id)
+
+    async def _validate_and_queue(self, job: Job) -> UploadReply:
+        rules = self.machines[job.machine].validation
+        received = self.spool.received(job)
+        data = await self.threads.work(received.read_bytes)
+        verdict = await self.threads.work(validate_program, data, job.filename, rules)
+        if not verdict.accepted:
+            reason = summarize(verdict)
+            await self.threads.work(self._keep_rejected, job, verdict)
+            job = await self._q(self.queue.reject, job.seq, reason)
+            log.warning("%s: %s (%s) rejected: %s", job.machine, job.id, job.filename, reason)
+            return UploadReply(False, f"{job.id} rejected: {reason}", job.id)
+        await self.threads.work(_write_durably, self.spool.program(job), verdict.program)
+        received.unlink(missing_ok=True)
+        job, replaced = await self._q(
+            self.queue.accept,
+            job.seq,
+            duplicates=self.machines[job.machine].duplicates,
+            program_size=len(verdict.program),
+            program_sha256=hashlib.sha256(verdict.program).hexdigest(),
+            program_name=verdict.program_name,
+            estimate=verdict.estimate.as_dict() if verdict.estimate is not None else None,
+            warnings=verdict.warnings,
+            reason=_validated_reason(verdict),
+        )
+        for old in replaced:
+            log.info("%s: %s replaced by %s (same content)", job.machine, old.id, job.id)
+        if job.state is JobState.REJECTED:
+            self.spool.discard(job)
+            log.info("%s: %s skipped: %s", job.machine, job.id, job.reason)
+            return UploadReply(True, f"{job.id} skipped: {job.reason}", job.id)
+        self.workers[job.machine].wake()
+        seconds = (job.estimate or {}).get("seconds")
+        estimate = f", estimated {seconds:.0f} s" if isinstance(seconds, (int, float)) else ""
+        log.info("%s: %s queued (%s%s)", job.machine, job.id, job.filename, estimate)
+        return UploadReply(True, f"{job.id} queued for {job.machine}{estimate}", job.id)
+
+    def _keep_rejected(self, job: Job, verdict: Verdict) -> None:
+        target = self.rejected_dir / f"{job.id}-{job.filename}"
+        os.replace(self.spool.received(job), target)
+        lines = [
+            f"job: {job.id}",
+            f"machine: {job.machine}",
+            f"file: {job.filename}",
+            f"from: {job.user}@{job.origin}",
+            f"received: {job.received_at.isoformat()}",
+            f"size: {job.size} bytes, sha256 {job.sha256}",
+            "rejected because:",
+        ]
+        lines.extend(f"  [{r.rule}] {r.reason}" for r in verdict.rejections)
+        if verdict.warnings:
+            lines.append("warnings:")
+            lines.extend(f"  {w}" for w in verdict.warnings)
+        Path(f"{target}.reason").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+    async def _resume(self) -> None:
+        """Jobs an earlier run left between arrival and the queue: finish them, or reject lost ones."""
+        for job in await self.threads.queue(self.queue.list, states=(JobState.RECEIVED,), limit=10_000, newest_first=False):
+            if job.machine not in self.machines:
+                continue
+            if self.spool.received(job).is_file():
+                log.info("%s: resuming %s (received before the restart)", job.machine, job.id)
+                self._spawn(self._process(job), f"jobs:resume:{job.id}")
+            else:
+                await self._q(self.queue.reject, job.seq, "the upload was lost when the gateway stopped; send it again")
+
+    # --- operations for methods and the demo -----------------------------------------------------------
+
+    def store(self, machine: str) -> AbstractAsyncContextManager[ProgramStore]:
+        return ProgramStore(self.machines[machine].controller)
+
+    def machine_busy(self, machine: str) -> bool:
+        """True while a job for this machine is on its way or waiting to be started."""
+        starter = self.autostarters.get(machine)
+        publisher = self.publisher.vars.get(machine)
+        waiting = bool(publisher.queue_length.sample.value) if publisher is not None else False
+        return waiting or self._processing.get(machine, 0) > 0 or (starter is not None and starter.busy)
+
+    # --- publishing ------------------------------------------------------------------------------------
+
+    def changed(self) -> None:
+        """Something in the queue changed: publish it soon."""
+        self._changed.set()
+
+    async def _q(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+        result = await self.threads.queue(fn, *args, **kwargs)
+        self.changed()
+        return result
+
+    def _spawn(self, coro: Awaitable[T], name: str) -> asyncio.Task[T]:
+        task: asyncio.Task[T] = asyncio.ensure_future(coro)
+        task.set_name(name)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
+
+    async def _watch(self) -> None:
+        version = await self.threads.queue(self.queue.data_version)
+        while True:
+            # asyncio.timeout, not wait_for: Python 3.11's wait_for can swallow a cancellation that
+            # arrives as the event fires, and this loop would then never end.
+            try:
+                async with asyncio.timeout(WATCH_INTERVAL):
+                    await self._changed.wait()
+            except TimeoutError:
+                pass
+            self._changed.clear()
+            current = await self.threads.queue(self.queue.data_version)
+            external = current != version
+            version = current
+            await self._sync()
+            if external:
+                for worker in self.workers.values():
+                    worker.wake()
+
+    async def _publish_all(self) -> None:
+        """At start-up: every machine's summary, and the record of every job not yet finished."""
+        self._rev, self._transition = await self.threads.queue(self.queue.marks)
+        for name in self.machines:
+            await self._summary(name)
+        waiting = await self.threads.queue(
+            self.queue.list, states=(JobState.RECEIVED, JobState.QUEUED, JobState.SENDING, JobState.FAILED), limit=1000
+        )
+        for job in waiting:
+            if job.machine in self.machines:
+                self.publisher.job(job)
+
+    async def _sync(self) -> None:
+        jobs = await self.threads.queue(self.queue.changes_since, self._rev)
+        transitions = await self.threads.queue(self.queue.transitions_since, self._transition)
+        by_seq = {job.seq: job for job in jobs}
+        for t in transitions:
+            self._transition = max(self._transition, t.id)
+            if t.machine in self.machines:
+                self.publisher.transition(t, by_seq.get(t.seq))
+        machines = set()
+        for job in jobs:
+            self._rev = max(self._rev, job.rev)
+            if job.machine in self.machines:
+                self.publisher.job(job)
+                machines.add(job.machine)
+        for name in sorted(machines):
+            await self._summary(name)
+
+    async def _summary(self, machine: str) -> None:
+        q = self.queue
+
+        def read() -> dict[str, Any]:
+            sending = q.list(machine=machine, states=(JobState.SENDING,), limit=1)
+            return {
+                "waiting": q.count(machine=machine, states=(JobState.QUEUED, JobState.SENDING)),
+                "failed": q.count(machine=machine, states=(JobState.FAILED,)),
+                "current": sending[0] if sending else None,
+                "delivered": q.latest(machine, JobState.DELIVERED),
+                "failed_job": q.latest(machine, JobState.FAILED),
+                "rejected": q.latest(machine, JobState.REJECTED),
+            }
+
+        self.publisher.summary(machine, **await self.threads.queue(read))
+
+
+def _write_durably(path: Path, data: bytes) -> None:
+    """Write, flush to disk, then rename into place: a crash leaves the old state or the new one."""
+    temp = path.with_name(path.name + ".writing")
+    with temp.open("wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(temp, path)
+
+
+def _validated_reason(verdict: Verdict) -> str:
+    parts = ["valid"]
+    if verdict.estimate is not None and verdict.estimate.seconds is not None:
+        parts.append(f"estimated {verdict.estimate.seconds:.1f} s")
+    if verdict.warnings:
+        parts.append(f"{len(verdict.warnings)} warning{'s' if len(verdict.warnings) != 1 else ''}")
+    return ", ".join(parts)
