@@ -25,7 +25,25 @@ log = logging.getLogger("gateway")
 def build_sinks(config: Config, tree: VariableTree) -> list[Sink]:
     from gateway.sinks.opcua.server import OpcUaSink
 
-    return [OpcUaSink(tree, config.gateway.opcua, config.state_dir)]
+    sinks: list[Sink] = [OpcUaSink(tree, config.gateway.opcua, config.state_dir)]
+    if config.gateway.mqtt is not None:  # no `mqtt:` in the gateway file: no broker to reach
+        from gateway.sinks.mqtt.sink import MqttSink
+
+        sinks.append(MqttSink(tree, config.gateway.mqtt, config.state_dir, base_dir=config.base_dir))
+    if any(m.copydata is not None for m in config.machines):  # frames for nesting software
+        from gateway.sinks.copydata.sink import CopydataSink
+
+        sinks.append(CopydataSink(tree))
+    return sinks
+
+
+def build_jobs(config: Config, tree: VariableTree) -> Any:
+    """The FTP job queue, when some machine has a `jobs:` section (None otherwise)."""
+    if not any(m.jobs is not None for m in config.machines):
+        return None
+    from gateway.jobs.service import JobService
+
+    return JobService(config, tree)
 
 
 class Gateway:
@@ -36,6 +54,7 @@ class Gateway:
         self.tree = VariableTree(config.machines)
         self.sinks: list[Sink] = build_sinks(config, self.tree)
         self.sources: list[Source] = [create_source(m) for m in self.tree.machines.values()]
+        self.jobs = build_jobs(config, self.tree)  # before the sinks start: it adds Jobs/ variables and methods
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
 
@@ -52,6 +71,8 @@ class Gateway:
                 await self._stack.enter_async_context(sink)
             for source in self.sources:
                 await self._stack.enter_async_context(source)
+            if self.jobs is not None:
+                await self._stack.enter_async_context(self.jobs)
         except BaseException:
             await self._stack.aclose()
             raise
@@ -67,6 +88,8 @@ class Gateway:
                 tg.create_task(sink.run(), name=f"sink:{sink.name}")
             for source in self.sources:
                 tg.create_task(source.run(), name=f"source:{source.machine.name}")
+            if self.jobs is not None:
+                tg.create_task(self.jobs.run(), name="jobs")
             for name, factory in extra:
                 tg.create_task(factory(), name=name)
             self.ready.set()

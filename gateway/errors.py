@@ -129,3 +129,49 @@ class SinkError(GatewayError):
 
 class CodecError(GatewayError, ValueError):
     """Bytes or text that do not follow the format they claim to."""
+
+
+# --- MQTT --------------------------------------------------------------------------------------
+
+
+class BadWriteRequest(WriteError):
+    """A write request that cannot be read at all: not UTF-8, malformed JSON, too large, no value."""
+
+    status = "BadDecodingError"
+
+
+class BrokerError(SinkError):
+    """The MQTT broker could not be reached, or the connection to it failed."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+class BrokerRefused(BrokerError):
+    """The broker answered, and refused us: bad credentials, not authorised, client id rejected."""
+
+
+# --- jobs --------------------------------------------------------------------------------------
+
+
+class JobError(GatewayError):
+    """A job operation was refused: unknown job, or a state that does not allow it."""
+
+
+class DeliveryError(GatewayError):
+    """The controller's program store could not take (or give) a program.
+
+    `reply` is the FTP server's own answer when there was one (`550 disk full`);
+    `permanent` marks refusals that retrying cannot cure (a name the store rejects).
+    """
+
+    def __init__(self, reason: str, *, reply: str | None = None, permanent: bool = False) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.reply = reply
+        self.permanent = permanent
+
+
+class ProgramNotFound(DeliveryError):
+    """The controller's program store has no program of that name."""

@@ -14,16 +14,21 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
 import signal
 import socket
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from gateway.app import Gateway, run_until_signalled
+from gateway.auth.passwords import hash_password
 from gateway.cli.check import report_config_error
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
+from gateway.config.mqtt import MachineMqtt, MqttConfig
 from gateway.errors import ConfigError, SinkError, WriteError
 from gateway.logconfig import configure
 from gateway.model.tree import Machine, WriteContext
@@ -31,6 +36,9 @@ from gateway.model.tree import Machine, WriteContext
 log = logging.getLogger("gateway.demo")
 
 DEMO_PROGRAM = "demo.nc"
+DEMO_INBOX_USER = "nesting"
+DEMO_INBOX_PASSWORD = "nesting"  # a demo-only default, printed in the banner
+DEMO_INBOX_PASSWORD_ENV = "CNC_DEMO_INBOX_PASSWORD"
 STATE_IDLE, STATE_ALARM = 0, 3
 
 
@@ -40,8 +48,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--opcua-port", type=int, default=4840, help="gateway OPC UA port (default 4840)")
     p.add_argument("--sim-opcua-port", type=int, default=4841, help="simulator OPC UA port (default 4841)")
     p.add_argument("--sim-ftp-port", type=int, default=2122, help="simulator FTP port (default 2122)")
+    p.add_argument("--inbox-port", type=int, default=2121, help="FTP job inbox port (default 2121)")
+    p.add_argument("--inbox-host", default="127.0.0.1", help="FTP job inbox address (default 127.0.0.1)")
+    p.add_argument("--copydata-port", type=int, default=5020,
+                   help="port of the mapping's COPYDATA tcp-server target (default 5020)")
     p.add_argument("--speed", type=float, default=1.0, help="simulator speed factor (default 1)")
     p.add_argument("--state-dir", type=Path, default=Path("state/demo"))
+    p.add_argument("--mqtt-host", default="127.0.0.1", help="MQTT broker (default 127.0.0.1)")
+    p.add_argument("--mqtt-port", type=int, default=1883, help="MQTT broker port (default 1883); when nothing "
+                   "answers there, the demo starts an embedded broker on it")
+    p.add_argument("--no-mqtt", action="store_true", help="do not publish to MQTT")
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
 
@@ -72,9 +88,15 @@ def handle(args: argparse.Namespace) -> int:
     mapping = base.machines[0]
     endpoint = f"opc.tcp://127.0.0.1:{args.sim_opcua_port}"
     mapping = mapping.model_copy(update={"driver": mapping.driver.model_copy(update={"endpoint": endpoint})})
+    if mapping.mqtt is None:  # the demo lets MQTT write the machine's readwrite variables (Feed/Override…)
+        mapping = mapping.model_copy(update={"mqtt": MachineMqtt(writable=True)})
+    mapping = demo_jobs(mapping, args)
+    mapping = demo_copydata(mapping, args)
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://0.0.0.0:{args.opcua_port}/cnc-gateway"),
         state_dir=str(args.state_dir),
+        inbox=demo_inbox(mapping, args),
+        mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
     )
     config = Config(gateway, (mapping,), Path.cwd(), base.files)
     try:
@@ -85,20 +107,74 @@ def handle(args: argparse.Namespace) -> int:
     return 0
 
 
+def demo_copydata(mapping: MachineMapping, args: argparse.Namespace) -> MachineMapping:
+    """The COPYDATA tcp-server target listens on the port the demo was given."""
+    if mapping.copydata is None:
+        return mapping
+    targets = [
+        t.model_copy(update={"port": args.copydata_port}) if t.transport == "tcp-server" else t
+        for t in mapping.copydata.targets
+    ]
+    return mapping.model_copy(update={"copydata": mapping.copydata.model_copy(update={"targets": targets})})
+
+
+def demo_jobs(mapping: MachineMapping, args: argparse.Namespace) -> MachineMapping:
+    """The job queue delivers to the simulator's FTP store, on the port the demo runs it on."""
+    if mapping.jobs is None:
+        return mapping
+    controller = mapping.jobs.controller.model_copy(update={"port": args.sim_ftp_port})
+    return mapping.model_copy(update={"jobs": mapping.jobs.model_copy(update={"controller": controller})})
+
+
+def demo_inbox(mapping: MachineMapping, args: argparse.Namespace) -> InboxConfig:
+    """The FTP inbox with one account for the demo machine; its password from the environment or the default."""
+    password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
+    account = FtpAccount(user=DEMO_INBOX_USER, password_hash=hash_password(password), machines=[mapping.machine])
+    return InboxConfig(host=args.inbox_host, port=args.inbox_port, accounts=[account])
+
+
 async def demo(config: Config, args: argparse.Namespace) -> None:
-    mapping = config.machines[0]
     external = port_in_use("127.0.0.1", args.sim_opcua_port)
     toggle = asyncio.Event()
-    async with Gateway(config) as gw:
-        machine = gw.tree.machines[mapping.machine]
-        tasks: list[tuple[str, object]] = [("demo:driver", lambda: keep_program_running(machine))]
-        if external:
-            log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
-        else:
-            tasks.append(("demo:simulator", lambda: simulator_loop(config, args, toggle)))
-            _install_toggle(toggle)
-        print_banner(gw, mapping, args, external)
-        await gw.run(*tasks)  # type: ignore[arg-type]
+    async with contextlib.AsyncExitStack() as stack:
+        broker = await _ensure_broker(config, stack)
+        gw = await stack.enter_async_context(Gateway(config))
+        await _run_demo(gw, config, args, external, toggle, broker)
+
+
+async def _ensure_broker(config: Config, stack: contextlib.AsyncExitStack) -> str:
+    """The demo, and only the demo, starts an embedded broker when none answers on the configured port."""
+    from gateway.sinks.mqtt.embedded import EmbeddedBroker, broker_reachable
+
+    mqtt = config.gateway.mqtt
+    if mqtt is None:
+        return "off"
+    if await asyncio.to_thread(broker_reachable, mqtt.host, mqtt.port):
+        log.info("using the MQTT broker on %s:%d", mqtt.host, mqtt.port)
+        return "already running"
+    if mqtt.host not in ("127.0.0.1", "localhost", "::1"):
+        log.warning("no MQTT broker answers on %s:%d; the gateway keeps retrying", mqtt.host, mqtt.port)
+        return "not reachable; retrying"
+    await stack.enter_async_context(EmbeddedBroker(mqtt.host, mqtt.port))
+    log.warning("no MQTT broker on %s:%d: started an embedded one (amqtt) for the demo", mqtt.host, mqtt.port)
+    return "embedded amqtt, started by the demo"
+
+
+async def _run_demo(
+    gw: Gateway, config: Config, args: argparse.Namespace, external: bool, toggle: asyncio.Event, broker: str
+) -> None:
+    mapping = config.machines[0]
+    machine = gw.tree.machines[mapping.machine]
+    jobs = gw.jobs
+    busy = (lambda: jobs.machine_busy(machine.name)) if jobs is not None else (lambda: False)
+    tasks: list[tuple[str, object]] = [("demo:driver", lambda: keep_program_running(machine, busy))]
+    if external:
+        log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
+    else:
+        tasks.append(("demo:simulator", lambda: simulator_loop(config, args, toggle)))
+        _install_toggle(toggle)
+    print_banner(gw, mapping, args, external, broker)
+    await gw.run(*tasks)  # type: ignore[arg-type]
 
 
 async def simulator_loop(config: Config, args: argparse.Namespace, toggle: asyncio.Event) -> None:
@@ -135,8 +211,8 @@ def _install_toggle(toggle: asyncio.Event) -> None:
             loop.add_reader(sys.stdin, on_input)
 
 
-async def keep_program_running(machine: Machine) -> None:
-    """Select and start the demo program whenever the machine is idle; reset alarms."""
+async def keep_program_running(machine: Machine, busy: Callable[[], bool] = lambda: False) -> None:
+    """Select and start the demo program whenever the machine is idle (and no job wants it); reset alarms."""
     ctx = WriteContext("demo")
     state = machine.nodes["Machine/State"]
     name = machine.nodes["Program/Name"]
@@ -148,7 +224,7 @@ async def keep_program_running(machine: Machine) -> None:
             if state.sample.value == STATE_ALARM:
                 log.info("demo: machine in alarm, resetting")
                 await machine.write("Control/Reset", True, ctx)
-            elif state.sample.value == STATE_IDLE:
+            elif state.sample.value == STATE_IDLE and not busy():
                 if name.sample.value != DEMO_PROGRAM:
                     await machine.write("Control/SelectProgram", DEMO_PROGRAM, ctx)
                 await machine.write("Control/Start", True, ctx)
@@ -157,7 +233,9 @@ async def keep_program_running(machine: Machine) -> None:
             log.info("demo: %s (%s); will retry", exc.reason, exc.status)
 
 
-def print_banner(gw: Gateway, mapping: MachineMapping, args: argparse.Namespace, external: bool) -> None:
+def print_banner(
+    gw: Gateway, mapping: MachineMapping, args: argparse.Namespace, external: bool, broker: str = "off"
+) -> None:
     opcua = gw.sink("opcua")
     endpoint = getattr(opcua, "endpoint", f"opc.tcp://127.0.0.1:{args.opcua_port}/cnc-gateway")
     lines = [
@@ -169,7 +247,47 @@ def print_banner(gw: Gateway, mapping: MachineMapping, args: argparse.Namespace,
         f"  simulator        {mapping.driver.endpoint} (OPC UA), ftp://127.0.0.1:{args.sim_ftp_port}/DATA/Programs "
         + ("(already running)" if external else "(in-process)"),
     ]
+    mqtt = config_mqtt(gw)
+    if mqtt is not None:
+        lines += [
+            f"  MQTT broker      mqtt://{mqtt.host}:{mqtt.port} ({broker})",
+            f"  watch            mosquitto_sub -v -t '{mqtt.prefix}/#'",
+            f"  write            mosquitto_pub -t {mqtt.prefix}/{mapping.machine}/feed/override/set -m 50",
+        ]
+    if gw.jobs is not None and gw.jobs.inbox is not None:
+        inbox = gw.jobs.inbox
+        password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
+        where = f"{DEMO_INBOX_USER}:{password}@{inbox.url.split('://', 1)[1]}{mapping.machine}/"
+        lines += [
+            f"  FTP job inbox    {inbox.url}  user {DEMO_INBOX_USER}, password {password!r} "
+            f"(set {DEMO_INBOX_PASSWORD_ENV} to change it)",
+            f"  send a job       curl -T part.nc ftp://{where}",
+            f"  jobs             cnc-gateway jobs list; OPC UA Objects/Machines/{mapping.machine}/Jobs; "
+            "the program starts when the machine is idle",
+        ]
+    lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     if not external:
         lines.append("  outage drill     press Enter (or kill -USR1 <pid>) to stop the simulator, again to restart it")
     lines += ["  stop             Ctrl-C", ""]
     print("\n".join(lines), flush=True)
+
+
+def copydata_banner(mapping: MachineMapping, mapping_file: str) -> list[str]:
+    """How to watch the frames a nesting package would get."""
+    if mapping.copydata is None:
+        return []
+    lines = []
+    for target in mapping.copydata.targets:
+        if target.transport == "tcp-server":
+            host = "127.0.0.1" if target.listen_address in ("0.0.0.0", "::") else target.listen_address
+            lines.append(
+                f"  COPYDATA frames  cnc-gateway frames listen --tcp {host}:{target.listen_port} "
+                f"--mapping {mapping_file}"
+            )
+        else:
+            lines.append(f"  COPYDATA frames  {target.name}: {target.describe()}")
+    return lines
+
+
+def config_mqtt(gw: Gateway) -> MqttConfig | None:
+    return gw.config.gateway.mqtt

@@ -7,9 +7,10 @@ import sys
 from collections.abc import Sequence
 
 from gateway import __version__
-from gateway.cli import check, demo, discover, run, schema
+from gateway.cli import check, demo, discover, jobs, passwords, programs, run, schema
+from gateway.cli import frames
 
-COMMANDS = (run, check, schema, discover, demo)
+COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -6,7 +6,9 @@ from typing import Literal
 
 from pydantic import Field, field_validator
 
+from gateway.config.jobs import InboxConfig
 from gateway.config.mapping import Strict, check_endpoint
+from gateway.config.mqtt import MqttConfig
 
 SecurityMode = Literal["None"]
 
@@ -36,3 +38,7 @@ class GatewayConfig(Strict):
     state_dir: str = Field(default="state", description="Where the gateway keeps its state; relative to this file")
     machines: list[str] = Field(default_factory=list, description="Mapping files, relative to this file")
     log_level: Literal["debug", "info", "warning", "error"] = "info"
+    inbox: InboxConfig = Field(
+        default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
+    )
+    mqtt: MqttConfig | None = Field(default=None, description="The MQTT broker to publish to; absent: no MQTT")

@@ -24,6 +24,8 @@ from pydantic import (
     model_validator,
 )
 
+from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.model.types import TYPE_NAMES, TypeSpec
 
 RESERVED_SEGMENTS = frozenset({"Status", "Jobs", "Commands", "Programs", "Alarms"})
@@ -64,7 +66,7 @@ def check_path(path: str) -> str:
                 f"path segment {seg!r} in {path!r} must start with a letter, digit or '_' "
                 "and contain only letters, digits, '_', '-' and '.'"
             )
-    if segments[0] in RESERVED_SEGMENTS:
+    if segments[0].lower() in {r.lower() for r in RESERVED_SEGMENTS}:  # MQTT topics are lower-case
         raise ValueError(f"path {path!r} starts with {segments[0]!r}, which the gateway reserves for itself")
     return path
 
@@ -121,6 +123,10 @@ class VariableSpec(Strict):
     description: str = ""
     sampling_interval: float | None = Field(default=None, ge=0, description="Milliseconds; default from defaults")
     queue_size: int | None = Field(default=None, ge=1, le=10000)
+    mqtt: VariableMqtt | None = Field(default=None, description="How this variable appears in MQTT (topic, QoS, writes)")
+    copydata: VariableCopydata | None = Field(
+        default=None, description="This variable's id in COPYDATA frames for nesting software: {id: 12}"
+    )
 
     @field_validator("path")
     @classmethod
@@ -161,6 +167,13 @@ class VariableSpec(Strict):
             return value.strip()
         if value < 0:
             raise ValueError("deadband must not be negative")
+        return value
+
+    @field_validator("mqtt")
+    @classmethod
+    def _mqtt(cls, value: VariableMqtt | None, info: ValidationInfo) -> VariableMqtt | None:
+        if value is not None and value.writable and info.data.get("access") != "readwrite":
+            raise ValueError("mqtt.writable: true needs access: readwrite")
         return value
 
     @property
@@ -237,6 +250,10 @@ class VariableDefaults(Strict):
     queue_size: int = Field(default=1, ge=1, le=10000)
 
 
+# Imported here, not at the top: jobs embeds validation rules that derive from Strict above.
+from gateway.config.jobs import JobsConfig  # noqa: E402
+
+
 class MachineMapping(Strict):
     """One machine: its name, its controller, and the variables mirrored upstream."""
 
@@ -245,6 +262,13 @@ class MachineMapping(Strict):
     driver: OpcUaDriver
     defaults: VariableDefaults = VariableDefaults()
     variables: list[VariableSpec] = Field(min_length=1)
+    mqtt: MachineMqtt | None = Field(default=None, description="This machine's MQTT defaults (QoS, retain, writes)")
+    jobs: JobsConfig | None = Field(
+        default=None, description="The FTP job queue: program store on the controller, checks, retries, auto-start"
+    )
+    copydata: MachineCopydata | None = Field(
+        default=None, description="COPYDATA targets: where this machine's frames for nesting software go"
+    )
 
     @field_validator("machine")
     @classmethod
@@ -254,6 +278,36 @@ class MachineMapping(Strict):
                 f"machine name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', starting with a letter or digit"
             )
         return name
+
+    @field_validator("jobs")
+    @classmethod
+    def _jobs_variables(cls, jobs: JobsConfig | None, info: ValidationInfo) -> JobsConfig | None:
+        """auto.select/start/ready must name mapped variables of a fitting type."""
+        variables = info.data.get("variables")
+        if jobs is None or jobs.auto is None or variables is None:
+            return jobs
+        by_path = {v.path: v for v in variables}
+        auto = jobs.auto
+        wanted = [("select", auto.select, "String", True), ("start", auto.start, "Boolean", True)]
+        if auto.ready is not None:
+            wanted.append(("ready.path", auto.ready.path, None, False))
+        for key, path, type_name, writable in wanted:
+            if path is None:
+                continue
+            var = by_path.get(path)
+            if var is None:
+                raise ValueError(f"auto.{key}: {path!r} is not a variable of this mapping")
+            if type_name is not None and str(var.type) != type_name:
+                raise ValueError(f"auto.{key}: {path} is {var.type}, expected {type_name}")
+            if writable and not var.writable:
+                raise ValueError(f"auto.{key}: {path} must have access: readwrite")
+        return jobs
+
+    @model_validator(mode="after")
+    def _copydata_cross_checks(self) -> MachineMapping:
+        """Ids unique per machine, targets naming variables with ids, ids that fit the id width."""
+        copydata_issues(self.variables, self.copydata)
+        return self
 
     def sampling_interval(self, var: VariableSpec) -> float:
         return self.defaults.sampling_interval if var.sampling_interval is None else var.sampling_interval

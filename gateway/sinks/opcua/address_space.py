@@ -36,6 +36,8 @@ MACHINES = "Machines"
 INTERNAL_OBJECTS: dict[str, str] = {
     "Status": "Connection state, last error and counters of the link to the controller",
     "Jobs": "Programs received for this machine and their delivery state",
+    "Programs": "The controller's program store: list, fetch, back up, delete and queue programs",
+    "Commands": "Commands to the machine",
 }
 
 OBJECTS_FOLDER = ua.NodeId(ua.ObjectIds.ObjectsFolder, 0)
@@ -111,6 +113,20 @@ class AddressSpacePlan:
             self._container(MACHINES, OBJECTS_FOLDER, True, MACHINES, "Machines served by this gateway", folder=True)
         if machine.name not in self._containers:
             self._container(machine.name, self.machines_id, True, machine.name, machine.mapping.description, folder=False)
+
+    def add_object(self, machine: Machine, name: str) -> ua.NodeId:
+        """An Object directly under the machine (Programs, Commands) that methods hang on."""
+        self.add_machine(machine)
+        text = f"{machine.name}/{name}"
+        if text not in self._containers:
+            description = INTERNAL_OBJECTS.get(name, "")
+            self._container(text, self.machine_id(machine.name), False, name, description, folder=False)
+        return self.id(text)
+
+    def add_item(self, item: ua.AddNodesItem) -> None:
+        """Any other node of ours (methods and their argument properties), parents planned first."""
+        self._pending.append(item)
+        self.owned.add(item.RequestedNewNodeId)
 
     def add_variable(self, node: VariableNode) -> ua.NodeId:
         """Plan one variable (and any parents still missing); returns its NodeId."""

@@ -20,6 +20,7 @@ import socket
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Self
 from urllib.parse import urlsplit
@@ -32,9 +33,11 @@ from gateway import __version__
 from gateway.config.gateway import OpcUaServerConfig
 from gateway.errors import SinkError
 from gateway.model.hub import Change, Subscription
+from gateway.model.methods import Method
 from gateway.model.sample import utcnow
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.opcua.address_space import AddressSpacePlan
+from gateway.sinks.opcua.methods import call_result, plan_methods
 from gateway.sinks.opcua.values import ValueKind, ValueMismatch, value_kind
 from gateway.sinks.opcua.writes import write_node
 
@@ -46,6 +49,31 @@ YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
 SECURITY_POLICIES: dict[str, ua.SecurityPolicyType] = {
     "None": ua.SecurityPolicyType.NoSecurity,
 }
+
+
+# The session user of the Call request being served: asyncua does not pass it to method callbacks.
+_CALLER: ContextVar[Any] = ContextVar("opcua_caller", default=None)
+
+
+def _track_callers(iserver: Any) -> None:
+    """Make every new session's Call service record its user in _CALLER while the call runs."""
+    create_session = iserver.create_session
+
+    def create(*args: Any, **kwargs: Any) -> Any:
+        session = create_session(*args, **kwargs)
+        call = session.call
+
+        async def call_as_user(params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
+            token = _CALLER.set(session.user)
+            try:
+                return await call(params)
+            finally:
+                _CALLER.reset(token)
+
+        session.call = call_as_user
+        return session
+
+    iserver.create_session = create
 
 
 def session_user_name(user: Any) -> str | None:
@@ -188,6 +216,7 @@ class OpcUaSink:
         self.namespace_index = await server.register_namespace(self.config.namespace)
         iserver = server.iserver
         iserver.attribute_service = _GatewayAttributeService(iserver.aspace, self, iserver.isession.user)
+        _track_callers(iserver)
         self._server = server
         self._plan = AddressSpacePlan(self.namespace_index)
         # Subscribe before reading the initial samples, so no change falls between the two.
@@ -246,8 +275,11 @@ class OpcUaSink:
     async def _build(self) -> None:
         plan = self._require_plan()
         plan.add_machines(self.tree.machines.values())
+        methods = plan_methods(plan, self.tree.machines.values())
         await self.add_nodes(plan.take())
         self._register(plan)
+        for nodeid, method in methods:
+            self.server.iserver.isession.add_method_callback(nodeid, self._method_callback(method))
         await self._push([(node, node.sample) for node in self._vars])
 
     def _register(self, plan: AddressSpacePlan) -> None:
@@ -308,6 +340,16 @@ class OpcUaSink:
             if count % YIELD_EVERY == 0:
                 await asyncio.sleep(0)
                 now = utcnow()
+
+    # --- methods -----------------------------------------------------------------------------
+
+    def _method_callback(self, method: Method) -> Callable[..., Any]:
+        """asyncua calls this with the object's node id and the input Variants."""
+
+        async def callback(parent: ua.NodeId, *inputs: ua.Variant) -> ua.CallMethodResult:
+            return await call_result(method, inputs, self.user_name(_CALLER.get()))
+
+        return callback
 
     # --- writes ------------------------------------------------------------------------------
 
