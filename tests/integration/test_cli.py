@@ -64,9 +64,12 @@ async def test_run_serves_bad_values_while_the_controller_is_down_and_stops_clea
     gateway_file = tmp_path / "gateway.yaml"
     gateway_file.write_text(
         f"opcua: {{endpoint: 'opc.tcp://127.0.0.1:{gw_port}/cnc-gateway'}}\n"
-        f"state_dir: state\nmachines: [{ROOT / 'mappings' / 'laser-sim.yaml'}]\n"
+        f"state_dir: state\ninbox: {{port: {free_port()}}}\nmachines: [{ROOT / 'mappings' / 'laser-sim.yaml'}]\n"
     )
-    proc = spawn("cnc-gateway", "run", str(gateway_file), env={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}"})
+    proc = spawn(
+        "cnc-gateway", "run", str(gateway_file),
+        env={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}", "LASER_SIM_COPYDATA_PORT": "0"},
+    )
     processes.append(proc)
     endpoint = f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"
 

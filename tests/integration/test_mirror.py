@@ -18,6 +18,7 @@ from asyncua import Client, ua
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
 from simulator.runner import Simulator
 from tests.waiting import free_port, wait_until
@@ -55,10 +56,17 @@ def gateway_config(tmp_path: Path, sim_port: int, gw_port: int, mapping_text: st
     if mapping_text is not None:
         mapping_file = tmp_path / "laser-sim.yaml"
         mapping_file.write_text(mapping_text)
-    mapping = load_mapping(mapping_file, environ={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}"})
+    mapping = load_mapping(
+        mapping_file,
+        environ={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}", "LASER_SIM_COPYDATA_PORT": "0"},
+    )
     driver = mapping.driver.model_copy(update={"watchdog_interval": 0.5, "reconnect": mapping.driver.reconnect.model_copy(update={"initial": 0.2, "max": 1.0})})
     mapping = mapping.model_copy(update={"driver": driver})
-    gateway = GatewayConfig(opcua=OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"), state_dir=str(tmp_path / "state"))
+    gateway = GatewayConfig(
+        opcua=OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"),
+        state_dir=str(tmp_path / "state"),
+        inbox=InboxConfig(port=free_port()),
+    )
     return Config(gateway, (mapping,), tmp_path, (mapping_file,))
 
 

@@ -44,7 +44,7 @@ async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[tuple[Gateway
     args = Namespace(inbox_host="127.0.0.1", inbox_port=free_port(), sim_ftp_port=free_port(), broker=broker.port)
     # Real time: the part runs for about a second, long enough for the gateway to see it running.
     async with Simulator(opcua_port=free_port(), ftp_port=args.sim_ftp_port, speed=1.0, store=tmp_path / "sim") as sim:
-        base = load([find_mapping(None)], environ={})
+        base = load([find_mapping(None)], environ={"LASER_SIM_COPYDATA_PORT": "0"})
         mapping = base.machines[0]
         driver = mapping.driver.model_copy(update={"endpoint": sim.opcua_endpoint})
         mapping = demo_jobs(mapping.model_copy(update={"driver": driver}), args)

@@ -242,7 +242,11 @@ def mqtt_config(port: int, **overrides: Any) -> MqttConfig:
 
 def gateway_config(mapping: MachineMapping, state_dir: Path, mqtt: MqttConfig, opcua_port: int) -> Config:
     gateway = GatewayConfig.model_validate(
-        {"opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway"}, "state_dir": str(state_dir)}
+        {
+            "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway"},
+            "state_dir": str(state_dir),
+            "inbox": {"port": free_port()},
+        }
     ).model_copy(update={"mqtt": mqtt})
     return Config(gateway, (mapping,), state_dir.parent)
 

@@ -18,7 +18,10 @@ OVERRIDE = "cnc/laser-sim/feed/override"
 
 
 def laser_mapping(endpoint: str) -> Any:
-    mapping = load_mapping(ROOT / "mappings" / "laser-sim.yaml", environ={"LASER_SIM_ENDPOINT": endpoint})
+    mapping = load_mapping(
+        ROOT / "mappings" / "laser-sim.yaml",
+        environ={"LASER_SIM_ENDPOINT": endpoint, "LASER_SIM_COPYDATA_PORT": "0"},
+    )
     variables = [
         v.model_copy(update={"mqtt": VariableMqtt(writable=True)}) if v.path == "Feed/Override" else v
         for v in mapping.variables

@@ -1,0 +1,33 @@
+"""Integration tests bind free loopback ports, never the product's defaults.
+
+To keep that true, the session holds the default ports itself (where they are
+free), so a test or a spawned process that reaches for one fails at once instead
+of colliding with a gateway, simulator or broker running on this machine.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Iterator
+
+import pytest
+
+# Gateway OPC UA, simulator OPC UA, FTP inbox, simulator FTP, COPYDATA. (1883 is the system broker's.)
+DEFAULT_PORTS = (4840, 4841, 2121, 2122, 5020)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def default_ports_are_off_limits() -> Iterator[list[int]]:
+    held: list[socket.socket] = []
+    for port in DEFAULT_PORTS:
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            s.bind(("0.0.0.0", port))
+            s.listen(1)
+        except OSError:  # something real is using it (a demo a developer left running): leave it be
+            s.close()
+            continue
+        held.append(s)
+    yield [s.getsockname()[1] for s in held]
+    for s in held:
+        s.close()
