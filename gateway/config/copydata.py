@@ -6,9 +6,7 @@ lists the targets, each with its transport (`tcp-client`, `tcp-server`, `udp`,
 (one frame per change or one per cycle, a rate limit, periodic snapshots) and
 whether it accepts writes back.
 
-Like gateway.config.mqtt, these models carry their own strict base class
-because the mapping models embed them (importing mapping.Strict would be a
-circular import); the rules are the same. The checks that need the whole file
+The checks that need the whole file
 (ids unique per machine, targets naming variables that exist, ids that fit the
 id width) are in `copydata_issues`, which MachineMapping calls, so that each
 error points at the exact key that is wrong.
@@ -26,8 +24,10 @@ import re
 from collections.abc import Sequence
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from gateway.config.base import Backoff, Strict
 
 U32_MAX = 2**32 - 1
 DEFAULT_TCP_PORT = 5020
@@ -50,12 +50,6 @@ _REQUIRED: dict[str, tuple[str, ...]] = {"tcp-client": ("host", "port"), "udp": 
 _SPECIFIC = frozenset().union(*_TRANSPORT_KEYS.values())
 
 
-class CopydataStrict(BaseModel):
-    """Same rules as mapping.Strict: unknown keys are errors, loaded settings are immutable."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
 def _issue(loc: tuple[str | int, ...], message: str, value: Any = None) -> InitErrorDetails:
     return InitErrorDetails(type=PydanticCustomError("value_error", message), loc=loc, input=value)
 
@@ -65,24 +59,10 @@ def _raise(title: str, issues: list[InitErrorDetails]) -> None:
         raise ValidationError.from_exception_data(title, issues)
 
 
-class VariableCopydata(CopydataStrict):
+class VariableCopydata(Strict):
     """How one variable appears in COPYDATA frames: its id (the contract with the nesting software)."""
 
     id: int = Field(ge=0, le=U32_MAX, description="Variable id in the frames; unique within the machine")
-
-
-class CopydataBackoff(CopydataStrict):
-    """Seconds between attempts to connect, to listen again, or to find the window."""
-
-    initial: float = Field(default=0.5, gt=0)
-    max: float = Field(default=10.0, gt=0)
-    factor: float = Field(default=2.0, ge=1)
-
-    @model_validator(mode="after")
-    def _ordered(self) -> CopydataBackoff:
-        if self.max < self.initial:
-            raise ValueError("backoff max must not be below initial")
-        return self
 
 
 def check_encoding(name: str) -> str:
@@ -104,7 +84,7 @@ def check_encoding(name: str) -> str:
     return name
 
 
-class CopydataTarget(CopydataStrict):
+class CopydataTarget(Strict):
     """One receiver of a machine's frames: a nesting package, or one of its instances."""
 
     name: str = Field(description="Target name, unique within the machine: logs, status and task names")
@@ -171,7 +151,7 @@ class CopydataTarget(CopydataStrict):
         default=None, ge=1024, le=64 * 1024 * 1024,
         description="TCP: socket send buffer in bytes (smaller keeps a slow receiver's backlog fresher)",
     )  # fmt: skip
-    backoff: CopydataBackoff = Field(default_factory=CopydataBackoff)
+    backoff: Backoff = Field(default_factory=Backoff)
 
     @field_validator("name")
     @classmethod
@@ -270,7 +250,7 @@ def _reissue(err: Any) -> InitErrorDetails:
     return details
 
 
-class MachineCopydata(CopydataStrict):
+class MachineCopydata(Strict):
     """The machine's COPYDATA targets: where its frames go."""
 
     targets: list[CopydataTarget] = Field(min_length=1, description="Receivers of this machine's frames")

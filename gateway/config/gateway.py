@@ -7,7 +7,8 @@ from typing import Literal
 from pydantic import Field, field_validator
 
 from gateway.config.jobs import InboxConfig
-from gateway.config.mapping import Strict, check_endpoint
+from gateway.config.base import Strict
+from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
 
 SecurityMode = Literal["None"]

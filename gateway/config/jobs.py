@@ -5,11 +5,6 @@ the controller), how programs are checked before they go there, what happens to
 duplicates and failures, and whether the program is selected and started once
 delivered. The gateway file's `inbox:` configures the FTP server that nesting
 software drops programs into: where it listens, who may log in, and its limits.
-
-Like gateway.config.mqtt, these models carry their own strict base class
-because the mapping models embed them (importing mapping.Strict would be a
-circular import); the rules are the same: unknown keys are errors and loaded
-settings are immutable.
 """
 
 from __future__ import annotations
@@ -17,9 +12,10 @@ from __future__ import annotations
 import re
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ByteSize, ConfigDict, Field, SecretStr, field_validator, model_validator
+from pydantic import ByteSize, Field, SecretStr, field_validator, model_validator
 
 from gateway.auth.passwords import parse_hash
+from gateway.config.base import Backoff, Strict
 from gateway.config.validation import ValidationRules
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -30,12 +26,6 @@ _VARIABLE_PATH = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*(/[A-Za-z0-9_][A-Za-z
 ANONYMOUS_USERS = ("anonymous", "ftp")
 
 
-class JobsStrict(BaseModel):
-    """Same rules as mapping.Strict: unknown keys are errors, loaded settings are immutable."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
 Port = Annotated[int, Field(ge=1, le=65535)]
 # "64 MiB", "512kB" or a number of bytes
 Size = Annotated[ByteSize, Field(description="Bytes, or a size with a unit: 64MiB, 500kB")]
@@ -44,7 +34,7 @@ Size = Annotated[ByteSize, Field(description="Bytes, or a size with a unit: 64Mi
 # --- the mapping file: jobs --------------------------------------------------------------------
 
 
-class ControllerFtp(JobsStrict):
+class ControllerFtp(Strict):
     """The controller's FTP program store."""
 
     host: str = Field(min_length=1, description="Controller address")
@@ -84,25 +74,14 @@ class ControllerFtp(JobsStrict):
         return suffix
 
 
-class Retry(JobsStrict):
+class Retry(Backoff):
     """Exponential backoff between delivery attempts, in seconds."""
 
     initial: float = Field(default=2.0, gt=0)
     max: float = Field(default=60.0, gt=0)
-    factor: float = Field(default=2.0, ge=1)
-
-    @model_validator(mode="after")
-    def _ordered(self) -> Retry:
-        if self.max < self.initial:
-            raise ValueError("retry max must not be below initial")
-        return self
-
-    def delay(self, attempt: int) -> float:
-        """Seconds to wait after failed attempt number `attempt` (1-based)."""
-        return min(self.max, self.initial * self.factor ** max(0, attempt - 1))
 
 
-class ReadyCondition(JobsStrict):
+class ReadyCondition(Strict):
     """A mapped variable that must hold a value before the gateway selects and starts a program."""
 
     path: str = Field(description="Mapped variable, e.g. Machine/State")
@@ -114,7 +93,7 @@ class ReadyCondition(JobsStrict):
         return check_variable_path(path)
 
 
-class AutoStart(JobsStrict):
+class AutoStart(Strict):
     """What happens on the machine after a program is delivered."""
 
     select: str | None = Field(default=None, description="String variable the program is written to, to select it")
@@ -144,7 +123,7 @@ class AutoStart(JobsStrict):
         return self
 
 
-class JobsConfig(JobsStrict):
+class JobsConfig(Strict):
     """The machine's job queue: its program store, checks, duplicates, retries and auto-start."""
 
     controller: ControllerFtp
@@ -171,7 +150,7 @@ def check_variable_path(path: str) -> str:
 # --- the gateway file: inbox --------------------------------------------------------------------
 
 
-class FtpAccount(JobsStrict):
+class FtpAccount(Strict):
     """One inbox login: a user, its secret, and the machines it may send programs to."""
 
     user: str = Field(description="Login name")
@@ -221,7 +200,7 @@ def check_machine_list(machines: list[str]) -> list[str]:
     return machines
 
 
-class PortRange(JobsStrict):
+class PortRange(Strict):
     min: Port
     max: Port
 
@@ -236,14 +215,14 @@ class PortRange(JobsStrict):
         return range(self.min, self.max + 1)
 
 
-class InboxTls(JobsStrict):
+class InboxTls(Strict):
     """Implicit FTPS (TLS from the first byte, usually port 990). Files are relative to the state directory."""
 
     cert: str = Field(default="inbox-cert.pem", description="PEM certificate (chain), relative to the state directory")
     key: str = Field(default="inbox-key.pem", description="PEM private key, relative to the state directory")
 
 
-class InboxConfig(JobsStrict):
+class InboxConfig(Strict):
     """The FTP server that nesting software drops programs into: one folder per machine."""
 
     enabled: bool = Field(default=True, description="Serve the inbox when some machine has a jobs section")

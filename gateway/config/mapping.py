@@ -12,9 +12,7 @@ from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
 from pydantic import (
-    BaseModel,
     BeforeValidator,
-    ConfigDict,
     Field,
     PlainSerializer,
     SecretStr,
@@ -24,19 +22,15 @@ from pydantic import (
     model_validator,
 )
 
+from gateway.config.base import Backoff, Strict
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.config.jobs import JobsConfig
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.model.types import TYPE_NAMES, TypeSpec
 
 RESERVED_SEGMENTS = frozenset({"Status", "Jobs", "Commands", "Programs", "Alarms"})
 SEGMENT_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 MACHINE_RE = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,62}$")
-
-
-class Strict(BaseModel):
-    """Every config model rejects unknown keys and is immutable once loaded."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 def _parse_type(value: Any) -> TypeSpec:
@@ -195,20 +189,6 @@ class VariableSpec(Strict):
         return float(self.deadband)
 
 
-class Backoff(Strict):
-    """Exponential backoff between reconnect attempts, in seconds."""
-
-    initial: float = Field(default=0.5, gt=0)
-    max: float = Field(default=10.0, gt=0)
-    factor: float = Field(default=2.0, ge=1)
-
-    @model_validator(mode="after")
-    def _ordered(self) -> Backoff:
-        if self.max < self.initial:
-            raise ValueError("backoff max must not be below initial")
-        return self
-
-
 def check_endpoint(url: str, scheme: str = "opc.tcp") -> str:
     parts = urlsplit(url)
     if parts.scheme != scheme:
@@ -248,10 +228,6 @@ class OpcUaDriver(Strict):
 class VariableDefaults(Strict):
     sampling_interval: float = Field(default=100.0, ge=0, description="Milliseconds")
     queue_size: int = Field(default=1, ge=1, le=10000)
-
-
-# Imported here, not at the top: jobs embeds validation rules that derive from Strict above.
-from gateway.config.jobs import JobsConfig  # noqa: E402
 
 
 class MachineMapping(Strict):

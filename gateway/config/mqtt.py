@@ -4,10 +4,6 @@ The gateway file's `mqtt:` section says which broker to reach and how; without
 it the gateway does not use MQTT at all. Mapping files may refine, per machine
 and per variable, the QoS, the retain flag, the payload form, the topic and
 whether writes over MQTT are allowed (they are off unless a mapping says so).
-
-These models do not derive from `gateway.config.mapping.Strict` only because
-the mapping models embed them (a circular import); the rules are the same:
-unknown keys are errors and loaded settings are immutable.
 """
 
 from __future__ import annotations
@@ -16,25 +12,19 @@ import re
 from typing import Annotated, Any, Literal
 
 from pydantic import (
-    BaseModel,
     BeforeValidator,
-    ConfigDict,
     Field,
     SecretStr,
     field_validator,
     model_validator,
 )
 
+from gateway.config.base import Backoff, Strict
+
 QoS = Literal[0, 1, 2]
 PayloadMode = Literal["json", "raw"]
 
 _TOPIC_FORBIDDEN = re.compile(r"[+#\x00]")
-
-
-class MqttStrict(BaseModel):
-    """Same rules as mapping.Strict: unknown keys are errors, loaded settings are immutable."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 def check_topic_part(text: str, what: str) -> str:
@@ -59,7 +49,7 @@ def _protocol(value: Any) -> Any:
     return value
 
 
-class MqttTls(MqttStrict):
+class MqttTls(Strict):
     """TLS towards the broker. The broker's certificate and host name are verified unless `verify: false`."""
 
     ca: str | None = Field(
@@ -81,21 +71,14 @@ class MqttTls(MqttStrict):
         return self
 
 
-class MqttReconnect(MqttStrict):
+class MqttReconnect(Backoff):
     """Exponential backoff between connection attempts to the broker, in seconds."""
 
     initial: float = Field(default=1.0, gt=0)
     max: float = Field(default=30.0, gt=0)
-    factor: float = Field(default=2.0, ge=1)
-
-    @model_validator(mode="after")
-    def _ordered(self) -> MqttReconnect:
-        if self.max < self.initial:
-            raise ValueError("reconnect max must not be below initial")
-        return self
 
 
-class MqttBuffer(MqttStrict):
+class MqttBuffer(Strict):
     """Store-and-forward while the broker is unreachable (or slower than the machines)."""
 
     limit: int = Field(
@@ -112,7 +95,7 @@ class MqttBuffer(MqttStrict):
     )
 
 
-class MqttConfig(MqttStrict):
+class MqttConfig(Strict):
     """The MQTT broker the gateway publishes to (gateway file). Absent: MQTT is off."""
 
     host: str = Field(default="127.0.0.1", min_length=1)
@@ -163,7 +146,7 @@ class MqttConfig(MqttStrict):
         return value
 
 
-class MachineMqtt(MqttStrict):
+class MachineMqtt(Strict):
     """Per machine (mapping file): defaults for this machine's topics."""
 
     qos: QoS | None = Field(default=None, description="Default: the gateway file's mqtt.qos")
@@ -175,7 +158,7 @@ class MachineMqtt(MqttStrict):
     )
 
 
-class VariableMqtt(MqttStrict):
+class VariableMqtt(Strict):
     """Per variable (mapping file): overrides of the machine's MQTT settings."""
 
     topic: str | None = Field(
