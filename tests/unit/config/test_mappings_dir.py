@@ -11,14 +11,14 @@ from gateway.cli.schema import schema
 from gateway.config.loader import load, load_mapping, read_yaml, is_gateway_file
 
 MAPPINGS = Path(__file__).resolve().parents[3] / "mappings"
-YAML_FILES = sorted(MAPPINGS.glob("*.yaml"))
+YAML_FILES = sorted(MAPPINGS.rglob("*.yaml"))
 
 
 def test_there_are_mapping_files() -> None:
     assert any(p.name == "laser-sim.yaml" for p in YAML_FILES)
 
 
-@pytest.mark.parametrize("path", YAML_FILES, ids=[p.name for p in YAML_FILES])
+@pytest.mark.parametrize("path", YAML_FILES, ids=[str(p.relative_to(MAPPINGS)) for p in YAML_FILES])
 def test_shipped_file_is_valid(path: Path) -> None:
     config = load([path], environ={})
     assert config.machines
