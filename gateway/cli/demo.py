@@ -19,6 +19,7 @@ import signal
 import socket
 import sys
 from collections.abc import Callable
+from typing import Any
 from pathlib import Path
 
 from gateway.app import Gateway, run_until_signalled
@@ -138,8 +139,10 @@ async def demo(config: Config, args: argparse.Namespace) -> None:
     toggle = asyncio.Event()
     async with contextlib.AsyncExitStack() as stack:
         broker = await _ensure_broker(config, stack)
+        # The simulator first, so the gateway finds its controller at once.
+        switch = None if external else await stack.enter_async_context(SimulatorSwitch(config, args, toggle))
         gw = await stack.enter_async_context(Gateway(config))
-        await _run_demo(gw, config, args, external, toggle, broker)
+        await _run_demo(gw, config, args, switch, toggle, broker)
 
 
 async def _ensure_broker(config: Config, stack: contextlib.AsyncExitStack) -> str:
@@ -161,38 +164,69 @@ async def _ensure_broker(config: Config, stack: contextlib.AsyncExitStack) -> st
 
 
 async def _run_demo(
-    gw: Gateway, config: Config, args: argparse.Namespace, external: bool, toggle: asyncio.Event, broker: str
+    gw: Gateway,
+    config: Config,
+    args: argparse.Namespace,
+    switch: SimulatorSwitch | None,
+    toggle: asyncio.Event,
+    broker: str,
 ) -> None:
     mapping = config.machines[0]
     machine = gw.tree.machines[mapping.machine]
     jobs = gw.jobs
     busy = (lambda: jobs.machine_busy(machine.name)) if jobs is not None else (lambda: False)
     tasks: list[tuple[str, object]] = [("demo:driver", lambda: keep_program_running(machine, busy))]
-    if external:
+    if switch is None:
         log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
     else:
-        tasks.append(("demo:simulator", lambda: simulator_loop(config, args, toggle)))
+        tasks.append(("demo:simulator", switch.run))
         _install_toggle(toggle)
-    print_banner(gw, mapping, args, external, broker)
+    print_banner(gw, mapping, args, switch is None, broker)
     await gw.run(*tasks)  # type: ignore[arg-type]
 
 
-async def simulator_loop(config: Config, args: argparse.Namespace, toggle: asyncio.Event) -> None:
-    """Run the in-process simulator; each toggle stops it or starts it again."""
-    from simulator.runner import Simulator
+class SimulatorSwitch:
+    """The in-process simulator: started before the gateway; each toggle stops it or starts it again."""
 
-    store = config.state_dir / "simulator-store"
-    store.mkdir(parents=True, exist_ok=True)
-    while True:
-        async with Simulator(
-            opcua_port=args.sim_opcua_port, ftp_port=args.sim_ftp_port, speed=args.speed, store=store
-        ):
-            log.info("simulator running (OPC UA %d, FTP %d)", args.sim_opcua_port, args.sim_ftp_port)
-            await toggle.wait()
-            toggle.clear()
-        log.warning("simulator STOPPED: values go Bad within seconds. Press Enter (or kill -USR1) to start it again.")
-        await toggle.wait()
-        toggle.clear()
+    def __init__(self, config: Config, args: argparse.Namespace, toggle: asyncio.Event) -> None:
+        self.args = args
+        self.toggle = toggle
+        self.store = config.state_dir / "simulator-store"
+        self._sim: Any = None
+
+    async def __aenter__(self) -> SimulatorSwitch:
+        await self._start()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._stop()
+
+    async def _start(self) -> None:
+        from simulator.runner import Simulator
+
+        args = self.args
+        self.store.mkdir(parents=True, exist_ok=True)
+        sim = Simulator(opcua_port=args.sim_opcua_port, ftp_port=args.sim_ftp_port, speed=args.speed, store=self.store)
+        await sim.__aenter__()
+        self._sim = sim
+        log.info("simulator running (OPC UA %d, FTP %d)", args.sim_opcua_port, args.sim_ftp_port)
+
+    async def _stop(self) -> None:
+        sim, self._sim = self._sim, None
+        if sim is not None:
+            await sim.__aexit__(None, None, None)
+
+    async def run(self) -> None:
+        while True:
+            await self.toggle.wait()
+            self.toggle.clear()
+            if self._sim is not None:
+                await self._stop()
+                log.warning(
+                    "simulator STOPPED: values go Bad within seconds. Press Enter (or kill -USR1) to start it again."
+                )
+            else:
+                await self._start()
 
 
 def _install_toggle(toggle: asyncio.Event) -> None:

@@ -95,7 +95,6 @@ class JobPublisher:
             "state": t.state.value,
             "previous": t.previous.value if t.previous is not None else None,
             "reason": t.reason,
-            "ts": t.ts.isoformat(),
         }
         if job is not None:
             payload["filename"] = job.filename

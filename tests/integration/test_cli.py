@@ -9,6 +9,7 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from asyncua import Client, ua
@@ -139,10 +140,25 @@ async def test_demo_runs_the_simulator_and_keeps_a_program_running(
         return now is not None and first is not None and now.Value.Value != first.Value.Value
 
     await wait_until(advanced, timeout=20, message="the program's block number to advance")
+
+    # The outage drill the banner offers: SIGUSR1 stops the in-process simulator, a second one restarts it.
+    async def position_status() -> ua.StatusCode | None:
+        dv = await read_value(endpoint, "ns=2;s=laser-sim/Axes/X/Position")
+        return None if dv is None else dv.StatusCode
+
+    proc.send_signal(signal.SIGUSR1)
+    await wait_until(lambda: _is(position_status(), bad=True), timeout=10, message="X Bad after the simulator stopped")
+    proc.send_signal(signal.SIGUSR1)
+    await wait_until(lambda: _is(position_status(), bad=False), timeout=15, message="X Good after it restarted")
     code, out, err = stop(proc, signal.SIGTERM)
     assert code == 0, err
     assert "Traceback" not in err
     assert f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway" in out
+
+
+async def _is(status: Any, *, bad: bool) -> bool:
+    code = await status
+    return code is not None and (code.is_bad() if bad else code.is_good())
 
 
 def demo_extra_args() -> list[str]:
