@@ -16,6 +16,7 @@ from typing import Any, Protocol
 
 from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ControllerUnavailable, NotWritable, OutOfRange, UnknownVariable
+from gateway.model.access import AccessPolicy
 from gateway.model.events import EventBus
 from gateway.model.hub import ChangeHub
 from gateway.model.methods import Method
@@ -36,13 +37,14 @@ WriteHook = Callable[["VariableNode", Any, "WriteContext"], Awaitable[None]]
 
 
 class WriteContext:
-    """Who is writing, through which sink. Roles and audit build on this."""
+    """Who is writing, through which sink, with which role (see gateway/model/access.py)."""
 
-    __slots__ = ("origin", "user")
+    __slots__ = ("origin", "user", "role")
 
-    def __init__(self, origin: str, user: str | None = None) -> None:
+    def __init__(self, origin: str, user: str | None = None, role: str | None = None) -> None:
         self.origin = origin
         self.user = user
+        self.role = role
 
 
 class VariableNode:
@@ -270,6 +272,7 @@ class VariableTree:
         self.events = EventBus()
         self.machines: dict[str, Machine] = {}
         self.write_hooks: list[WriteHook] = []
+        self.access = AccessPolicy()
         for mapping in mappings:
             self.add_machine(mapping)
 
