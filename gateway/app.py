@@ -14,6 +14,9 @@ from collections.abc import Awaitable, Callable
 from contextlib import AsyncExitStack
 from typing import Any, Self
 
+from gateway.audit.store import audit_path
+from gateway.audit.trail import AuditTrail
+from gateway.commands.runner import install_commands
 from gateway.config.loader import Config
 from gateway.model.tree import VariableTree
 from gateway.sinks.base import Sink
@@ -22,10 +25,32 @@ from gateway.sources.base import Source, create_source
 log = logging.getLogger("gateway")
 
 
+def configure_access(config: Config, tree: VariableTree) -> None:
+    """Roles, whether they are enforced, and the roles of callers without a login (gateway/model/access.py)."""
+    gw = config.gateway
+    access = gw.access
+    tree.access.configure(
+        gw.roles,
+        enabled=access.is_enabled(gw.users),
+        default_write_role=access.default_write_role,
+        origin_roles={"jobs": access.jobs_role, "copydata": access.copydata_role},
+        mqtt_roles={
+            m.machine: (m.mqtt.writer_role if m.mqtt and m.mqtt.writer_role else access.mqtt_writer_role)
+            for m in config.machines
+        },
+    )
+    if tree.access.enabled:
+        log.info("access control on: %d user(s), roles %s, anonymous OPC UA logins: %s",
+                 len(gw.users), " < ".join(gw.roles), access.anonymous)
+
+
 def build_sinks(config: Config, tree: VariableTree) -> list[Sink]:
+    from gateway.auth.users import UserDirectory
     from gateway.sinks.opcua.server import OpcUaSink
 
-    sinks: list[Sink] = [OpcUaSink(tree, config.gateway.opcua, config.state_dir)]
+    gw = config.gateway
+    users = UserDirectory.from_config(gw)
+    sinks: list[Sink] = [OpcUaSink(tree, gw.opcua, config.state_dir, users=users)]
     if config.gateway.mqtt is not None:  # no `mqtt:` in the gateway file: no broker to reach
         from gateway.sinks.mqtt.sink import MqttSink
 
@@ -46,15 +71,32 @@ def build_jobs(config: Config, tree: VariableTree) -> Any:
     return JobService(config, tree)
 
 
+def build_alarms(config: Config, tree: VariableTree) -> Any:
+    """The alarm managers, when some machine has an `alarms:` section (None otherwise)."""
+    if not any(m.alarms is not None for m in config.machines):
+        return None
+    from gateway.alarms.service import AlarmService
+
+    return AlarmService(tree, config.state_dir)
+
+
 class Gateway:
     """Owns every component; `async with Gateway(config) as gw: await gw.run()`."""
 
     def __init__(self, config: Config) -> None:
         self.config = config
         self.tree = VariableTree(config.machines)
+        configure_access(config, self.tree)
+        retention = config.gateway.access.audit_retention
+        self.audit = AuditTrail(audit_path(config.state_dir), retention_days=retention)
+        self.tree.audit_sinks.append(self.audit.record)
+        install_commands(self.tree)  # the mapping's commands as Commands/ methods, before the sinks see them
         self.sinks: list[Sink] = build_sinks(config, self.tree)
         self.sources: list[Source] = [create_source(m) for m in self.tree.machines.values()]
         self.jobs = build_jobs(config, self.tree)  # before the sinks start: it adds Jobs/ variables and methods
+        self.alarms = build_alarms(config, self.tree)
+        if self.alarms is not None:
+            self.sink("opcua").alarms = self.alarms  # alarm conditions and events in the address space
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
 
@@ -67,6 +109,9 @@ class Gateway:
     async def __aenter__(self) -> Self:
         self.config.state_dir.mkdir(parents=True, exist_ok=True)
         try:
+            await self._stack.enter_async_context(self.audit)  # first in, last out: it sees every write
+            if self.alarms is not None:  # before the sinks: OPC UA offers the alarms still open from the start
+                await self._stack.enter_async_context(self.alarms)
             for sink in self.sinks:
                 await self._stack.enter_async_context(sink)
             for source in self.sources:
@@ -90,6 +135,8 @@ class Gateway:
                 tg.create_task(source.run(), name=f"source:{source.machine.name}")
             if self.jobs is not None:
                 tg.create_task(self.jobs.run(), name="jobs")
+            if self.alarms is not None:
+                tg.create_task(self.alarms.run(), name="alarms")
             for name, factory in extra:
                 tg.create_task(factory(), name=name)
             self.ready.set()

@@ -25,6 +25,7 @@ from pathlib import Path
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
 from gateway.cli.check import report_config_error
+from gateway.config.access import AccessConfig, UserConfig
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
@@ -40,6 +41,8 @@ DEMO_PROGRAM = "demo.nc"
 DEMO_INBOX_USER = "nesting"
 DEMO_INBOX_PASSWORD = "nesting"  # a demo-only default, printed in the banner
 DEMO_INBOX_PASSWORD_ENV = "CNC_DEMO_INBOX_PASSWORD"
+DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the role of its name
+DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
 STATE_IDLE, STATE_ALARM = 0, 3
 
 
@@ -89,8 +92,8 @@ def handle(args: argparse.Namespace) -> int:
     mapping = base.machines[0]
     endpoint = f"opc.tcp://127.0.0.1:{args.sim_opcua_port}"
     mapping = mapping.model_copy(update={"driver": mapping.driver.model_copy(update={"endpoint": endpoint})})
-    if mapping.mqtt is None:  # the demo lets MQTT write the machine's readwrite variables (Feed/Override…)
-        mapping = mapping.model_copy(update={"mqtt": MachineMqtt(writable=True)})
+    if mapping.mqtt is None:  # the demo lets MQTT write the readwrite variables (Feed/Override…) and run commands
+        mapping = mapping.model_copy(update={"mqtt": MachineMqtt(writable=True, commands=True)})
     mapping = demo_jobs(mapping, args)
     mapping = demo_copydata(mapping, args)
     gateway = GatewayConfig(
@@ -98,6 +101,7 @@ def handle(args: argparse.Namespace) -> int:
         state_dir=str(args.state_dir),
         inbox=demo_inbox(mapping, args),
         mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
+        **demo_access(),
     )
     config = Config(gateway, (mapping,), Path.cwd(), base.files)
     try:
@@ -106,6 +110,17 @@ def handle(args: argparse.Namespace) -> int:
         log.error("cannot start: %s", exc)
         return 1
     return 0
+
+
+def demo_access() -> dict[str, Any]:
+    """Users viewer, operator and engineer (password: the user name, or CNC_DEMO_PASSWORD), so that access
+    control is on: anonymous clients look, and MQTT and COPYDATA writers act as operators."""
+    shared = os.environ.get(DEMO_PASSWORD_ENV)
+    users = [
+        UserConfig(name=name, role=name, password_hash=hash_password(shared or name)) for name in DEMO_USERS
+    ]
+    access = AccessConfig(anonymous="viewer", mqtt_writer_role="operator", copydata_role="operator")
+    return {"users": users, "access": access}
 
 
 def demo_copydata(mapping: MachineMapping, args: argparse.Namespace) -> MachineMapping:
@@ -247,7 +262,7 @@ def _install_toggle(toggle: asyncio.Event) -> None:
 
 async def keep_program_running(machine: Machine, busy: Callable[[], bool] = lambda: False) -> None:
     """Select and start the demo program whenever the machine is idle (and no job wants it); reset alarms."""
-    ctx = WriteContext("demo")
+    ctx = WriteContext("demo", "demo", role="operator")  # selects and starts programs, as an operator would
     state = machine.nodes["Machine/State"]
     name = machine.nodes["Program/Name"]
     while True:
@@ -275,8 +290,13 @@ def print_banner(
     lines = [
         "",
         "cnc-gateway demo",
-        f"  OPC UA server    {endpoint.replace('0.0.0.0', '127.0.0.1')}  (security None, anonymous)",
-        f"  browse           Objects/Machines/{mapping.machine}/Axes/X/Position, Feed/Override (writable), Status/...",
+        f"  OPC UA server    {endpoint.replace('0.0.0.0', '127.0.0.1')}  (None, Basic256Sha256, Aes128/Aes256 "
+        f"endpoints; trust a client by moving its certificate from {args.state_dir}/pki/rejected/ to trusted/)",
+        "  OPC UA users     viewer, operator, engineer; "
+        + (f"password from {DEMO_PASSWORD_ENV}" if os.environ.get(DEMO_PASSWORD_ENV)
+           else f"password: the user name ({DEMO_PASSWORD_ENV} changes it)")
+        + "; anonymous clients are viewers",
+        f"  browse           Objects/Machines/{mapping.machine}/Axes/X/Position, Feed/Override (operators write), Status/...",
         f"  node ids         ns=2;s={mapping.machine}/Axes/X/Position",
         f"  simulator        {mapping.driver.endpoint} (OPC UA), ftp://127.0.0.1:{args.sim_ftp_port}/DATA/Programs "
         + ("(already running)" if external else "(in-process)"),

@@ -9,8 +9,10 @@ from collections.abc import Sequence
 from gateway import __version__
 from gateway.cli import check, demo, discover, jobs, passwords, programs, run, schema
 from gateway.cli import frames
+from gateway.cli import audit
+from gateway.cli import alarms
 
-COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames)
+COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms)
 
 
 def build_parser() -> argparse.ArgumentParser:

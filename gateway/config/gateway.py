@@ -4,14 +4,23 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
+from gateway.config.access import (
+    DEFAULT_ROLES,
+    AccessConfig,
+    UserConfig,
+    check_access,
+    check_roles,
+    check_users,
+)
 from gateway.config.jobs import InboxConfig
 from gateway.config.base import Strict
 from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
+from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
 
-SecurityMode = Literal["None"]
+SecurityMode = SecurityName
 
 
 class OpcUaServerConfig(Strict):
@@ -20,16 +29,31 @@ class OpcUaServerConfig(Strict):
     endpoint: str = "opc.tcp://0.0.0.0:4840/cnc-gateway"
     name: str = "cnc-gateway"
     namespace: str = Field(default="urn:cnc-gateway", description="Namespace URI of the gateway's nodes")
-    security: list[SecurityMode] = Field(
-        default_factory=lambda: ["None"],
+    security: list[SecurityMode] | None = Field(
+        default=None,
         min_length=1,
-        description="Endpoint security modes offered; signed and encrypted modes arrive with the security work",
+        description="Endpoints offered, e.g. [Basic256Sha256_SignAndEncrypt, None]; default: the profile's",
+    )
+    profile: Profile | None = Field(
+        default=None,
+        description="standard (default): None plus every signed and encrypted endpoint; secure: without None; "
+        "open: None only",
     )
 
     @field_validator("endpoint")
     @classmethod
     def _endpoint(cls, url: str) -> str:
         return check_endpoint(url)
+
+    @model_validator(mode="after")
+    def _security(self) -> OpcUaServerConfig:
+        check_security(self.security, self.profile)
+        return self
+
+    @property
+    def endpoints(self) -> tuple[str, ...]:
+        """The security endpoints to offer (names from gateway.config.security)."""
+        return endpoints_for(self.security, self.profile)
 
 
 class GatewayConfig(Strict):
@@ -43,3 +67,30 @@ class GatewayConfig(Strict):
         default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
     )
     mqtt: MqttConfig | None = Field(default=None, description="The MQTT broker to publish to; absent: no MQTT")
+    # --- users, roles and access control (gateway/config/access.py) ---
+    roles: list[str] = Field(
+        default_factory=lambda: list(DEFAULT_ROLES), min_length=1,
+        description="Roles, lowest first; each may do what the ones before it may",
+    )
+    users: list[UserConfig] = Field(default_factory=list, description="OPC UA logins, with scrypt password hashes")
+    access: AccessConfig = Field(
+        default_factory=AccessConfig, validate_default=True,  # its default roles must exist too
+        description="Role enforcement, anonymous logins, roles of MQTT, COPYDATA and job writers",
+    )
+
+    @field_validator("roles")
+    @classmethod
+    def _roles(cls, roles: list[str]) -> list[str]:
+        return check_roles(roles)
+
+    @field_validator("users")
+    @classmethod
+    def _users(cls, users: list[UserConfig], info: ValidationInfo) -> list[UserConfig]:
+        roles = info.data.get("roles")
+        return users if roles is None else check_users(users, roles)
+
+    @field_validator("access")
+    @classmethod
+    def _access(cls, access: AccessConfig, info: ValidationInfo) -> AccessConfig:
+        roles, users = info.data.get("roles"), info.data.get("users")
+        return access if roles is None or users is None else check_access(access, roles, users)

@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.gateway import GatewayConfig
 from gateway.config.mapping import MachineMapping, tree_conflicts
 from gateway.errors import ConfigError, ConfigIssue
@@ -209,7 +210,11 @@ class Config:
         return (self.base_dir / self.gateway.state_dir).resolve()
 
 
-def load_mapping(path: Path, environ: Mapping[str, str] | None = None) -> MachineMapping:
+def load_mapping(
+    path: Path, environ: Mapping[str, str] | None = None, roles: Sequence[str] | None = None
+) -> MachineMapping:
+    """One mapping file. `roles` are the gateway file's (default: viewer, operator, engineer, admin);
+    every role the mapping names must be one of them."""
     located = read_yaml(path, environ)
     if not isinstance(located.data, dict):
         raise ConfigError([ConfigIssue(str(path), 1, "", "a mapping file must be a YAML mapping with a 'machine' key")])
@@ -220,11 +225,45 @@ def load_mapping(path: Path, environ: Mapping[str, str] | None = None) -> Machin
     except ConfigError as exc:
         issues.extend(exc.issues)
     issues.extend(_structure_issues(located))
+    issues.extend(_role_issues(located, DEFAULT_ROLES if roles is None else roles))
     if issues:
         issues.sort(key=lambda i: (i.line or 0, i.key))
         raise ConfigError(issues)
     assert mapping is not None
     return mapping
+
+
+def _role_issues(located: Located, roles: Sequence[str]) -> list[ConfigIssue]:
+    """Roles the mapping names that the gateway file does not define (their syntax is pydantic's)."""
+    data = located.data
+    places: list[tuple[Loc, Any]] = []
+    defaults = data.get("defaults")
+    if isinstance(defaults, dict):
+        places.append((("defaults", "write_role"), defaults.get("write_role")))
+    mqtt = data.get("mqtt")
+    if isinstance(mqtt, dict):
+        places.append((("mqtt", "writer_role"), mqtt.get("writer_role")))
+    variables = data.get("variables")
+    if isinstance(variables, list):
+        for index, var in enumerate(variables):
+            if isinstance(var, dict):
+                places.append((("variables", index, "role"), var.get("role")))
+    commands = data.get("commands")
+    if isinstance(commands, dict):
+        for name, command in commands.items():
+            if isinstance(command, dict):
+                places.append((("commands", name, "role"), command.get("role")))
+    alarms = data.get("alarms")
+    if isinstance(alarms, dict):
+        places.append((("alarms", "acknowledge_role"), alarms.get("acknowledge_role")))
+    issues = []
+    for loc, role in places:
+        if not isinstance(role, str) or not ROLE_RE.match(role) or role == REFUSE or role in roles:
+            continue  # absent, or a syntax error pydantic reports, or fine
+        message = unknown_role(role, roles)
+        assert message is not None
+        issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
+    return issues
 
 
 def _structure_issues(located: Located) -> list[ConfigIssue]:
@@ -304,7 +343,7 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     seen: dict[str, Path] = {}
     for file in mapping_files:
         try:
-            mapping = load_mapping(file, environ)
+            mapping = load_mapping(file, environ, gateway.roles)
         except ConfigError as exc:
             issues.extend(exc.issues)
             continue

@@ -22,7 +22,10 @@ from pydantic import (
     model_validator,
 )
 
+from gateway.config.access import check_role_name
+from gateway.config.alarms import AlarmsConfig, alarms_issues
 from gateway.config.base import Backoff, Strict
+from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.config.jobs import JobsConfig
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
@@ -121,6 +124,9 @@ class VariableSpec(Strict):
     copydata: VariableCopydata | None = Field(
         default=None, description="This variable's id in COPYDATA frames for nesting software: {id: 12}"
     )
+    role: str | None = Field(
+        default=None, description="Lowest role that may write it (access: readwrite); default: defaults.write_role"
+    )
 
     @field_validator("path")
     @classmethod
@@ -161,6 +167,16 @@ class VariableSpec(Strict):
             return value.strip()
         if value < 0:
             raise ValueError("deadband must not be negative")
+        return value
+
+    @field_validator("role")
+    @classmethod
+    def _role(cls, value: str | None, info: ValidationInfo) -> str | None:
+        if value is None:
+            return None
+        check_role_name(value)
+        if info.data.get("access") != "readwrite":
+            raise ValueError("a role is only needed on variables with access: readwrite")
         return value
 
     @field_validator("mqtt")
@@ -228,6 +244,15 @@ class OpcUaDriver(Strict):
 class VariableDefaults(Strict):
     sampling_interval: float = Field(default=100.0, ge=0, description="Milliseconds")
     queue_size: int = Field(default=1, ge=1, le=10000)
+    write_role: str | None = Field(
+        default=None, description="Lowest role that may write this machine's variables; default: the gateway's "
+        "access.default_write_role"
+    )
+
+    @field_validator("write_role")
+    @classmethod
+    def _write_role(cls, value: str | None) -> str | None:
+        return None if value is None else check_role_name(value)
 
 
 class MachineMapping(Strict):
@@ -244,6 +269,12 @@ class MachineMapping(Strict):
     )
     copydata: MachineCopydata | None = Field(
         default=None, description="COPYDATA targets: where this machine's frames for nesting software go"
+    )
+    alarms: AlarmsConfig | None = Field(
+        default=None, description="Where the machine's active alarms come from, and how severe each class is"
+    )
+    commands: dict[CommandName, CommandSpec] | None = Field(
+        default=None, description="Named commands (start, stop, select-program, ...): writes, guard, completion, timeout"
     )
 
     @field_validator("machine")
@@ -278,6 +309,26 @@ class MachineMapping(Strict):
             if writable and not var.writable:
                 raise ValueError(f"auto.{key}: {path} must have access: readwrite")
         return jobs
+
+    @field_validator("alarms")
+    @classmethod
+    def _alarm_variables(cls, alarms: AlarmsConfig | None, info: ValidationInfo) -> AlarmsConfig | None:
+        """The alarm arrays must be variables of this mapping, of fitting types (errors at their own keys)."""
+        variables = info.data.get("variables")
+        if alarms is not None and variables is not None:
+            located_errors(alarms_issues(alarms, variables))
+        return alarms
+
+    @field_validator("commands")
+    @classmethod
+    def _command_variables(
+        cls, commands: dict[CommandName, CommandSpec] | None, info: ValidationInfo
+    ) -> dict[CommandName, CommandSpec] | None:
+        """Writes and conditions must name variables of this mapping, with values that fit them."""
+        variables = info.data.get("variables")
+        if commands is not None and variables is not None:
+            located_errors(command_issues(commands, variables))
+        return commands
 
     @model_validator(mode="after")
     def _copydata_cross_checks(self) -> MachineMapping:

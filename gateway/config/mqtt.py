@@ -19,6 +19,7 @@ from pydantic import (
     model_validator,
 )
 
+from gateway.config.access import check_role_name
 from gateway.config.base import Backoff, Strict
 
 QoS = Literal[0, 1, 2]
@@ -156,6 +157,20 @@ class MachineMqtt(Strict):
         default=False,
         description="Accept <topic>/set writes for this machine's `access: readwrite` variables",
     )
+    commands: bool = Field(
+        default=False,
+        description="Accept command requests on <prefix>/<machine>/commands/<name> (the mapping's commands)",
+    )
+    writer_role: str | None = Field(
+        default=None,
+        description="The role MQTT /set and command requests act with while access control is on; "
+        "default: the gateway file's access.mqtt_writer_role (none: refused)",
+    )
+
+    @field_validator("writer_role")
+    @classmethod
+    def _writer_role(cls, value: str | None) -> str | None:
+        return None if value is None else check_role_name(value)
 
 
 class VariableMqtt(Strict):
@@ -182,4 +197,6 @@ class VariableMqtt(Strict):
         levels = topic.split("/")
         if topic == "status" or levels[-1] == "set" or levels[-2:] == ["set", "result"]:
             raise ValueError(f"topic {topic!r} would clash with the gateway's own set/result/status topics")
+        if levels[0] in ("commands", "alarms"):
+            raise ValueError(f"topic {topic!r} would clash with the gateway's own {levels[0]}/… topics")
         return topic

@@ -7,12 +7,18 @@ the MQTT writers' role of the machine, ...) through `WriteContext.role`.
 
 While access control is off (the default, and what a mapping run on its own
 gets), every caller may do what the mapping allows, as before.
+
+The gateway's own writers have no login: the job queue's auto-start (origin
+"jobs") and COPYDATA replies ("copydata") act with the role configured for
+their origin (`origin_roles`) when their context names none. MQTT requests act
+with their machine's MQTT writers' role (`mqtt_role`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from gateway.errors import AccessDenied
 
@@ -23,15 +29,38 @@ DEFAULT_ROLES: tuple[str, ...] = ("viewer", "operator", "engineer", "admin")
 class AccessPolicy:
     roles: tuple[str, ...] = DEFAULT_ROLES
     enabled: bool = False
+    default_write_role: str | None = None  # for variables whose mapping names no role
+    origin_roles: dict[str, str] = field(default_factory=dict)  # {"jobs": "operator", ...}
+    mqtt_roles: dict[str, str | None] = field(default_factory=dict)  # per machine
     _rank: dict[str, int] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._rank = {name: index for index, name in enumerate(self.roles)}
 
-    def configure(self, roles: Sequence[str], *, enabled: bool) -> None:
+    def configure(
+        self,
+        roles: Sequence[str],
+        *,
+        enabled: bool,
+        default_write_role: str | None = None,
+        origin_roles: Mapping[str, str | None] | None = None,
+        mqtt_roles: Mapping[str, str | None] | None = None,
+    ) -> None:
         self.roles = tuple(roles)
         self.enabled = enabled
+        self.default_write_role = default_write_role
+        self.origin_roles = {k: v for k, v in (origin_roles or {}).items() if v is not None}
+        self.mqtt_roles = dict(mqtt_roles or {})
         self.__post_init__()
+
+    def role_of(self, ctx: Any) -> str | None:
+        """The role a caller acts with: its own, else its origin's (see the module docstring)."""
+        role = ctx.role
+        return role if role is not None else self.origin_roles.get(ctx.origin)
+
+    def mqtt_role(self, machine: str) -> str | None:
+        """The role of MQTT /set and command requests for `machine` (None: no role, refused while enabled)."""
+        return self.mqtt_roles.get(machine)
 
     def rank(self, role: str | None) -> int:
         """-1 for no role (or an unknown one): below every role."""
@@ -40,7 +69,10 @@ class AccessPolicy:
     def allows(self, role: str | None, required: str | None) -> bool:
         if not self.enabled or required is None:
             return True
-        return self.rank(role) >= self.rank(required)
+        needed = self._rank.get(required)
+        if needed is None:  # a role the configuration does not define: nobody has it (fail closed)
+            return False
+        return self.rank(role) >= needed
 
     def require(self, role: str | None, required: str | None, what: str) -> None:
         """Raise AccessDenied (BadUserAccessDenied) unless `role` may do `what`."""

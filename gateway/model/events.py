@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
@@ -26,12 +26,13 @@ class Event:
 
     `retain` marks state-like events (the latest per channel is what matters, e.g.
     a job's current record); others are a stream (every one matters, in order).
-    `payload` must be JSON-serialisable.
+    `payload` must be JSON-serialisable: an object, or a list for state that is a
+    list (a machine's active alarms), which is published as it is, without `ts`.
     """
 
     machine: str | None
     channel: str
-    payload: Mapping[str, Any]
+    payload: Mapping[str, Any] | Sequence[Any]
     retain: bool = False
     ts: datetime = field(default_factory=utcnow)
 

@@ -3,19 +3,22 @@
 Sources push raw controller values in through `Machine.ingest`; scaling and
 deadband are applied here, once, and accepted changes go to the change hub.
 Writes from any sink come back through `Machine.write`, which checks access,
-type and range and undoes the scaling before asking the source. Nothing else
+the caller's role, type and range and undoes the scaling before asking the
+source; method calls go through `Machine.call_method`, which checks the role.
+Both are audited (`VariableTree.audit_sinks`), refusals included. Nothing else
 talks to a controller.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from datetime import datetime
 from typing import Any, Protocol
 
+from gateway.audit.entry import AuditEntry, as_text
 from gateway.config.mapping import MachineMapping, VariableSpec
-from gateway.errors import ControllerUnavailable, NotWritable, OutOfRange, UnknownVariable
+from gateway.errors import ControllerUnavailable, NotWritable, OutOfRange, UnknownVariable, WriteError
 from gateway.model.access import AccessPolicy
 from gateway.model.events import EventBus
 from gateway.model.hub import ChangeHub
@@ -250,9 +253,123 @@ class Machine:
             raise UnknownVariable(f"{self.name} has no variable {path!r}")
         await self.write_node(node, value, ctx)
 
-    async def write_node(self, node: VariableNode, value: Any, ctx: WriteContext) -> None:
+    def write_role(self, node: VariableNode) -> str | None:
+        """The lowest role that may write `node`: its own, else the machine's default, else the gateway's."""
+        return node.spec.role or self.mapping.defaults.write_role or self.tree.access.default_write_role
+
+    async def write_node(
+        self, node: VariableNode, value: Any, ctx: WriteContext, *, check: Callable[[], None] | None = None
+    ) -> None:
+        """Check, authorise, carry out and audit one write; raises a WriteError subclass if refused.
+
+        `check` is the sink's own check of the request (OPC UA's strict Variant
+        types, say): it runs after the role check and raises a WriteError to refuse,
+        so that its refusals are audited like any other.
+        """
+        started = time.monotonic()
+        at = utcnow()
+        old = node.sample.value
+        try:
+            await self._write_node(node, value, ctx, check)
+        except WriteError as exc:
+            self.audit_write(node, old, value, ctx, exc, at, started)
+            raise
+        except Exception as exc:
+            self.audit_write(node, old, value, ctx, WriteError(f"internal error: {exc}"), at, started)
+            raise
+        self.audit_write(node, old, value, ctx, None, at, started)
+
+    def audit_write(
+        self,
+        node: VariableNode,
+        old: Any,
+        value: Any,
+        ctx: WriteContext,
+        error: WriteError | None,
+        at: datetime | None = None,
+        started: float | None = None,
+    ) -> None:
+        """Record a write in the audit trail; sinks call it for requests they refuse before `write_node`."""
+        self.audit(
+            "write", node.path, ctx, old=as_text(old), new=as_text(value), error=error, at=at, started=started
+        )
+
+    def audit(
+        self,
+        kind: str,
+        target: str,
+        ctx: WriteContext,
+        *,
+        old: str | None = None,
+        new: str | None = None,
+        error: WriteError | None = None,
+        at: datetime | None = None,
+        started: float | None = None,
+    ) -> None:
+        """Record any action on this machine (acknowledge, confirm, …): `old`/`new` are JSON text (as_text)."""
+        if not self.tree.audit_sinks:
+            return
+        duration = 0.0 if started is None else time.monotonic() - started
+        self.tree.audit(
+            AuditEntry(
+                at or utcnow(), kind, self.name, target, ctx.origin, ctx.user, self.tree.access.role_of(ctx),
+                old, new, "Good" if error is None else error.status, "" if error is None else error.reason,
+                duration,
+            )
+        )
+
+    async def call_method(
+        self,
+        method: Method,
+        args: Sequence[Any],
+        ctx: WriteContext,
+        *,
+        check: Callable[[], None] | None = None,
+    ) -> Sequence[Any]:
+        """Authorise (Method.role), run and audit one call; every sink calls methods through here.
+
+        Raises AccessDenied (BadUserAccessDenied) for a role below the method's, the
+        method's own WriteError otherwise. `check` is as for `write_node`.
+        """
+        started = time.monotonic()
+        at = utcnow()
+        access = self.tree.access
+        try:
+            what = f"call {self.name}/{method.object}.{method.name}"
+            access.require(access.role_of(ctx), method.role, what)
+            if check is not None:
+                check()
+            outputs = await method.call(ctx, args)
+        except WriteError as exc:
+            self.audit_call(method, args, ctx, exc, at, started)
+            raise
+        except Exception as exc:
+            self.audit_call(method, args, ctx, WriteError(f"internal error: {exc}"), at, started)
+            raise
+        self.audit_call(method, args, ctx, None, at, started)
+        return outputs
+
+    def audit_call(
+        self,
+        method: Method,
+        args: Sequence[Any],
+        ctx: WriteContext,
+        error: WriteError | None,
+        at: datetime | None = None,
+        started: float | None = None,
+    ) -> None:
+        target = f"{method.object}.{method.name}"
+        self.audit("call", target, ctx, new=as_text(list(args)), error=error, at=at, started=started)
+
+    async def _write_node(
+        self, node: VariableNode, value: Any, ctx: WriteContext, check: Callable[[], None] | None
+    ) -> None:
         if node.internal or not node.spec.writable:
             raise NotWritable(f"{node.full_path} is read-only")
+        access = self.tree.access
+        access.require(access.role_of(ctx), self.write_role(node), f"write {node.full_path}")
+        if check is not None:
+            check()
         engineering = coerce(node.type, value)
         node.check_range(engineering)
         for hook in self.tree.write_hooks:
@@ -273,8 +390,14 @@ class VariableTree:
         self.machines: dict[str, Machine] = {}
         self.write_hooks: list[WriteHook] = []
         self.access = AccessPolicy()
+        # Every write and call ends up here (gateway/audit/trail.py logs and stores them); never blocks.
+        self.audit_sinks: list[Callable[[AuditEntry], None]] = []
         for mapping in mappings:
             self.add_machine(mapping)
+
+    def audit(self, entry: AuditEntry) -> None:
+        for sink in self.audit_sinks:
+            sink(entry)
 
     def add_machine(self, mapping: MachineMapping) -> Machine:
         if mapping.machine in self.machines:

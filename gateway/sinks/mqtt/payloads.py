@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Any
 
@@ -110,7 +111,9 @@ def encode_document(doc: dict[str, Any]) -> bytes:
 
 
 def encode_event(event: Event) -> bytes:
-    """An event's payload with its time: `{"ts": …, …payload}` as compact JSON."""
+    """An event's payload with its time: `{"ts": …, …payload}` as compact JSON (a list payload: the list)."""
+    if not isinstance(event.payload, Mapping):
+        return _dumps(plain(list(event.payload))).encode()
     return _dumps({"ts": iso(event.ts), **plain_dict(dict(event.payload))}).encode()
 
 

@@ -32,6 +32,7 @@ from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
 from gateway.sinks.mqtt.client import (
     BrokerSettings,
     Connected,
+    Incoming,
     MqttClient,
     Will,
     default_client_id,
@@ -41,6 +42,7 @@ from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
 from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
+from gateway.sinks.mqtt.commands import CommandRequests
 from gateway.sinks.mqtt.writes import WriteBack
 from gateway.sources.backoff import backoff_delays
 
@@ -98,6 +100,7 @@ class MqttSink:
             ),
         )
         self.writes = WriteBack(tree, self.routes, config, self._answer)
+        self.commands = CommandRequests(tree, config, self._answer)  # <prefix>/<machine>/commands/<name>
         self.backlog: Backlog | None = None
         self.state = STATE_CONNECTING
         self.last_error = ""
@@ -150,7 +153,7 @@ class MqttSink:
         journal = Journal(self.state_dir / BACKLOG_FILE) if self.config.buffer.persist else None
         self.backlog = Backlog(self.config.buffer.limit, journal)
         self._client = MqttClient(
-            self.settings, on_message=self.writes.handle, on_published=self._published, on_lost=self._on_lost
+            self.settings, on_message=self._incoming, on_published=self._published, on_lost=self._on_lost
         )
         # Subscribe before reading the current samples, so no change falls between the two.
         self._sub = self.tree.hub.subscribe(
@@ -223,6 +226,8 @@ class MqttSink:
             tg.create_task(self._tick(), name="mqtt:tick")
             for machine in self.tree.machines:
                 tg.create_task(self.writes.worker(machine), name=f"mqtt:writes:{machine}")
+            for machine in self.commands.queues:
+                tg.create_task(self.commands.worker(machine), name=f"mqtt:commands:{machine}")
 
     # --- the broker connection ------------------------------------------------------------------
 
@@ -285,6 +290,11 @@ class MqttSink:
             client.subscribe(set_filters(self.config.prefix, self.routes.depths()), qos=1)
         except BrokerError as exc:
             log.error("MQTT: %s; writes over MQTT will not arrive", exc.reason)
+        if self.commands.filters:
+            try:
+                client.subscribe(self.commands.filters, qos=1)
+            except BrokerError as exc:
+                log.error("MQTT: %s; command requests over MQTT will not arrive", exc.reason)
         # Liveness first: a dashboard should learn that the gateway is back before the backlog arrives.
         self.backlog.discard_latest(self.routes.status_topic)
         self._publish_now(self.routes.status_topic, self._online_payload(), 1, True, None, True)
@@ -386,10 +396,17 @@ class MqttSink:
     def _emit(
         self, topic: str, payload: bytes, qos: int, retain: bool, machine: str | None, latest: bool
     ) -> None:
-        """Send now if nothing is waiting and the window has room; else keep it in order."""
+        """Send now if nothing is waiting and the window has room; else keep it in order.
+
+        QoS 0 waits for no acknowledgement, so it is held only to paho's queue, not to the
+        window of QoS 1/2 messages awaiting one (`max_inflight`).
+        """
         backlog = self.backlog
         assert backlog is not None
-        if self._online and not backlog and len(self._inflight) < self._window:
+        if self._online and not backlog and (
+            len(self._inflight) < self._window
+            or (qos == 0 and self._client is not None and self._client.queued_bytes_pending < PAHO_QUEUE_LIMIT)
+        ):
             self._publish_now(topic, payload, qos, retain, machine, latest)
             return
         if qos == 0 and not retain:
@@ -456,6 +473,11 @@ class MqttSink:
         backlog = self.backlog
         if backlog is not None and backlog.journal is not None:
             backlog.journal.commit()
+
+    def _incoming(self, msg: Incoming) -> None:
+        """A message from the broker: a command request, or else a write request."""
+        if not self.commands.handle(msg):
+            self.writes.handle(msg)
 
     def _answer(self, topic: str, payload: bytes, correlation: bytes | None) -> None:
         """A write result: sent at once if connected (the asker is waiting now), else dropped."""

@@ -7,6 +7,11 @@ bounded queue per machine to a worker that calls `Machine.write_node`, so that
 writes to one machine stay in order, a slow controller holds up only its own
 machine, and a flood cannot queue more than `max_pending_writes` per machine.
 Refusals are counted and logged with a quota, so junk cannot flood the log either.
+
+While access control is on, requests act with the machine's MQTT writers' role
+(`mqtt.writer_role` in the mapping, else the gateway's `access.mqtt_writer_role`;
+none: refused with BadUserAccessDenied): the broker authenticates the clients,
+the gateway authorises the topic. Refusals of a known variable are audited.
 """
 
 from __future__ import annotations
@@ -104,6 +109,7 @@ class WriteBack:
         reply = self._reply_topic(target, msg.response_topic)
         corr = msg.correlation_data
         route = self.routes.by_topic.get(target)
+        value: object = msg.payload[:256].decode("utf-8", "replace")  # what was asked, until it is decoded
         try:
             if msg.retain:
                 raise BadWriteRequest(
@@ -124,6 +130,12 @@ class WriteBack:
                 raise AccessDenied(
                     f"writes over MQTT are not enabled for {node.full_path} (mapping: mqtt.writable: true)"
                 )
+            access = self.tree.access
+            if access.enabled and access.mqtt_role(route.machine) is None:
+                raise AccessDenied(
+                    f"MQTT writes to {route.machine} have no role while access control is on "
+                    "(mapping: mqtt.writer_role, or the gateway file's access.mqtt_writer_role)"
+                )
             value = decode_set(msg.payload, node.type)
             queue = self.queues.get(route.machine)
             if queue is None:  # pragma: no cover - every machine has its queue
@@ -135,7 +147,14 @@ class WriteBack:
                     f"{self.cfg.max_pending_writes} writes to {route.machine} are already waiting; try again"
                 ) from None
         except WriteError as exc:
+            if route is not None:  # known variables only: junk topics are not worth a table row each
+                machine = route.node.machine
+                ctx = self._context(route.machine)
+                machine.audit_write(route.node, route.node.sample.value, value, ctx, exc)
             self._refuse(target, reply, corr, exc)
+
+    def _context(self, machine: str) -> WriteContext:
+        return WriteContext("mqtt", user=None, role=self.tree.access.mqtt_role(machine))
 
     def _reply_topic(self, target: str, requested: str | None) -> str:
         """The v5 response topic when it is usable, else `<target>/set/result`.
@@ -160,9 +179,9 @@ class WriteBack:
         """Carry out one machine's queued writes, in order, until cancelled."""
         queue = self.queues[machine_name]
         machine = self.tree.machines[machine_name]
-        ctx = WriteContext("mqtt", user=None)
         while True:
             req = await queue.get()
+            ctx = self._context(machine_name)
             node = req.route.node
             try:
                 await machine.write_node(node, req.value, ctx)

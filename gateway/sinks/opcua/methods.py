@@ -8,7 +8,9 @@ A method `Programs.List` of machine `laser-sim` becomes the Method node
 `InputArguments`/`OutputArguments` properties typed from the Method's
 Arguments, as every OPC UA client expects to find them.
 
-Calls are checked the OPC UA way before the handler sees them: too few
+Every call goes through `Machine.call_method`, which checks the session's role
+against `Method.role` (BadUserAccessDenied) and audits the call. Inside it, the
+arguments are checked the OPC UA way before the handler sees them: too few
 arguments -> BadArgumentsMissing, too many -> BadTooManyArguments, a Variant of
 the wrong type -> BadTypeMismatch (with the offending argument marked in
 InputArgumentResults). A refusal from the handler (a WriteError) becomes its
@@ -149,18 +151,35 @@ def encode_outputs(method: Method, outputs: Sequence[Any]) -> list[ua.Variant]:
     return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs)]
 
 
-async def call_result(method: Method, inputs: Sequence[ua.Variant], user: str | None) -> ua.CallMethodResult:
-    """Carry out one call; never raises."""
+class ArgumentsRefused(WriteError):
+    """The OPC UA argument check's refusal, carrying the CallMethodResult to answer with."""
+
+    def __init__(self, result: ua.CallMethodResult) -> None:
+        code = result.StatusCode
+        marked = [i for i, r in enumerate(result.InputArgumentResults or []) if not r.is_good()]
+        where = f" (argument {', '.join(str(i + 1) for i in marked)})" if marked else ""
+        super().__init__(f"wrong arguments{where}", status=code.name)
+        self.result = result
+
+
+async def call_result(
+    machine: Machine, method: Method, inputs: Sequence[ua.Variant], user: str | None, role: str | None = None
+) -> ua.CallMethodResult:
+    """Carry out one call through `machine.call_method` (role check, audit); never raises."""
     values, refused = check_inputs(method, inputs)
-    if refused is not None:
-        return refused
-    assert values is not None
-    ok = [ua.StatusCode() for _ in values]
+
+    def check() -> None:
+        if refused is not None:
+            raise ArgumentsRefused(refused)
+
+    args = values if values is not None else [getattr(v, "Value", v) for v in inputs]
+    ok = [ua.StatusCode() for _ in args]
     try:
-        outputs = await method.call(WriteContext(ORIGIN, user), values)
+        outputs = await machine.call_method(method, args, WriteContext(ORIGIN, user, role), check=check)
         variants = encode_outputs(method, outputs)
+    except ArgumentsRefused as exc:
+        return exc.result
     except WriteError as exc:
-        log.info("OPC UA call %s.%s refused (%s): %s", method.object, method.name, exc.status, exc.reason)
         return ua.CallMethodResult(StatusCode=status_code(exc.status), InputArgumentResults=ok)
     except ValueMismatch as exc:
         log.error("OPC UA call %s.%s: %s", method.object, method.name, exc)

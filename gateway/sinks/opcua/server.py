@@ -7,8 +7,13 @@ variables through the tree by replacing the server's attribute service.
 
 Seams for the work that builds on this server (alarms, commands, programs,
 users): `server` (the asyncua Server), `machine_node_id()`, `add_nodes()` for more
-nodes in our namespace, and `user_name`, which turns a session's user into the
-name passed to the tree in `WriteContext.user`.
+nodes in our namespace, and `user_name`/`user_role`, which turn a session's user
+into the name and role passed to the tree in `WriteContext`.
+
+Users and security: logins go to `identity.GatewayUserManager` (the gateway's
+users, anonymous role, lockout per address); each session's UserAccessLevel and
+UserExecutable are answered for its role; endpoints, the server certificate and
+the client trust list come from `security.py`.
 """
 
 from __future__ import annotations
@@ -35,9 +40,20 @@ from gateway.errors import SinkError
 from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import utcnow
-from gateway.model.tree import VariableNode, VariableTree
+from gateway.auth.users import UserDirectory
+from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
 from gateway.sinks.opcua.address_space import AddressSpacePlan
+from gateway.sinks.opcua.asyncua_tuning import keep_written_values
+from gateway.sinks.opcua.identity import (
+    CLIENT_ADDRESS,
+    GatewayUserManager,
+    address_of,
+    session_role,
+    user_access_level,
+    user_executable,
+)
 from gateway.sinks.opcua.methods import call_result, plan_methods
+from gateway.sinks.opcua.security import ClientCertificates, Pki, secure_server
 from gateway.sinks.opcua.values import ValueKind, ValueMismatch, value_kind
 from gateway.sinks.opcua.writes import write_node
 
@@ -45,23 +61,28 @@ log = logging.getLogger(__name__)
 
 ADD_BATCH = 2000  # AddNodesItems per call; the loop gets a turn between batches
 YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
-
-SECURITY_POLICIES: dict[str, ua.SecurityPolicyType] = {
-    "None": ua.SecurityPolicyType.NoSecurity,
-}
-
+# Notifications kept per monitored item for a client that does not collect them; a client's "0: as many as
+# you allow" is revised to this. asyncua's own cap, 10,000, lets one stalled client (no Publish requests)
+# hold about 270 bytes x 10,000 x every variable it watches (tests/integration/drills/test_slow_consumers.py).
+MAX_QUEUE_PER_ITEM = 100
 
 # The session user of the Call request being served: asyncua does not pass it to method callbacks.
 _CALLER: ContextVar[Any] = ContextVar("opcua_caller", default=None)
+# The session whose Read request is being served (UserAccessLevel per session); unset for internal reads.
+_READER: ContextVar[Any] = ContextVar("opcua_reader", default=None)
 
 
-def _track_callers(iserver: Any) -> None:
-    """Make every new session's Call service record its user in _CALLER while the call runs."""
+def _track_callers(iserver: Any, bserver: Callable[[], Any]) -> None:
+    """Hook every new session: its Call and Read services record its user (_CALLER, _READER) while
+    they run; ActivateSession learns the client's address (identity.CLIENT_ADDRESS); and on a
+    channel without security the client certificate is ignored (OPC UA Part 4, 5.6.2), so that an
+    untrusted client on the None endpoint is not refused for a certificate nobody checks there."""
     create_session = iserver.create_session
 
     def create(*args: Any, **kwargs: Any) -> Any:
         session = create_session(*args, **kwargs)
-        call = session.call
+        call, read = session.call, session.read
+        activate, create_ = session.activate_session, session.create_session
 
         async def call_as_user(params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
             token = _CALLER.set(session.user)
@@ -70,10 +91,80 @@ def _track_callers(iserver: Any) -> None:
             finally:
                 _CALLER.reset(token)
 
+        async def read_as_user(params: ua.ReadParameters) -> list[ua.DataValue]:
+            token = _READER.set(session)
+            try:
+                return await read(params)
+            finally:
+                _READER.reset(token)
+
+        def activate_from(*a: Any, **kw: Any) -> Any:
+            token = CLIENT_ADDRESS.set(address_of(session.name))
+            try:
+                return activate(*a, **kw)
+            finally:
+                CLIENT_ADDRESS.reset(token)
+
+        async def create_on_channel(params: ua.CreateSessionParameters, *a: Any, **kw: Any) -> Any:
+            if params.ClientCertificate and _channel_unsecured(bserver(), session):
+                params.ClientCertificate = None
+            return await create_(params, *a, **kw)
+
         session.call = call_as_user
+        session.read = read_as_user
+        session.activate_session = activate_from
+        session.create_session = create_on_channel
         return session
 
     iserver.create_session = create
+
+
+_REFUSALS_WE_LOG = (
+    "BadUserAccessDenied", "BadIdentityTokenRejected", "BadCertificateUntrusted", "BadCertificateTimeInvalid",
+    "BadCertificateUriInvalid", "BadCertificateInvalid", "BadCertificateUseNotAllowed",
+)
+
+
+class _QuietRefusals(logging.Filter):
+    """asyncua logs every refused login or certificate as an ERROR; the gateway already logs each one
+    in a line that says who and why (gateway.auth, security.py). Drop asyncua's duplicate, and say
+    plainly what its "token not supported" means."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        fault = message.startswith("sending service fault response")
+        if fault and any(name in message for name in _REFUSALS_WE_LOG):
+            return False
+        if message.startswith("Rejected active session UserIdentityToken not supported"):
+            record.msg = ("OPC UA: login refused: the client used an identity token this server does not offer "
+                          "(anonymous logins are refused: access.anonymous)")
+            record.args = None
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
+_QUIET = _QuietRefusals()
+for _name in ("asyncua.server.uaprocessor", "asyncua.server.internal_session"):
+    if _QUIET not in logging.getLogger(_name).filters:
+        logging.getLogger(_name).addFilter(_QUIET)
+
+
+def _channel_unsecured(bserver: Any, session: Any) -> bool:
+    """Whether `session` was created on a SecureChannel with MessageSecurityMode None.
+
+    asyncua does not tell the session; its connection does (a private attribute,
+    read defensively: when in doubt, the certificate is checked)."""
+    for protocol in getattr(bserver, "clients", ()):
+        processor = getattr(protocol, "processor", None)
+        if processor is not None and processor.session is session:
+            policy = getattr(getattr(processor, "_connection", None), "security_policy", None)
+            return getattr(policy, "Mode", None) == ua.MessageSecurityMode.None_
+    return False
+
+
+def session_user_role(user: Any) -> str | None:
+    """Default `OpcUaSink.user_role`: the gateway role of the session (identity.SessionUser)."""
+    return session_role(user)
 
 
 def session_user_name(user: Any) -> str | None:
@@ -105,6 +196,26 @@ class _GatewayAttributeService(AttributeService):
         self._sink = sink
         self._internal_user = internal_user
 
+    def read(self, params: ua.ReadParameters) -> list[ua.DataValue]:
+        """asyncua's read, except UserAccessLevel and UserExecutable of our nodes, which depend on the
+        reading session's role (asyncua's Read service does not pass the user: see _READER)."""
+        results = super().read(params)
+        reader = _READER.get()
+        if reader is None:  # the server itself
+            return results
+        per_user = (ua.AttributeIds.UserAccessLevel, ua.AttributeIds.UserExecutable)
+        items = params.NodesToRead
+        if not any(rv.AttributeId in per_user for rv in items):
+            return results
+        role = self._sink.user_role(reader.user)
+        for index, rv in enumerate(items):
+            status = results[index].StatusCode
+            if rv.AttributeId in per_user and (status is None or status.is_good()):
+                answer = self._sink._user_attribute(rv.NodeId, rv.AttributeId, role)
+                if answer is not None:
+                    results[index] = answer
+        return results
+
     async def write(self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)) -> list[ua.StatusCode]:
         owned = self._sink._owned
         items = params.NodesToWrite
@@ -117,8 +228,8 @@ class _GatewayAttributeService(AttributeService):
             theirs = await super().write(ua.WriteParameters(NodesToWrite=[wv for _, wv in others]), user)
             for (i, _), status in zip(others, theirs):
                 results[i] = status
-        name = self._sink.user_name(user)
-        statuses = await asyncio.gather(*(self._sink._client_write(wv, name) for _, wv in ours))
+        name, role = self._sink.user_name(user), self._sink.user_role(user)
+        statuses = await asyncio.gather(*(self._sink._client_write(wv, name, role) for _, wv in ours))
         for (i, _), status in zip(ours, statuses):
             results[i] = status
         return results
@@ -129,14 +240,21 @@ class OpcUaSink:
 
     name = "opcua"
 
-    def __init__(self, tree: VariableTree, config: OpcUaServerConfig, state_dir: Path) -> None:
+    def __init__(
+        self, tree: VariableTree, config: OpcUaServerConfig, state_dir: Path, users: UserDirectory | None = None
+    ) -> None:
         self.tree = tree
         self.config = config
-        self.state_dir = state_dir  # for the server's certificates, once secure endpoints arrive
+        self.state_dir = state_dir  # pki/ (own certificate, trusted/, rejected/) lives here
+        self.pki = Pki(state_dir / "pki")
+        self.users = users  # None: anyone, anonymously (no users configured, access control off)
         self.endpoint: str = config.endpoint
         self.namespace_index: int = -1
         self.application_uri = f"urn:{socket.gethostname()}:cnc-gateway"
         self.user_name: Callable[[Any], str | None] = session_user_name
+        self.user_role: Callable[[Any], str | None] = session_user_role
+        self.certificates: ClientCertificates | None = None
+        self._methods: dict[ua.NodeId, tuple[Machine, Method]] = {}
         self._server: Server | None = None
         self._plan: AddressSpacePlan | None = None
         self._sub: Subscription | None = None
@@ -146,6 +264,7 @@ class OpcUaSink:
         self._mismatched: set[VariableNode] = set()  # holding a value their type cannot carry
         self._unplaceable: set[VariableNode] = set()  # late variables the server refused
         self._failing: set[VariableNode] = set()  # whose last value write failed unexpectedly
+        self.alarms: Any = None  # the AlarmService (gateway/alarms/service.py), when machines have alarms
 
     # --- seams for other components ----------------------------------------------------------
 
@@ -184,6 +303,52 @@ class OpcUaSink:
             await asyncio.sleep(0)
         return added
 
+    # --- seams for alarm conditions (gateway/sinks/opcua/alarms.py) ---------------------------
+
+    def caller_context(self) -> WriteContext:
+        """Who is calling, inside a method callback (asyncua does not pass the session to callbacks)."""
+        caller = _CALLER.get()
+        return WriteContext("opcua", self.user_name(caller), self.user_role(caller))
+
+    def link_method(self, nodeid: ua.NodeId, callback: Callable[..., Any]) -> None:
+        """Serve calls of a Method node (also a standard one, such as Acknowledge) with `callback`."""
+        self.server.iserver.isession.add_method_callback(nodeid, callback)
+
+    async def trigger_event(self, event: Any, subscription: int | None = None, item: int | None = None) -> None:
+        """Report an event (an asyncua Event object) to its notifier's subscribers: all, or one subscription
+        (and one of its monitored items), as ConditionRefresh does."""
+        service = self.server.iserver.subscription_service
+        if subscription is None:
+            await service.trigger_event(event)
+            return
+        sub = service.subscriptions.get(subscription)
+        if sub is None:
+            return
+        monitored = sub.monitored_item_srv
+        if item is not None and item not in monitored._monitored_events.get(event.emitting_node, ()):
+            return  # that item watches another notifier
+        await monitored.trigger_event(event, item)
+
+    async def trigger_unfiltered(self, event: Any, subscription: int, item: int | None = None) -> None:
+        """Queue `event` for every event monitored item of one subscription (or only `item`), whatever its
+        notifier and WhereClause: how OPC UA Part 9 (4.5) delivers RefreshStart/RefreshEnd events."""
+        sub = self.server.iserver.subscription_service.subscriptions.get(subscription)
+        if sub is None:
+            return
+        monitored = sub.monitored_item_srv
+        for mids in list(monitored._monitored_events.values()):
+            for mid in mids:
+                mdata = monitored._monitored_items.get(mid)
+                if mdata is None or (item is not None and mid != item):
+                    continue
+                fields = ua.EventFieldList(
+                    ClientHandle=mdata.client_handle, EventFields=event.to_event_fields(mdata.filter.SelectClauses)
+                )
+                await sub.enqueue_event(mid, fields, mdata.queue_size)
+
+    def has_subscription(self, subscription: int) -> bool:
+        return subscription in self.server.iserver.subscription_service.subscriptions
+
     # --- lifecycle ---------------------------------------------------------------------------
 
     async def __aenter__(self) -> Self:
@@ -202,6 +367,7 @@ class OpcUaSink:
     async def _start(self) -> None:
         self._vars, self._by_id, self._owned = {}, {}, set()
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
+        keep_written_values()  # no deep copy of every value per subscribed item (asyncua_tuning.py)
         server = Server()
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
@@ -211,12 +377,17 @@ class OpcUaSink:
         await server.set_build_info(server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow())
         server.set_endpoint(self.endpoint)
         server.set_server_name(self.config.name)
-        server.set_security_policy([SECURITY_POLICIES[mode] for mode in self.config.security])
         server.allow_remote_admin(False)  # no remote AddNodes/DeleteNodes through the "admin" user name
+        self._set_identities(server)
+        host = self._bind_address()[0]
+        self.certificates = await secure_server(
+            server, self.config.endpoints, self.pki, self.application_uri, self.config.name, host
+        )
         self.namespace_index = await server.register_namespace(self.config.namespace)
         iserver = server.iserver
         iserver.attribute_service = _GatewayAttributeService(iserver.aspace, self, iserver.isession.user)
-        _track_callers(iserver)
+        _track_callers(iserver, lambda: server.bserver)
+        iserver.max_monitored_item_queue_size = MAX_QUEUE_PER_ITEM
         self._server = server
         self._plan = AddressSpacePlan(self.namespace_index)
         # Subscribe before reading the initial samples, so no change falls between the two.
@@ -230,6 +401,22 @@ class OpcUaSink:
             if isinstance(exc, OSError):
                 raise SinkError(f"OPC UA server cannot listen on {self.endpoint}: {exc.strerror or exc}") from None
             raise
+
+    def _set_identities(self, server: Server) -> None:
+        """Which identity tokens the endpoints offer, and who checks them."""
+        users = self.users
+        if users is None:
+            return  # asyncua's default: anonymous and user names, everyone accepted
+        tokens: list[type] = []
+        if users.anonymous_allowed:
+            tokens.append(ua.AnonymousIdentityToken)
+        if users.has_users:
+            tokens.append(ua.UserNameIdentityToken)
+            if not any(name != "None" for name in self.config.endpoints):
+                log.warning("OPC UA: users are configured but only the None endpoint is offered: "
+                            "passwords cross the network in clear text (opcua.profile: standard or secure)")
+        server.set_identity_tokens(tokens)
+        server.iserver.set_user_manager(GatewayUserManager(users))
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self._close()
@@ -278,8 +465,15 @@ class OpcUaSink:
         methods = plan_methods(plan, self.tree.machines.values())
         await self.add_nodes(plan.take())
         self._register(plan)
+        owners = {id(m): machine for machine in self.tree.machines.values() for m in machine.methods.values()}
         for nodeid, method in methods:
-            self.server.iserver.isession.add_method_callback(nodeid, self._method_callback(method))
+            machine = owners[id(method)]
+            self._methods[nodeid] = (machine, method)
+            self.server.iserver.isession.add_method_callback(nodeid, self._method_callback(machine, method))
+        if self.alarms is not None:
+            from gateway.sinks.opcua.alarms import OpcUaAlarms
+
+            await OpcUaAlarms(self, self.alarms).install()
         await self._push([(node, node.sample) for node in self._vars])
 
     def _register(self, plan: AddressSpacePlan) -> None:
@@ -343,21 +537,36 @@ class OpcUaSink:
 
     # --- methods -----------------------------------------------------------------------------
 
-    def _method_callback(self, method: Method) -> Callable[..., Any]:
+    def _method_callback(self, machine: Machine, method: Method) -> Callable[..., Any]:
         """asyncua calls this with the object's node id and the input Variants."""
 
         async def callback(parent: ua.NodeId, *inputs: ua.Variant) -> ua.CallMethodResult:
-            return await call_result(method, inputs, self.user_name(_CALLER.get()))
+            caller = _CALLER.get()
+            return await call_result(machine, method, inputs, self.user_name(caller), self.user_role(caller))
 
         return callback
 
+    def _user_attribute(self, nodeid: ua.NodeId, attribute: int, role: str | None) -> ua.DataValue | None:
+        """UserAccessLevel of our variables, UserExecutable of our methods, for a session's role."""
+        policy = self.tree.access
+        if attribute == ua.AttributeIds.UserAccessLevel:
+            var = self._by_id.get(nodeid)
+            if var is None:
+                return None
+            level = user_access_level(var.node, role, policy)
+            return ua.DataValue(ua.Variant(level, ua.VariantType.Byte))
+        entry = self._methods.get(nodeid)
+        if entry is None:
+            return None
+        return ua.DataValue(ua.Variant(user_executable(entry[1], role, policy), ua.VariantType.Boolean))
+
     # --- writes ------------------------------------------------------------------------------
 
-    async def _client_write(self, wv: ua.WriteValue, user: str | None) -> ua.StatusCode:
+    async def _client_write(self, wv: ua.WriteValue, user: str | None, role: str | None) -> ua.StatusCode:
         var = self._by_id.get(wv.NodeId)
         if var is None:  # one of our folders, objects or properties
             return ua.StatusCode(ua.StatusCodes.BadNotWritable)
-        return await write_node(var.node, var.kind, wv, user)
+        return await write_node(var.node, var.kind, wv, user, role)
 
 
 @contextmanager

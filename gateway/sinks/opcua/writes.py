@@ -3,9 +3,12 @@
 A Write to one of our variables is checked the way an OPC UA client expects (the
 Variant's type must be the node's, no arrays into scalars, no Bad-status or null
 values, only the Value attribute), then handed to `Machine.write_node`, which checks
-access, range and roles, unscales, and asks the source. The answer's status name
-becomes the StatusCode returned to the client. An accepted write does not change
-the node: the new value comes back from the controller like any other change.
+access, range and roles, unscales, and asks the source. The OPC UA checks run
+inside `write_node` (its `check`), after the role check, so that a viewer hears
+BadUserAccessDenied whatever it sent and every refusal is audited. The answer's
+status name becomes the StatusCode returned to the client. An accepted write
+does not change the node: the new value comes back from the controller like any
+other change.
 """
 
 from __future__ import annotations
@@ -50,18 +53,37 @@ def precheck(node: VariableNode, kind: ValueKind, wv: ua.WriteValue) -> ua.Statu
     return None
 
 
-async def write_node(node: VariableNode, kind: ValueKind, wv: ua.WriteValue, user: str | None) -> ua.StatusCode:
+_REASONS = {
+    "BadNotWritable": "only the Value attribute of {path} can be written",
+    "BadWriteNotSupported": "{path}: index ranges cannot be written",
+    "BadTypeMismatch": "{path} takes a {type} Variant",
+}
+
+
+def _requested(wv: ua.WriteValue) -> object:
+    """The value a client sent, as far as there is one (for the audit trail)."""
+    dv = wv.Value
+    variant = dv.Value if dv is not None else None
+    value = variant.Value if variant is not None else None
+    return list(value) if isinstance(value, tuple) else value
+
+
+async def write_node(
+    node: VariableNode, kind: ValueKind, wv: ua.WriteValue, user: str | None, role: str | None = None
+) -> ua.StatusCode:
     """Carry out one client write to a tree variable; never raises."""
-    refused = precheck(node, kind, wv)
-    if refused is not None:
-        return refused
-    value = wv.Value.Value.Value
-    if isinstance(value, tuple):
-        value = list(value)
+    value = _requested(wv)
+
+    def check() -> None:
+        refused = precheck(node, kind, wv)
+        if refused is not None:
+            name = refused.name
+            reason = _REASONS.get(name, "{path}: refused").format(path=node.full_path, type=kind.spec)
+            raise WriteError(reason, status=name)
+
     try:
-        await node.machine.write_node(node, value, WriteContext(ORIGIN, user))
+        await node.machine.write_node(node, value, WriteContext(ORIGIN, user, role), check=check)
     except WriteError as exc:
-        log.info("OPC UA write to %s refused (%s): %s", node.full_path, exc.status, exc.reason)
         return status_code(exc.status)
     except Exception:
         log.exception("OPC UA write to %s failed unexpectedly", node.full_path)

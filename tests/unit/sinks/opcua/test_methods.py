@@ -106,19 +106,20 @@ def test_right_arguments_become_python_values() -> None:
     assert refused is None and values == ["a", 3]
 
 
-async def test_a_call_reaches_the_handler_with_the_caller_and_encodes_outputs() -> None:
+async def test_a_call_reaches_the_handler_with_the_caller_and_encodes_outputs(tree: VariableTree) -> None:
     calls.clear()
-    result = await call_result(METHOD, [s("part"), u32(2)], "anna")
+    result = await call_result(tree.machines["m1"], METHOD, [s("part"), u32(2)], "anna")
     assert result.StatusCode.is_good()
     assert calls == [("anna", ["part", 2])]
     [out] = result.OutputArguments
     assert out.VariantType == ua.VariantType.String and out.Value == ["part.nc", "b.nc"]
 
 
-async def test_a_refusal_becomes_its_status_code_and_a_bad_output_an_internal_error() -> None:
-    refused = await call_result(METHOD, [s("busy"), u32(1)], None)
+async def test_a_refusal_becomes_its_status_code_and_a_bad_output_an_internal_error(tree: VariableTree) -> None:
+    machine = tree.machines["m1"]
+    refused = await call_result(machine, METHOD, [s("busy"), u32(1)], None)
     assert refused.StatusCode == ua.StatusCode(ua.StatusCodes.BadInvalidState)
-    odd = await call_result(METHOD, [s("odd"), u32(1)], None)
+    odd = await call_result(machine, METHOD, [s("odd"), u32(1)], None)
     assert odd.StatusCode == ua.StatusCode(ua.StatusCodes.BadInternalError)
 
 

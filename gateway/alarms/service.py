@@ -1,0 +1,67 @@
+"""AlarmService: the alarm managers of every machine with an `alarms:` section, and their history file.
+
+Entered before the sinks (so that the OPC UA server finds the occurrences a
+previous run left open and can offer them to ConditionRefresh from the start),
+run with the other components: one task per machine (`alarms:<machine>`).
+SQLite calls run in one worker thread of the service's own, off the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import logging
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any, Self, TypeVar
+
+from gateway.alarms.manager import AlarmManager
+from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.errors import SinkError
+from gateway.model.tree import VariableTree
+
+log = logging.getLogger("gateway.alarms")
+
+T = TypeVar("T")
+
+
+class AlarmService:
+    def __init__(self, tree: VariableTree, state_dir: Path) -> None:
+        self.tree = tree
+        self.store = AlarmStore(store_path(state_dir))
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="alarms-db")
+        self.managers: dict[str, AlarmManager] = {
+            name: AlarmManager(machine, machine.mapping.alarms, self.store, self.db)
+            for name, machine in tree.machines.items()
+            if machine.mapping.alarms is not None
+        }
+        self._opened = False
+
+    async def db(self, fn: Callable[..., T], *args: Any) -> T:
+        """Run a store call in the service's database thread."""
+        return await asyncio.get_running_loop().run_in_executor(self._pool, functools.partial(fn, *args))
+
+    async def __aenter__(self) -> Self:
+        try:
+            await self.db(self.store.open)
+        except AlarmStoreError as exc:
+            raise SinkError(str(exc)) from None
+        self._opened = True
+        for name, manager in self.managers.items():
+            records = await self.db(self.store.retained, name)
+            manager.load(records)
+            if records:
+                log.info("%s: %d alarm(s) still listed from the previous run", name, len(records))
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        if self._opened:
+            self._opened = False
+            await self.db(self.store.close)
+        await asyncio.to_thread(self._pool.shutdown, True)
+
+    async def run(self) -> None:
+        async with asyncio.TaskGroup() as tg:
+            for name, manager in self.managers.items():
+                tg.create_task(manager.run(), name=f"alarms:{name}")

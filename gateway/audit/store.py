@@ -1,0 +1,140 @@
+"""The audit table: one SQLite file in the state directory, written by the trail, read by the CLI.
+
+Times are stored as ISO-8601 UTC text with microseconds (`2026-05-06T07:08:09.123456Z`),
+which sorts like the times themselves. WAL mode lets `cnc-gateway audit list`
+read while the gateway writes.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterable
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+from gateway.audit.entry import AuditEntry
+
+FILE_NAME = "audit.sqlite3"
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS audit (
+    id INTEGER PRIMARY KEY,
+    ts TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    machine TEXT NOT NULL,
+    target TEXT NOT NULL,
+    origin TEXT NOT NULL,
+    user TEXT,
+    role TEXT,
+    old TEXT,
+    new TEXT,
+    status TEXT NOT NULL,
+    reason TEXT NOT NULL,
+    duration_ms REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS audit_ts ON audit (ts);
+CREATE INDEX IF NOT EXISTS audit_machine_ts ON audit (machine, ts);
+CREATE INDEX IF NOT EXISTS audit_user_ts ON audit (user, ts);
+"""
+
+COLUMNS = "ts, kind, machine, target, origin, user, role, old, new, status, reason, duration_ms"
+
+
+def audit_path(state_dir: Path) -> Path:
+    return state_dir / FILE_NAME
+
+
+def iso(ts: datetime) -> str:
+    ts = ts if ts.tzinfo else ts.replace(tzinfo=timezone.utc)
+    return ts.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def parse_iso(text: str) -> datetime:
+    return datetime.strptime(text, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=timezone.utc)
+
+
+@dataclass(frozen=True, slots=True)
+class AuditRow:
+    """An entry read back, with its row id."""
+
+    id: int
+    entry: AuditEntry
+
+
+class AuditStore:
+    """Blocking SQLite access: the trail uses it from its own thread, the CLI directly."""
+
+    def __init__(self, path: Path, *, create: bool = True) -> None:
+        self.path = path
+        if create:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        elif not path.exists():
+            raise FileNotFoundError(str(path))
+        self._db = sqlite3.connect(str(path), timeout=10.0, isolation_level=None)
+        if create:
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._db.executescript(SCHEMA)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def insert(self, entries: Iterable[AuditEntry]) -> int:
+        """One transaction for the whole batch."""
+        rows = [
+            (
+                iso(e.time), e.kind, e.machine, e.target, e.origin, e.user, e.role, e.old, e.new, e.status,
+                e.reason, round(e.duration * 1000.0, 3),
+            )
+            for e in entries
+        ]
+        if not rows:
+            return 0
+        with self._db:
+            self._db.execute("BEGIN")
+            self._db.executemany(f"INSERT INTO audit ({COLUMNS}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", rows)
+        return len(rows)
+
+    def prune(self, days: int, now: datetime | None = None) -> int:
+        """Delete entries older than `days` days (0: keep everything). Returns how many went."""
+        if days <= 0:
+            return 0
+        cutoff = (now or datetime.now(timezone.utc)) - timedelta(days=days)
+        with self._db:
+            self._db.execute("BEGIN")
+            cur = self._db.execute("DELETE FROM audit WHERE ts < ?", (iso(cutoff),))
+        return cur.rowcount
+
+    def query(
+        self,
+        *,
+        machine: str | None = None,
+        user: str | None = None,
+        since: datetime | None = None,
+        limit: int = 100,
+    ) -> list[AuditRow]:
+        """Newest first."""
+        where, params = [], []
+        if machine is not None:
+            where.append("machine = ?")
+            params.append(machine)
+        if user is not None:
+            where.append("user = ?")
+            params.append(user)
+        if since is not None:
+            where.append("ts >= ?")
+            params.append(iso(since))
+        sql = f"SELECT id, {COLUMNS} FROM audit"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY ts DESC, id DESC LIMIT ?"
+        params.append(max(1, limit))
+        out = []
+        for row in self._db.execute(sql, params):
+            (rowid, ts, kind, mach, target, origin, usr, role, old, new, status, reason, ms) = row
+            entry = AuditEntry(
+                parse_iso(ts), kind, mach, target, origin, usr, role, old, new, status, reason, ms / 1000.0
+            )
+            out.append(AuditRow(rowid, entry))
+        return out

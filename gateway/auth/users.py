@@ -1,0 +1,101 @@
+"""The gateway's users: who may log in (OPC UA), with which role, and what happens to wrong passwords.
+
+Built from the gateway file (`users:`, `access:`). Protocol-neutral: the OPC UA
+sink adapts it to asyncua's user manager (gateway/sinks/opcua/identity.py).
+
+- A known user with the right password gets its role.
+- A wrong password, or an unknown user, is refused; an unknown user costs as
+  much scrypt work as a known one, so timing does not tell which names exist.
+- After `lockout.failures` refusals from one address within `lockout.window`
+  seconds, that address is refused for `lockout.duration` seconds without any
+  check (gateway/auth/ratelimit.py).
+- Anonymous logins get `access.anonymous` as their role, or are refused.
+
+Every refusal is logged with the address, never with the password.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+
+from gateway.auth.passwords import hash_password, verify_password
+from gateway.auth.ratelimit import LoginLimiter
+from gateway.config.access import REFUSE
+from gateway.config.gateway import GatewayConfig
+
+log = logging.getLogger("gateway.auth")
+
+
+@dataclass(frozen=True, slots=True)
+class Identity:
+    """Who a session is: a user name (None for anonymous) and the role it acts with."""
+
+    name: str | None
+    role: str | None
+
+
+@cache
+def _dummy_hash() -> str:
+    return hash_password("not a password", salt=b"cnc-gateway-dummy-user")
+
+
+class UserDirectory:
+    def __init__(
+        self,
+        users: Mapping[str, tuple[str, str]],  # name -> (password hash, role)
+        *,
+        anonymous_role: str | None,
+        anonymous_allowed: bool = True,
+        limiter: LoginLimiter | None = None,
+    ) -> None:
+        self._users = dict(users)
+        self.anonymous_role = anonymous_role
+        self.anonymous_allowed = anonymous_allowed
+        self.limiter = limiter or LoginLimiter()
+
+    @classmethod
+    def from_config(cls, config: GatewayConfig) -> UserDirectory:
+        access = config.access
+        lockout = access.lockout
+        refuse = access.anonymous == REFUSE
+        return cls(
+            {u.name: (u.password_hash, u.role) for u in config.users},
+            anonymous_role=None if refuse else access.anonymous,
+            anonymous_allowed=not refuse,
+            limiter=LoginLimiter(lockout.failures, lockout.window, lockout.duration),
+        )
+
+    @property
+    def has_users(self) -> bool:
+        return bool(self._users)
+
+    def anonymous(self, address: str, via: str = "OPC UA") -> Identity | None:
+        if not self.anonymous_allowed:
+            log.info("%s: anonymous login from %s refused (access.anonymous: refuse)", via, address)
+            return None
+        return Identity(None, self.anonymous_role)
+
+    def authenticate(self, name: str, password: str, address: str, via: str = "OPC UA") -> Identity | None:
+        """The user's identity, or None (refused). Blocking: one scrypt check (~50 ms) unless locked out."""
+        wait = self.limiter.locked(address)
+        if wait > 0:
+            log.info("%s: login as %r from %s refused unchecked: locked out for %.0f s more",
+                     via, name[:64], address, wait)
+            return None
+        known = self._users.get(name)
+        encoded, role = known if known is not None else (_dummy_hash(), None)
+        if verify_password(password, encoded) and known is not None:
+            log.info("%s: %s logged in from %s as %s", via, name, address, role)
+            return Identity(name, role)
+        why = "wrong password" if known is not None else "unknown user"
+        if self.limiter.failed(address):
+            log.warning("%s: login as %r from %s refused (%s); %d failures within %.0f s: "
+                        "refusing every login from %s for %.0f s",
+                        via, name[:64], address, why, self.limiter.failures, self.limiter.window, address,
+                        self.limiter.lockout)
+        else:
+            log.warning("%s: login as %r from %s refused (%s)", via, name[:64], address, why)
+        return None

@@ -1,0 +1,136 @@
+"""`cnc-gateway alarms list`: the alarm history from the state directory, whether the gateway runs or not.
+
+    cnc-gateway alarms list --machine laser-sim --since 2h
+    cnc-gateway alarms list --since 2026-05-06 --active --json
+
+`--since` takes a duration back from now (`90s`, `15m`, `2h`, `7d`), `today`, or an
+ISO-8601 date or time (local time unless it names a zone). Listed: occurrences
+raised since then, and those still active then, newest first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import sys
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+from typing import Any, TextIO
+
+from gateway.alarms.records import AlarmRecord
+from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.cli.check import report_config_error
+from gateway.config.loader import load
+from gateway.errors import ConfigError
+
+DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhdw])\s*$")
+_UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400, "w": 604800}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("alarms", help="the alarm history kept in the state directory")
+    alarms = p.add_subparsers(dest="alarms_command", metavar="ACTION", required=True)
+    q = alarms.add_parser("list", help="alarm occurrences, newest first")
+    q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
+                   help="gateway or mapping file(s) the gateway runs with (to find its state directory)")
+    q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+    q.add_argument("--machine", default=None)
+    q.add_argument("--since", default=None, type=since_arg,
+                   help="90s, 15m, 2h, 7d, today, or an ISO-8601 date/time (default: everything)")
+    q.add_argument("--active", action="store_true", help="only alarms that are still active")
+    q.add_argument("--limit", type=int, default=200)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(handler=handle_list)
+
+
+def parse_since(text: str, now: datetime | None = None) -> datetime:
+    """A point in time from what a person types; raises ValueError with the accepted forms."""
+    now = now or datetime.now(timezone.utc)
+    m = _DURATION.match(text)
+    if m:
+        return now - timedelta(seconds=float(m.group(1)) * _UNITS[m.group(2)])
+    if text.strip().lower() == "today":
+        local = now.astimezone()
+        return local.replace(hour=0, minute=0, second=0, microsecond=0)
+    try:
+        when = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise ValueError(f"{text!r}: expected a duration (90s, 15m, 2h, 7d), 'today', or an ISO-8601 date/time") from None
+    return when if when.tzinfo else when.astimezone()  # naive: local time
+
+
+def since_arg(text: str) -> datetime:
+    try:
+        return parse_since(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def state_dir(args: argparse.Namespace) -> Path:
+    if args.state_dir is not None:
+        return Path(args.state_dir)
+    if args.config:
+        try:
+            return load(args.config).state_dir
+        except ConfigError as exc:
+            report_config_error(exc)
+            raise SystemExit(2) from None
+    env = os.environ.get("CNC_GATEWAY_STATE_DIR")
+    if env:
+        return Path(env)
+    found = [d for d in DEFAULT_STATE_DIRS if store_path(d).is_file()]
+    if not found:
+        return DEFAULT_STATE_DIRS[0]
+    chosen = max(found, key=lambda d: store_path(d).stat().st_mtime)
+    print(f"(alarms: {store_path(chosen)}; -c FILE or --state-dir to choose)", file=sys.stderr)
+    return chosen
+
+
+def handle_list(args: argparse.Namespace) -> int:
+    path = store_path(state_dir(args))
+    store = AlarmStore(path)
+    try:
+        store.open(create=False)
+        records = store.history(args.machine, args.since, active_only=args.active, limit=args.limit)
+    except AlarmStoreError as exc:
+        print(f"error: {exc} (give -c FILE or --state-dir)", file=sys.stderr)
+        return 1
+    finally:
+        store.close()
+    if args.json:
+        print(json.dumps([_json(r) for r in records], indent=2))
+        return 0
+    print_table(records, sys.stdout)
+    return 0
+
+
+def _json(record: AlarmRecord) -> dict[str, Any]:
+    doc = record.as_dict()
+    doc["machine"] = record.machine
+    doc.pop("quality", None)  # a property of the running gateway's view, not of the history
+    return {k: (v.isoformat() if isinstance(v, datetime) else v) for k, v in doc.items()}
+
+
+def _when(ts: datetime | None) -> str:
+    return ts.astimezone().strftime("%Y-%m-%d %H:%M:%S") if ts is not None else "-"
+
+
+def print_table(records: list[AlarmRecord], out: TextIO) -> None:
+    if not records:
+        print("no alarms", file=out)
+        return
+    rows = [("OCC", "MACHINE", "ALARM", "SEV", "RAISED", "CLEARED", "ACKNOWLEDGED", "TEXT")]
+    for r in records:
+        acked = f"{_when(r.acked_at)} {r.acked_by}" if r.acked else "-"
+        if r.confirmed:
+            acked += " (confirmed)"
+        rows.append((
+            str(r.occurrence), r.machine, r.id, str(r.severity), _when(r.raised_at),
+            "active" if r.active else _when(r.cleared_at), acked, r.text,
+        ))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]
+    for row in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[-1], file=out)

@@ -1,0 +1,282 @@
+"""Command requests: `<prefix>/<machine>/commands/<name>` runs a mapped command, the answer goes to `…/result`.
+
+The body is a JSON object with the command's arguments by name and an optional
+`correlation_id`, which the answer repeats: `{"name": "part.nc",
+"correlation_id": "c-17"}`; an empty body is `{}`. With MQTT 5, a request's
+response topic and correlation data are used, as for writes. Every request gets
+exactly one answer:
+
+    {"ok": true,  "status": "Good", "reason": "Machine/State is 1 (Running)", "result": …, "duration_ms": 312.5, …}
+    {"ok": false, "status": "BadTimeout", "error": "start: no completion within 5 s …", "reason": …, "duration_ms": …}
+
+What can be refused without the controller (unknown machine or command, commands
+not enabled for the machine, a retained request, an oversized or malformed body,
+unknown or missing arguments) is answered at once from the paho callback. The
+rest waits in a bounded queue per machine (`max_pending_writes`, like writes) for
+that machine's worker, which runs up to `MAX_RUNNING` commands at once (a stop
+must not wait behind a start that is waiting for its deadline) through
+`Machine.call_method`, the path every sink's calls take (role check, audit).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from gateway.config.mqtt import MqttConfig
+from gateway.errors import AccessDenied, ArgumentsMissing, BadWriteRequest, TooManyArguments, WriteError
+from gateway.model.methods import Method
+from gateway.model.tree import Machine, VariableTree, WriteContext
+from gateway.sinks.mqtt.client import Incoming
+from gateway.sinks.mqtt.payloads import plain
+from gateway.sinks.mqtt.topics import clean_segment, valid_publish_topic
+from gateway.sinks.mqtt.writes import LogQuota, TooManyWrites
+
+log = logging.getLogger(__name__)
+
+COMMANDS = "commands"
+RESULT = "result"
+OBJECT = "Commands"  # the machine methods that are commands (gateway/commands/runner.py)
+CORRELATION = "correlation_id"
+MAX_RUNNING = 4  # commands of one machine carried out at once
+
+Answer = Callable[[str, bytes, "bytes | None"], None]
+_dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":"), allow_nan=False).encode
+
+
+class UnknownCommand(WriteError):
+    status = "BadMethodInvalid"
+
+
+class UnknownMachine(WriteError):
+    status = "BadNodeIdUnknown"
+
+
+# --- pure parts ------------------------------------------------------------------------------------
+
+
+def command_filter(prefix: str) -> str:
+    return f"{prefix}/+/{COMMANDS}/+"
+
+
+def command_target(topic: str, prefix: str) -> tuple[str, str] | None:
+    """`cnc/laser-sim/commands/start` → ("laser-sim", "start"); None for any other topic."""
+    head = prefix + "/"
+    if not topic.startswith(head):
+        return None
+    levels = topic[len(head):].split("/")
+    if len(levels) != 3 or levels[1] != COMMANDS or not levels[0] or not levels[2]:
+        return None
+    return levels[0], levels[2]
+
+
+def read_body(payload: bytes) -> dict[str, Any]:
+    """The request's JSON object (an empty body is `{}`). Raises BadWriteRequest with the reason."""
+    try:
+        text = bytes(payload).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise BadWriteRequest(f"the body is not UTF-8 text (byte {exc.start})") from None
+    if not text.strip():
+        return {}
+    try:
+        body = json.loads(text)
+    except RecursionError:
+        raise BadWriteRequest("malformed JSON: nested too deeply") from None
+    except ValueError as exc:
+        where = f" at character {exc.pos}" if isinstance(getattr(exc, "pos", None), int) else ""
+        raise BadWriteRequest(f"malformed JSON: {getattr(exc, 'msg', exc)}{where}") from None
+    if not isinstance(body, dict):
+        raise BadWriteRequest('expected a JSON object with the arguments by name, e.g. {"name": "part.nc"}')
+    return body
+
+
+def correlation_of(body: Mapping[str, Any]) -> str | int | None:
+    value = body.get(CORRELATION)
+    if value is None or (isinstance(value, (str, int)) and not isinstance(value, bool)):
+        return value
+    raise BadWriteRequest(f"{CORRELATION} must be text or a number")
+
+
+def arguments(method: Method, body: Mapping[str, Any]) -> list[Any]:
+    """The body's arguments in the method's order (types are checked by the call itself)."""
+    names = [a.name for a in method.inputs]
+    unknown = sorted(k for k in body if k != CORRELATION and k not in names)
+    if unknown:
+        takes = ", ".join(names) if names else "no arguments"
+        raise TooManyArguments(f"{method.name} does not take {', '.join(map(repr, unknown))} (it takes {takes})")
+    missing = [n for n in names if n not in body]
+    if missing:
+        raise ArgumentsMissing(f"{method.name} needs {', '.join(missing)}")
+    return [body[n] for n in names]
+
+
+def encode_reply(
+    command: str,
+    *,
+    duration_ms: float,
+    correlation: str | int | None = None,
+    result: str | None = None,
+    error: WriteError | None = None,
+) -> bytes:
+    doc: dict[str, Any] = {"ok": error is None, "command": command}
+    if error is None:
+        doc.update(status="Good", reason=result or "", result=result or "")
+    else:
+        doc.update(status=error.status, error=error.reason, reason=error.reason)
+    doc["duration_ms"] = round(duration_ms, 1)
+    if correlation is not None:
+        doc[CORRELATION] = correlation
+    return _dumps(plain(doc)).encode()
+
+
+# --- the requests ----------------------------------------------------------------------------------
+
+
+class _Request:
+    __slots__ = ("machine", "method", "args", "reply", "correlation", "data", "received")
+
+    def __init__(
+        self, machine: Machine, method: Method, args: list[Any], reply: str,
+        correlation: str | int | None, data: bytes | None, received: float,
+    ) -> None:
+        self.machine = machine
+        self.method = method
+        self.args = args
+        self.reply = reply
+        self.correlation = correlation
+        self.data = data
+        self.received = received
+
+
+class CommandRequests:
+    """Turns command messages into machine method calls and answers every one of them."""
+
+    def __init__(self, tree: VariableTree, cfg: MqttConfig, answer: Answer) -> None:
+        self.tree = tree
+        self.cfg = cfg
+        self.answer = answer
+        self.prefix = cfg.prefix
+        self.machines: dict[str, Machine] = {
+            clean_segment(name): machine
+            for name, machine in tree.machines.items()
+            if any(obj == OBJECT for obj, _ in machine.methods)
+        }
+        self.queues: dict[str, asyncio.Queue[_Request]] = {
+            m.name: asyncio.Queue(maxsize=cfg.max_pending_writes) for m in self.machines.values()
+        }
+        self.received = 0
+        self.refused = 0
+        self._quota = LogQuota()
+
+    @property
+    def filters(self) -> list[str]:
+        """What to subscribe to: nothing when no machine has commands."""
+        return [command_filter(self.prefix)] if self.machines else []
+
+    # --- from paho, on the loop ----------------------------------------------------------------
+
+    def handle(self, msg: Incoming) -> bool:
+        """A command request (answered, now or later): True. Any other message: False."""
+        target = command_target(msg.topic, self.prefix)
+        if target is None:
+            return False
+        started = time.monotonic()
+        self.received += 1
+        segment, name = target
+        reply = self._reply_topic(msg.topic, msg.response_topic)
+        correlation: str | int | None = None
+        machine = self.machines.get(segment)
+        method = machine.methods.get((OBJECT, name)) if machine is not None else None
+        try:
+            if msg.retain:
+                raise BadWriteRequest("retained command requests are ignored: publish them without the retain flag")
+            if machine is None:
+                raise UnknownMachine(f"no machine {segment!r} has commands")
+            if method is None:
+                known = ", ".join(n for obj, n in machine.methods if obj == OBJECT)
+                raise UnknownCommand(f"{machine.name} has no command {name!r} (it has {known})")
+            if len(msg.payload) > self.cfg.max_set_payload:
+                raise BadWriteRequest(
+                    f"the body has {len(msg.payload)} bytes, more than the {self.cfg.max_set_payload} allowed",
+                    status="BadRequestTooLarge",
+                )
+            body = read_body(msg.payload)
+            correlation = correlation_of(body)
+            mqtt = machine.mapping.mqtt
+            if mqtt is None or not mqtt.commands:
+                raise AccessDenied(
+                    f"commands over MQTT are not enabled for {machine.name} (mapping: mqtt: {{commands: true}})"
+                )
+            args = arguments(method, body)
+            try:
+                self.queues[machine.name].put_nowait(
+                    _Request(machine, method, args, reply, correlation, msg.correlation_data, started)
+                )
+            except asyncio.QueueFull:
+                raise TooManyWrites(
+                    f"{self.cfg.max_pending_writes} commands for {machine.name} are already waiting; try again"
+                ) from None
+        except WriteError as exc:
+            if machine is not None and method is not None:  # known commands only: junk is not worth an entry
+                machine.audit_call(method, [], self._context(machine), exc)
+            self._refuse(name, reply, msg.correlation_data, correlation, exc, started)
+        return True
+
+    def _context(self, machine: Machine) -> WriteContext:
+        return WriteContext("mqtt", user=None, role=self.tree.access.mqtt_role(machine.name))
+
+    def _reply_topic(self, topic: str, requested: str | None) -> str:
+        """The v5 response topic when usable (under our prefix only a …/result topic), else `<topic>/result`."""
+        if requested and valid_publish_topic(requested):
+            if not requested.startswith(self.prefix + "/") or requested.endswith(f"/{RESULT}"):
+                return requested
+        return f"{topic}/{RESULT}"
+
+    def _refuse(
+        self, name: str, reply: str, data: bytes | None, correlation: str | int | None,
+        exc: WriteError, started: float,
+    ) -> None:
+        self.refused += 1
+        if self._quota.allow():
+            log.info("MQTT command %s refused: %s (%s)", name[:100], exc.reason[:300], exc.status)
+        payload = encode_reply(
+            name, duration_ms=(time.monotonic() - started) * 1000, correlation=correlation, error=exc
+        )
+        self.answer(reply, payload, data)
+
+    # --- workers ------------------------------------------------------------------------------
+
+    async def worker(self, machine_name: str) -> None:
+        """Carry out one machine's queued commands, up to MAX_RUNNING at once, until cancelled."""
+        queue = self.queues[machine_name]
+        slots = asyncio.Semaphore(MAX_RUNNING)
+        async with asyncio.TaskGroup() as tg:
+            while True:
+                req = await queue.get()
+                await slots.acquire()
+                tg.create_task(self._run(req, slots), name=f"mqtt:command:{machine_name}:{req.method.name}")
+
+    async def _run(self, req: _Request, slots: asyncio.Semaphore) -> None:
+        name = req.method.name
+        try:
+            outputs: Sequence[Any] = await req.machine.call_method(req.method, req.args, self._context(req.machine))
+        except WriteError as exc:
+            self._refuse(name, req.reply, req.data, req.correlation, exc, req.received)
+            return
+        except Exception as exc:  # a bug below must not end the commands of this machine
+            log.exception("MQTT command %s/%s failed unexpectedly", req.machine.name, name)
+            self._refuse(name, req.reply, req.data, req.correlation, WriteError(f"internal error: {exc}"),
+                         req.received)
+            return
+        finally:
+            slots.release()
+        result = str(outputs[0]) if outputs else ""
+        log.info("MQTT command %s/%s: %s", req.machine.name, name, result)
+        payload = encode_reply(
+            name, duration_ms=(time.monotonic() - req.received) * 1000, correlation=req.correlation, result=result
+        )
+        self.answer(req.reply, payload, req.data)

@@ -1,0 +1,279 @@
+"""Machine alarms in the OPC UA server: condition nodes, events, Acknowledge, Confirm and ConditionRefresh.
+
+Each machine with alarms is an event notifier (EventNotifier SubscribeToEvents,
+and the Server object HasNotifier it), so a client may subscribe to events on the
+Server object, as most SCADA systems do, or on the machine alone. Every alarm
+occurrence is a condition node `<machine>/Alarms/<occurrence>` of type
+AlarmConditionType while it is retained; each transition (raised, cleared,
+acknowledged, confirmed, quality) is reported as an event through both notifiers,
+with the same EventId. When an occurrence ends (Retain false) its node goes.
+
+Clients acknowledge and confirm by calling the standard methods
+AcknowledgeableConditionType.Acknowledge/Confirm (i=9111/9113) on the condition
+node with an EventId the condition reported and a comment; the alarm manager
+checks the caller's role and records it before the answer goes back.
+ConditionType.ConditionRefresh (i=3875, and ConditionRefresh2) sends the calling
+subscription a RefreshStartEvent, the latest event of every retained condition, and
+RefreshEndEvent, so that a client that connects late sees the alarms in force.
+
+This module does not import asyncua's server API: it uses the sink's seams
+(`add_nodes`, `trigger_event`, `link_method`, `caller_context`, `server`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import deque
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from asyncua import ua
+
+from gateway.alarms.manager import AlarmManager
+from gateway.alarms.records import AlarmChange, AlarmRecord
+from gateway.errors import WriteError
+from gateway.model.sample import utcnow
+from gateway.sinks.opcua.address_space import HAS_COMPONENT
+from gateway.sinks.opcua.conditions import (
+    ACKNOWLEDGE,
+    ALARM_CONDITION_TYPE,
+    CONDITION_REFRESH,
+    CONDITION_REFRESH2,
+    CONFIRM,
+    HAS_NOTIFIER,
+    SERVER,
+    ConditionIds,
+    condition_event,
+    emitted_by,
+    new_event_id,
+    refresh_event,
+)
+from gateway.sinks.opcua.values import status_code
+
+if TYPE_CHECKING:
+    from gateway.alarms.service import AlarmService
+    from gateway.sinks.opcua.server import OpcUaSink
+
+log = logging.getLogger(__name__)
+
+OBJECT = "Alarms"
+BASE_OBJECT_TYPE = ua.NodeId(ua.ObjectIds.BaseObjectType)
+EVENT_IDS_KEPT = 32  # recent EventIds per condition that Acknowledge/Confirm accept
+
+
+def _status(name: str) -> ua.StatusCode:
+    return ua.StatusCode(getattr(ua.StatusCodes, name))
+
+
+@dataclass
+class _Condition:
+    manager: AlarmManager
+    occurrence: int
+    ids: ConditionIds
+    severity: int
+    last: Any = None  # the latest event, as sent (ConditionRefresh sends it again)
+    event_ids: deque[bytes] = field(default_factory=lambda: deque(maxlen=EVENT_IDS_KEPT))
+
+
+class OpcUaAlarms:
+    """The alarm conditions of every machine the AlarmService manages."""
+
+    def __init__(self, sink: OpcUaSink, service: AlarmService) -> None:
+        self.sink = sink
+        self.service = service
+        self._conditions: dict[ua.NodeId, _Condition] = {}
+        self._by_occurrence: dict[int, ua.NodeId] = {}
+        self._notifiers: dict[str, ua.NodeId] = {}
+        self._lock = asyncio.Lock()
+
+    # --- set-up ------------------------------------------------------------------------------
+
+    async def install(self) -> None:
+        """Make the machines notifiers, add the conditions still retained, and take the standard methods."""
+        sink = self.sink
+        server = sink.server
+        ns = sink.namespace_index
+        for name, manager in self.service.managers.items():
+            machine_id = sink.machine_node_id(name)
+            self._notifiers[name] = machine_id
+            mask = ua.EventNotifier.to_bitfield([ua.EventNotifier.SubscribeToEvents])
+            notifier = ua.DataValue(ua.Variant(mask, ua.VariantType.Byte))
+            await server.write_attribute_value(machine_id, notifier, ua.AttributeIds.EventNotifier)
+            await server.get_node(SERVER).add_reference(machine_id, HAS_NOTIFIER, forward=True, bidirectional=True)
+            await sink.add_nodes([_object_item(ua.NodeId(f"{name}/{OBJECT}", ns), machine_id, OBJECT, ns)])
+            for record in manager.retained():
+                condition = await self._condition(manager, record)
+                condition.last = self._event(condition, record, record.raised_at, True)
+            manager.listen(self._on_change(manager))
+        sink.link_method(ACKNOWLEDGE, self._method(self._acknowledge))
+        sink.link_method(CONFIRM, self._method(self._confirm))
+        sink.link_method(CONDITION_REFRESH, self._refresh)
+        sink.link_method(CONDITION_REFRESH2, self._refresh)
+
+    async def _condition(self, manager: AlarmManager, record: AlarmRecord) -> _Condition:
+        """The condition of an occurrence, its node added on first sight."""
+        nodeid = self._by_occurrence.get(record.occurrence)
+        if nodeid is not None:
+            return self._conditions[nodeid]
+        ns = self.sink.namespace_index
+        name = manager.name
+        nodeid = ua.NodeId(f"{name}/{OBJECT}/{record.occurrence}", ns)
+        parent = ua.NodeId(f"{name}/{OBJECT}", ns)
+        await self.sink.add_nodes([_condition_item(nodeid, parent, record, ns)])
+        ids = ConditionIds(nodeid, self._notifiers[name], name)
+        condition = _Condition(manager, record.occurrence, ids, record.severity)
+        self._conditions[nodeid] = condition
+        self._by_occurrence[record.occurrence] = nodeid
+        return condition
+
+    def _event(self, condition: _Condition, record: AlarmRecord, time: Any, retained: bool,
+               comment: str = "", user: str = "") -> Any:
+        event_id = new_event_id()
+        condition.event_ids.append(event_id)
+        event = condition_event(
+            record, condition.ids, event_id=event_id, time=time, retained=retained,
+            last_severity=condition.severity, comment=comment, user=user,
+        )
+        condition.severity = record.severity
+        return event
+
+    # --- transitions -------------------------------------------------------------------------
+
+    def _on_change(self, manager: AlarmManager) -> Callable[[AlarmChange], Awaitable[None]]:
+        async def listener(change: AlarmChange) -> None:
+            async with self._lock:
+                condition = await self._condition(manager, change.record)
+                event = self._event(condition, change.record, change.ts, change.retained, change.comment, change.user)
+                condition.last = event
+                await self._send(event, condition.ids.source)
+                if not change.retained:
+                    await self._forget(condition)
+
+        return listener
+
+    async def _send(self, event: Any, machine_id: ua.NodeId, subscription: int | None = None,
+                    item: int | None = None) -> None:
+        for notifier in (SERVER, machine_id):
+            await self.sink.trigger_event(emitted_by(event, notifier), subscription, item)
+
+    async def _forget(self, condition: _Condition) -> None:
+        nodeid = condition.ids.condition
+        self._conditions.pop(nodeid, None)
+        self._by_occurrence.pop(condition.occurrence, None)
+        server = self.sink.server
+        try:
+            await server.delete_nodes([server.get_node(nodeid)])
+        except Exception as exc:  # a node left behind is untidy, not harmful
+            log.warning("cannot remove the ended alarm condition %s: %s", nodeid.to_string(), exc)
+
+    # --- Acknowledge and Confirm -------------------------------------------------------------
+
+    def _method(self, action: Callable[[AlarmManager, int, Any, str], Awaitable[Any]]) -> Callable[..., Any]:
+        async def callback(parent: ua.NodeId, *inputs: ua.Variant) -> ua.CallMethodResult:
+            return await self._respond(parent, inputs, action)
+
+        return callback
+
+    async def _acknowledge(self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str) -> Any:
+        return await manager.acknowledge(occurrence, ctx, comment)
+
+    async def _confirm(self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str) -> Any:
+        return await manager.confirm(occurrence, ctx, comment)
+
+    async def _respond(
+        self, parent: ua.NodeId, inputs: Sequence[ua.Variant], action: Callable[..., Awaitable[Any]]
+    ) -> ua.CallMethodResult:
+        """(EventId: ByteString, Comment: LocalizedText) on a condition node; never raises."""
+        if len(inputs) < 2:
+            return ua.CallMethodResult(StatusCode=_status("BadArgumentsMissing"))
+        if len(inputs) > 2:
+            return ua.CallMethodResult(StatusCode=_status("BadTooManyArguments"))
+        event_id, comment = inputs
+        results = [
+            ua.StatusCode() if event_id.VariantType == ua.VariantType.ByteString and event_id.Value else
+            _status("BadTypeMismatch"),
+            ua.StatusCode() if comment.VariantType in (ua.VariantType.LocalizedText, ua.VariantType.String,
+                                                       ua.VariantType.Null) else _status("BadTypeMismatch"),
+        ]
+        if not all(r.is_good() for r in results):
+            return ua.CallMethodResult(StatusCode=_status("BadTypeMismatch"), InputArgumentResults=results)
+        condition = self._conditions.get(parent)
+        if condition is None:
+            return ua.CallMethodResult(StatusCode=_status("BadNodeIdUnknown"), InputArgumentResults=results)
+        if bytes(event_id.Value) not in condition.event_ids:
+            return ua.CallMethodResult(StatusCode=_status("BadEventIdUnknown"), InputArgumentResults=results)
+        text = comment.Value.Text if isinstance(comment.Value, ua.LocalizedText) else comment.Value
+        try:
+            await action(condition.manager, condition.occurrence, self.sink.caller_context(), str(text or ""))
+        except WriteError as exc:
+            log.info("OPC UA %s of alarm occurrence %d refused (%s): %s",
+                     getattr(action, "__name__", "call").strip("_"), condition.occurrence, exc.status, exc.reason)
+            return ua.CallMethodResult(StatusCode=status_code(exc.status), InputArgumentResults=results)
+        except Exception:
+            log.exception("OPC UA alarm call on occurrence %d failed unexpectedly", condition.occurrence)
+            return ua.CallMethodResult(StatusCode=_status("BadInternalError"), InputArgumentResults=results)
+        return ua.CallMethodResult(StatusCode=ua.StatusCode(), InputArgumentResults=results)
+
+    # --- ConditionRefresh --------------------------------------------------------------------
+
+    async def _refresh(self, parent: ua.NodeId, *inputs: ua.Variant) -> ua.CallMethodResult:
+        """ConditionRefresh(SubscriptionId) and ConditionRefresh2(SubscriptionId, MonitoredItemId)."""
+        if not inputs:
+            return ua.CallMethodResult(StatusCode=_status("BadArgumentsMissing"))
+        values = [v.Value for v in inputs]
+        if any(not isinstance(v, int) or isinstance(v, bool) for v in values) or len(values) > 2:
+            return ua.CallMethodResult(StatusCode=_status("BadTypeMismatch" if len(values) <= 2 else "BadTooManyArguments"))
+        subscription = values[0]
+        item = values[1] if len(values) == 2 else None
+        if not self.sink.has_subscription(subscription):
+            return ua.CallMethodResult(StatusCode=_status("BadSubscriptionIdInvalid"))
+        async with self._lock:
+            now = utcnow()
+            # The bracket goes to every event item of the subscription, past its filter (Part 9, 4.5);
+            # the conditions between must pass the filter, and go through their notifiers as usual.
+            await self.sink.trigger_unfiltered(refresh_event(True, time=now), subscription, item)
+            for condition in list(self._conditions.values()):
+                if condition.last is not None:
+                    await self._send(condition.last, condition.ids.source, subscription, item)
+            await self.sink.trigger_unfiltered(refresh_event(False, time=now), subscription, item)
+        return ua.CallMethodResult(StatusCode=ua.StatusCode())
+
+
+def _object_item(nodeid: ua.NodeId, parent: ua.NodeId, name: str, ns: int) -> ua.AddNodesItem:
+    attrs = ua.ObjectAttributes(
+        DisplayName=ua.LocalizedText(name),
+        Description=ua.LocalizedText("The machine's alarms in force: one condition per occurrence"),
+        WriteMask=0,
+        UserWriteMask=0,
+        EventNotifier=0,
+    )
+    return ua.AddNodesItem(
+        ParentNodeId=parent,
+        ReferenceTypeId=HAS_COMPONENT,
+        RequestedNewNodeId=nodeid,
+        BrowseName=ua.QualifiedName(name, ns),
+        NodeClass=ua.NodeClass.Object,
+        NodeAttributes=attrs,
+        TypeDefinition=BASE_OBJECT_TYPE,
+    )
+
+
+def _condition_item(nodeid: ua.NodeId, parent: ua.NodeId, record: AlarmRecord, ns: int) -> ua.AddNodesItem:
+    attrs = ua.ObjectAttributes(
+        DisplayName=ua.LocalizedText(f"{record.id} {record.text}"),
+        Description=ua.LocalizedText(f"Alarm {record.id}, occurrence {record.occurrence}"),
+        WriteMask=0,
+        UserWriteMask=0,
+        EventNotifier=0,
+    )
+    return ua.AddNodesItem(
+        ParentNodeId=parent,
+        ReferenceTypeId=HAS_COMPONENT,
+        RequestedNewNodeId=nodeid,
+        BrowseName=ua.QualifiedName(f"{record.id}-{record.occurrence}", ns),
+        NodeClass=ua.NodeClass.Object,
+        NodeAttributes=attrs,
+        TypeDefinition=ALARM_CONDITION_TYPE,
+    )

@@ -1,0 +1,138 @@
+"""Alarm occurrences as OPC UA AlarmConditionType events: pure translation, no server.
+
+One event per transition, with the fields SCADA alarm lists read: EventId (fresh
+per event), ConditionId (the condition node, in the event's `NodeId`),
+ConditionName (the controller's alarm number), SourceNode/SourceName (the
+machine), Message (the controller's text), Severity (1..1000), Retain, Quality,
+and the two-state variables ActiveState, AckedState and ConfirmedState with
+their Id and TransitionTime. `emitted_by` makes the copy for each notifier the
+event is reported through (the Server object and the machine's object).
+"""
+
+from __future__ import annotations
+
+import copy
+import time as _time
+import uuid
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from asyncua import ua
+from asyncua.common.event_objects import AlarmCondition, RefreshEndEvent, RefreshStartEvent
+
+from gateway.alarms.records import AlarmRecord, Quality
+from gateway.model.sample import utcnow
+
+SERVER = ua.NodeId(ua.ObjectIds.Server)
+ALARM_CONDITION_TYPE = ua.NodeId(ua.ObjectIds.AlarmConditionType)
+PROCESS_CLASS = ua.NodeId(ua.ObjectIds.ProcessConditionClassType)
+ACKNOWLEDGE = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
+CONFIRM = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Confirm)
+CONDITION_REFRESH = ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh)
+CONDITION_REFRESH2 = ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh2)
+HAS_NOTIFIER = ua.NodeId(ua.ObjectIds.HasNotifier)
+
+QUALITY_CODES: dict[Quality, int] = {
+    Quality.GOOD: ua.StatusCodes.Good,
+    Quality.UNCERTAIN: ua.StatusCodes.UncertainLastUsableValue,
+}
+
+# asyncua's generated event classes declare some fields with a DataType NodeId (UtcTime, Duration)
+# where a Variant needs a VariantType; these are the built-in types those DataTypes derive from.
+_BASE_TYPES: dict[int, ua.VariantType] = {
+    ua.ObjectIds.UtcTime: ua.VariantType.DateTime,
+    ua.ObjectIds.Duration: ua.VariantType.Double,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ConditionIds:
+    """Where an occurrence lives in the address space."""
+
+    condition: ua.NodeId  # ConditionId: the condition's own node
+    source: ua.NodeId  # SourceNode: the machine's object
+    source_name: str  # SourceName: the machine's name
+
+
+def new_event_id() -> bytes:
+    """EventIds are opaque ByteStrings, unique per event."""
+    return uuid.uuid4().bytes
+
+
+def _typed(event: Any) -> Any:
+    for name, dtype in list(event.data_types.items()):
+        if isinstance(dtype, ua.NodeId):
+            event.data_types[name] = _BASE_TYPES.get(dtype.Identifier, ua.VariantType.Variant)
+    return event
+
+
+def _two_state(event: Any, name: str, value: bool, true: str, false: str, when: datetime | None) -> None:
+    setattr(event, name, ua.LocalizedText(true if value else false))
+    setattr(event, f"{name}/Id", value)
+    setattr(event, f"{name}/TrueState", ua.LocalizedText(true))
+    setattr(event, f"{name}/FalseState", ua.LocalizedText(false))
+    if when is not None:
+        setattr(event, f"{name}/TransitionTime", when)
+
+
+def condition_event(
+    record: AlarmRecord,
+    ids: ConditionIds,
+    *,
+    event_id: bytes,
+    time: datetime,
+    retained: bool,
+    last_severity: int | None = None,
+    comment: str = "",
+    user: str = "",
+) -> Any:
+    """The event that reports `record`'s state at `time` (emitted by the Server object; see `emitted_by`)."""
+    event = _typed(AlarmCondition(sourcenode=ids.source, message=record.text, severity=record.severity))
+    event.emitting_node = SERVER
+    event.add_property("NodeId", ids.condition, ua.VariantType.NodeId)  # ConditionId (not a component of the type)
+    event.EventId = event_id
+    event.SourceName = ids.source_name
+    event.Time = time
+    event.ReceiveTime = utcnow()
+    offset = _time.localtime(time.timestamp())
+    event.LocalTime = ua.TimeZoneDataType(Offset=offset.tm_gmtoff // 60, DaylightSavingInOffset=offset.tm_isdst > 0)
+    event.ConditionClassId = PROCESS_CLASS
+    event.ConditionClassName = ua.LocalizedText("Process")
+    event.ConditionName = record.id
+    event.BranchId = ua.NodeId()
+    event.Retain = retained
+    event.SupportsFilteredRetain = False
+    _two_state(event, "EnabledState", True, "Enabled", "Disabled", None)
+    event.Quality = ua.StatusCode(QUALITY_CODES[record.quality])
+    setattr(event, "Quality/SourceTimestamp", time)
+    event.LastSeverity = record.severity if last_severity is None else last_severity
+    event.Comment = ua.LocalizedText(comment or record.confirm_comment or record.ack_comment)
+    event.ClientUserId = user
+    _two_state(event, "ActiveState", record.active, "Active", "Inactive", record.cleared_at or record.raised_at)
+    setattr(event, "ActiveState/EffectiveDisplayName", ua.LocalizedText("Active" if record.active else "Inactive"))
+    _two_state(event, "AckedState", record.acked, "Acknowledged", "Unacknowledged", record.acked_at or record.raised_at)
+    _two_state(event, "ConfirmedState", record.confirmed, "Confirmed", "Unconfirmed",
+               record.confirmed_at or record.raised_at)
+    event.SuppressedOrShelved = False
+    event.InputNode = ua.NodeId()
+    return event
+
+
+def refresh_event(start: bool, *, time: datetime | None = None) -> Any:
+    """RefreshStartEvent / RefreshEndEvent, around the conditions ConditionRefresh sends again."""
+    event = _typed((RefreshStartEvent if start else RefreshEndEvent)(sourcenode=SERVER, severity=1))
+    event.emitting_node = SERVER
+    event.EventId = new_event_id()
+    event.SourceName = "Server"
+    event.Time = time or utcnow()
+    event.ReceiveTime = utcnow()
+    event.Message = ua.LocalizedText("ConditionRefresh " + ("start" if start else "end"))
+    return event
+
+
+def emitted_by(event: Any, notifier: ua.NodeId) -> Any:
+    """The same event (same fields, same EventId) reported through another notifier."""
+    twin = copy.copy(event)
+    twin.emitting_node = notifier
+    return twin
