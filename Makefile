@@ -4,13 +4,19 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test unit integration install system-deps schema clean
+.PHONY: demo test unit integration install system-deps schema soak bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
 	touch $(STAMP)
+
+BENCH_STAMP := $(VENV)/.bench-installed
+
+$(BENCH_STAMP): $(STAMP) pyproject.toml
+	$(BIN)/pip install --quiet -e '.[test,bench]'
+	touch $(BENCH_STAMP)
 
 install: $(STAMP)
 
@@ -29,6 +35,17 @@ unit: $(STAMP)
 
 integration: $(STAMP) system-deps
 	$(BIN)/pytest tests/integration
+
+# The fault drills with their soak counts: 30 broker restarts, 30 controller restarts, 50 gateway kills,
+# 150,000 changes past stalled consumers, and the bad-input corpus (README: Reliability drills). ~10 min.
+soak: $(STAMP) system-deps
+	CNC_DRILL_SCALE=soak $(BIN)/pytest tests/integration/drills
+
+# Throughput, latency, start-up, memory and job delivery against the raw libraries' ceilings, measured
+# in the same run (bench/README.md). About 15 min; `make bench BENCH_ARGS=--quick` takes about two.
+# Prints one table; the same figures go to bench/results/latest.json.
+bench: $(BENCH_STAMP) system-deps
+	$(BIN)/python -m bench.run $(BENCH_ARGS)
 
 schema: $(STAMP)
 	$(BIN)/cnc-gateway schema > mappings/mapping.schema.json
