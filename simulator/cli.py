@@ -6,12 +6,14 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import math
 import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from simulator.errors import SimulatorError
+from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
 from simulator.variables import NAMESPACE_URI
 
@@ -48,8 +50,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--opcua-user", default=None, help="require this OPC UA user (default: anonymous access)")
     p.add_argument("--opcua-password", default=None, help="password of --opcua-user")
+    noise = p.add_argument_group("noise mode (benchmark load)")
+    noise.add_argument(
+        "--noise-variables", type=int, default=0, metavar="N",
+        help="add N Double variables under Objects/PLC/Tasks/Noise that change at --noise-rate",
+    )  # fmt: skip
+    noise.add_argument(
+        "--noise-rate", type=_rate, default=1000.0, metavar="R",
+        help="total changes per second across the noise variables (default 1000; 'max': as fast as possible)",
+    )  # fmt: skip
+    noise.add_argument(
+        "--noise-per-folder", type=int, default=200, metavar="K", help="noise variables per folder (default 200)"
+    )
+    noise.add_argument(
+        "--noise-mapping", type=Path, default=None, metavar="FILE",
+        help="write a gateway mapping file for the noise variables to FILE at start",
+    )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
+
+
+def _rate(text: str) -> float:
+    if text.strip().lower() in ("max", "inf"):
+        return math.inf
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (or 'max')") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError("must be >= 0")
+    return value
 
 
 def _positive(text: str) -> float:
@@ -78,6 +108,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if (args.opcua_user is None) != (args.opcua_password is None):
         build_parser().error("--opcua-user and --opcua-password go together")
+    if args.noise_variables < 0 or args.noise_per_folder < 1:
+        build_parser().error("--noise-variables must be >= 0 and --noise-per-folder >= 1")
+    if args.noise_mapping is not None and not args.noise_variables:
+        build_parser().error("--noise-mapping needs --noise-variables")
     configure_logging(args.log_level)
     try:
         return asyncio.run(serve(args))
@@ -103,9 +137,17 @@ async def serve(args: argparse.Namespace) -> int:
         ftp_password=args.ftp_password,
         opcua_user=args.opcua_user,
         opcua_password=args.opcua_password,
+        noise=_noise(args),
     )
     try:
         async with simulator:
+            if simulator.noise is not None and args.noise_mapping is not None:
+                text = noise_mapping(simulator.noise.spec, simulator.opcua_endpoint)
+                try:
+                    args.noise_mapping.write_text(text, encoding="utf-8")
+                except OSError as exc:
+                    log.error("cannot write %s: %s", args.noise_mapping, exc.strerror or exc)
+                    return 1
             print_banner(simulator, args)
             await stop.wait()
             log.info("shutting down")
@@ -113,6 +155,12 @@ async def serve(args: argparse.Namespace) -> int:
         log.error("cannot start: %s", exc)
         return 1
     return 0
+
+
+def _noise(args: argparse.Namespace) -> NoiseSpec | None:
+    if not args.noise_variables:
+        return None
+    return NoiseSpec(args.noise_variables, args.noise_rate, args.noise_per_folder)
 
 
 def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
@@ -127,10 +175,21 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
         f"  store    {sim.store}",
         f"  programs {programs}",
         f"  speed    {sim.speed:g}x" + (f", looping {sim.loop_program}" if sim.loop_program else ""),
+        *(_noise_banner(sim, args) if sim.noise is not None else []),
         "  stop     Ctrl-C",
         "",
     ]
     print("\n".join(lines), flush=True)
+
+
+def _noise_banner(sim: Simulator, args: argparse.Namespace) -> list[str]:
+    assert sim.noise is not None
+    spec = sim.noise.spec
+    rate = "as fast as possible" if math.isinf(spec.rate) else f"{spec.rate:g} changes/s"
+    lines = [f"  noise    {spec.variables} Doubles under Objects/PLC/Tasks/Noise, {rate} (value = sequence number)"]
+    if args.noise_mapping is not None:
+        lines.append(f"           gateway mapping written to {args.noise_mapping}")
+    return lines
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -8,7 +8,9 @@ BadTypeMismatch for the wrong Variant type, and whatever the machine's command
 raises (BadOutOfRange, BadInvalidState, BadInvalidArgument).
 
 Values are pushed by `publish()`, which the runner calls every tick: only the
-variables that changed are written, stamped with the machine's clock.
+variables that changed are written, stamped with the machine's clock. Variables
+marked `pushed` (benchmark noise, simulator/noise.py) are written by their own
+driver through `server` instead.
 """
 
 from __future__ import annotations
@@ -108,6 +110,7 @@ class PlcServer:
         self._server: Server | None = None
         self.ns = 2
         self._by_id: dict[ua.NodeId, tuple[Variable, ua.VariantType, bool]] = {}
+        self._polled: dict[ua.NodeId, tuple[Variable, ua.VariantType, bool]] = {}  # publish() reads these
         self._objects: set[ua.NodeId] = set()
         self._cache: dict[ua.NodeId, Any] = {}
         self._lock = asyncio.Lock()
@@ -115,6 +118,13 @@ class PlcServer:
     @property
     def endpoint(self) -> str:
         return f"opc.tcp://{self.host}:{self.port}"
+
+    @property
+    def server(self) -> Server:
+        """The running asyncua Server, for drivers that push values themselves (noise mode)."""
+        if self._server is None:
+            raise SimulatorError("the OPC UA server is not running")
+        return self._server
 
     async def __aenter__(self) -> Self:
         users = _PasswordUsers(*self._auth) if self._auth else None
@@ -197,6 +207,8 @@ class PlcServer:
             if var.writable:
                 await node.set_writable()
             self._by_id[node.nodeid] = (var, vtype, array)  # the first publish stamps every value
+            if not var.pushed:
+                self._polled[node.nodeid] = (var, vtype, array)
 
     # --- values --------------------------------------------------------------------------------
 
@@ -207,7 +219,7 @@ class PlcServer:
             return
         async with self._lock:
             stamp = self._clock()
-            for node_id, (var, vtype, array) in self._by_id.items():
+            for node_id, (var, vtype, array) in self._polled.items():
                 if node_id == skip:
                     continue
                 value = var.read(self.machine)

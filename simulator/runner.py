@@ -25,6 +25,7 @@ from gateway.errors import WriteError
 from simulator.errors import SimulatorError
 from simulator.ftp_store import FtpStore
 from simulator.machine import Machine, MachineState
+from simulator.noise import Noise, NoiseSpec
 from simulator.opcua_server import PlcServer, utcnow
 from simulator.store import DirectoryStore
 from simulator.variables import Variable, build_variables
@@ -55,6 +56,7 @@ class Simulator:
         opcua_password: str | None = None,
         extra_variables: Sequence[Variable] = (),
         clock: Callable[[], datetime] = utcnow,
+        noise: NoiseSpec | None = None,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -72,8 +74,11 @@ class Simulator:
         self.store: Path = store if store is not None else Path()
         self.programs = DirectoryStore(self.store)
         self.machine = Machine(self.programs)
-        # The variable table; a later benchmark "noise mode" appends its own variables here.
+        # Benchmark load (simulator/noise.py): extra variables written at a set rate by their own task.
+        self.noise: Noise | None = Noise(noise) if noise is not None else None
         self.variables: list[Variable] = build_variables() + list(extra_variables)
+        if self.noise is not None:
+            self.variables += self.noise.variables
         self._opcua_auth = (opcua_user, opcua_password)
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
@@ -135,6 +140,11 @@ class Simulator:
                 raise SimulatorError(f"cannot loop {self.loop_program!r}: {exc.reason}") from None
         task = asyncio.create_task(self._tick_loop(), name="cnc-simulator:tick")
         stack.push_async_callback(_cancel, task)
+        if self.noise is not None:
+            noise = asyncio.create_task(
+                self.noise.run(self._opcua.server, self._opcua.ns), name="cnc-simulator:noise"
+            )
+            stack.push_async_callback(_cancel, noise)
         log.info(
             "simulator serving OPC UA on %s and FTP on %s:%d (store %s, speed %g)",
             self.opcua_endpoint,

@@ -6,8 +6,8 @@ Node ids follow B&R's scheme: `::AsGlobalPV:<global>.<member>` for global
 variables and `::<task>:<local>` for task-local ones.
 
 The table is plain data, so more variables can be appended without touching the
-server (the seam for a later benchmark "noise mode": extra variables whose
-getters ignore the machine and change at a set rate).
+server: the benchmark noise mode (simulator/noise.py) appends its variables,
+marked `pushed`, and writes them itself at a set rate.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ class Variable:
     write: Setter | None = None  # None: read-only
     description: str = ""
     array_length: int = 0  # 0: variable length (for arrays)
+    pushed: bool = False  # written by a driver of its own (noise mode), not read at every tick
 
     @property
     def writable(self) -> bool:

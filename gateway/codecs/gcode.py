@@ -135,6 +135,114 @@ def lex_lines(text: str) -> Iterator[Block | GcodeError]:
             yield exc
 
 
+#: An ordinary line in `lex_compact`'s form: (line, N number or None, [(letter, value), ...], has comments).
+Plain = tuple[int, "int | None", list[tuple[str, float]], bool]
+
+
+def lex_compact(text: str) -> Iterator[Plain | Block | GcodeError]:
+    """`lex_lines` for programs of millions of lines: the same reading, in a lighter form.
+
+    Ordinary lines (an optional N number, then words other than N and O, and
+    comments: nearly every line of a real program) come out as `Plain` tuples of
+    (letter, value) pairs, found by two regexes over the whole text instead of
+    one Word object per word; any other line comes out exactly as `lex_lines`
+    gives it (a Block or a GcodeError). For a Plain line, `lex_line` would give a
+    Block with the same line, number, letters and values, and comments when the
+    flag says so (a property test holds the two to it).
+    """
+    end = len(text)
+    pos = 0
+    line = 1
+    run_match = _ORDINARY_RUN.match
+    while pos < end:
+        run = run_match(text, pos).end()  # type: ignore[union-attr]
+        if run > pos:
+            yield from _lex_run(text, pos, run, line)
+            line += text.count("\n", pos, run)
+            pos = run
+            continue
+        nl = text.find("\n", pos)
+        stop = end if nl < 0 else nl
+        raw = text[pos:stop].removesuffix("\r")
+        try:
+            yield lex_line(raw, line)
+        except GcodeError as exc:
+            yield exc
+        line += 1
+        pos = end if nl < 0 else nl + 1
+
+
+# Ordinary lines, for `lex_compact`: an optional leading N number, then words (not N, not O) and
+# (comments) in any order, optionally a ;comment; CRLF or LF. Possessive quantifiers: a line
+# that is not ordinary fails at once, without backtracking (no regex blow-up on hostile input),
+# and a run of a million lines keeps no state per line.
+_NUMBER = r"[+-]?+[ \t]*+(?:[0-9]++(?:\.[0-9]*+)?+|\.[0-9]++)"
+_ORDINARY_LINE = (
+    r"[ \t]*+(?:[Nn][ \t]*+[0-9]++(?![0-9.])[ \t]*+)?+"
+    rf"(?:(?:[A-MP-Za-mp-z^@][ \t]*+{_NUMBER}|\([^()\n\r]*+\))[ \t]*+)*+(?:;[^\n\r]*+)?+"
+)
+_ORDINARY_RUN = re.compile(rf"(?:{_ORDINARY_LINE}\r?\n)*+(?:{_ORDINARY_LINE}\Z)?+")
+_RUN_TOKEN = re.compile(
+    rf"([A-MP-Za-mp-z^@])[ \t]*({_NUMBER})|(\()[^()\n\r]*\)|(;)[^\n\r]*|[Nn][ \t]*([0-9]+)|\r?\n|\Z"
+)
+_INFINITE = (math.inf, -math.inf)
+_CHUNK = 1 << 16  # characters of a run lexed by one findall (the tuples of a chunk are kept at once)
+
+
+def _lex_run(text: str, start: int, end: int, line: int) -> Iterator[Plain | Block | GcodeError]:
+    """The lines of text[start:end], which `_ORDINARY_RUN` matched, a chunk of lines at a time.
+
+    `findall` hands over every token as a tuple of groups (no match objects): a word
+    fills the letter and the number, a comment its `(` or `;`, an N word its digits,
+    and a line end (or the end of the chunk) nothing at all.
+    """
+    findall = _RUN_TOKEN.findall
+    while start < end:
+        stop = text.find("\n", start + _CHUNK, end)
+        stop = end if stop < 0 else stop + 1
+        lines: list[Plain] = []
+        words: list[tuple[str, float]] = []
+        comments = False
+        number: int | None = None
+        for letter, digits, paren, semi, block in findall(text, start, stop):
+            if letter:
+                if " " in digits or "\t" in digits:
+                    digits = digits.replace(" ", "").replace("\t", "")
+                value = float(digits)
+                if value in _INFINITE:  # too large for a float: the exact lexer words the error
+                    lines = []
+                    break
+                words.append((letter.upper(), value))
+            elif paren or semi:
+                comments = True
+            elif block:
+                number = int(block)
+            else:  # a line end, or the end of the chunk (one too many after a final line end)
+                lines.append((line + len(lines), number, words, comments))
+                words, comments, number = [], False, None
+        count = _line_count(text, start, stop)
+        if len(lines) >= count:
+            yield from lines[:count]
+        else:
+            yield from _lex_exactly(text, start, stop, line)
+        line += count
+        start = stop
+
+
+def _line_count(text: str, start: int, end: int) -> int:
+    """Physical lines in text[start:end]: its line ends, plus a last line without one."""
+    count = text.count("\n", start, end)
+    return count + (1 if end > start and text[end - 1] != "\n" else 0)
+
+
+def _lex_exactly(text: str, start: int, end: int, line: int) -> Iterator[Block | GcodeError]:
+    for offset, raw in enumerate(split_lines(text[start:end])):
+        try:
+            yield lex_line(raw, line + offset)
+        except GcodeError as exc:
+            yield exc
+
+
 def lex_line(raw: str, line: int = 1) -> Block:
     """Lex one line (without its line end). Raises GcodeError naming the column."""
     block = _fast_line(raw, line)

@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from gateway.codecs.gcode import Block, Program, Word, format_number
+from gateway.codecs.gcode import Program, format_number
 from gateway.jobs.arcs import TOLERANCE, ArcProblem, PlaneArc, arc_from_center, arc_from_radius
 
 AXES = "XYZ"
@@ -86,6 +86,12 @@ UNMODELLED: dict[float, str] = {
 }
 COMPENSATION = frozenset({41.0, 42.0, 41.1, 42.1})
 EXTRA_AXES = "ABCUVW"
+_EXTRA = frozenset(EXTRA_AXES)
+_END = frozenset({2.0, 30.0})  # M2, M30
+_NO_CODES: frozenset[float] = frozenset()
+#: G codes that take a block's axis words for something other than a move (see `_Estimator.step`).
+_SPECIAL = frozenset({4.0, 92.0, 10.0, 28.0, 28.1, 30.0, 30.1, 53.0})
+_AXIS_INDEX = tuple(enumerate(AXES))
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,11 +155,47 @@ def estimate_program(
     `default_feed_mm_min` is the feed for moves before any F word; without it such
     moves are noted and not timed.
     """
-    if not rapid_feed_mm_min > 0:
-        raise ValueError("rapid_feed_mm_min must be > 0")
-    if default_feed_mm_min is not None and not default_feed_mm_min > 0:
-        raise ValueError("default_feed_mm_min must be > 0")
-    return _Estimator(rapid_feed_mm_min, default_feed_mm_min, dwell_p).run(program)
+    running = RunningEstimate(
+        rapid_feed_mm_min=rapid_feed_mm_min, default_feed_mm_min=default_feed_mm_min, dwell_p=dwell_p
+    )
+    for block in program.blocks:
+        running.block(block.line, [(w.letter, w.value) for w in block.words], block.block_delete)
+    return running.result()
+
+
+class RunningEstimate:
+    """`estimate_program` one block at a time, for programs too large to hold as Blocks.
+
+    Feed every block of the program in order (as (letter, value) pairs), then ask
+    for the `result()`; blocks after the end code are counted and not estimated.
+    """
+
+    def __init__(
+        self,
+        *,
+        rapid_feed_mm_min: float,
+        default_feed_mm_min: float | None = None,
+        dwell_p: Literal["seconds", "milliseconds"] = "seconds",
+    ) -> None:
+        if not rapid_feed_mm_min > 0:
+            raise ValueError("rapid_feed_mm_min must be > 0")
+        if default_feed_mm_min is not None and not default_feed_mm_min > 0:
+            raise ValueError("default_feed_mm_min must be > 0")
+        self._estimator = _Estimator(rapid_feed_mm_min, default_feed_mm_min, dwell_p)
+        self._blocks = 0
+        self._ended = False
+
+    def block(self, line: int, pairs: list[tuple[str, float]], block_delete: bool = False) -> None:
+        self._blocks += 1
+        if not self._ended:
+            try:
+                self._ended = self._estimator.step(line, pairs, block_delete)
+            except (OverflowError, ValueError):  # numbers too large for the arithmetic of an arc
+                self._estimator.skip(line, "numbers too large to estimate")
+                self._estimator.lose(line)
+
+    def result(self) -> Estimate:
+        return self._estimator.result(self._blocks)
 
 
 Position = list[float | None]
@@ -242,66 +284,81 @@ class _Estimator:
         seconds: float | None = self.rapid_s + self.cut_s + self.dwell_s
         if self.timed == 0 and self.untimed > 0:
             seconds = None
-        return Estimate(
-            seconds, self.cut_mm, self.rapid_mm, self.dwell_s, blocks, extents, self.exact, tuple(notes)
-        )
+        cut, rapid, dwell = self.cut_mm, self.rapid_mm, self.dwell_s
+        exact = self.exact
+        totals = (cut, rapid, dwell, 0.0 if seconds is None else seconds)
+        bounds = () if extents is None else tuple(extents.as_dict().values())
+        if not all(map(math.isfinite, totals + bounds)):  # numbers beyond what a float holds
+            notes.append("the program's numbers are too large to add up: no time, lengths or extents")
+            seconds, cut, rapid, dwell, extents, exact = None, 0.0, 0.0, 0.0, None, False
+        return Estimate(seconds, cut, rapid, dwell, blocks, extents, exact, tuple(notes))
 
     # --- the program ---------------------------------------------------------------------------
 
-    def run(self, program: Program) -> Estimate:
-        for block in program.blocks:
-            if self.block(block):
-                break
-        return self.result(len(program.blocks))
+    def step(self, line: int, pairs: list[tuple[str, float]], block_delete: bool = False) -> bool:
+        """Apply one block given as (letter, value) pairs in order; True when it ends the program.
 
-    def block(self, b: Block) -> bool:
-        """Apply one block; True when it ends the program."""
-        words: dict[str, Word] = {}
-        for w in b.words:
-            if w.letter not in "GM":
-                words.setdefault(w.letter, w)
-        gs = [w.value for w in b.words if w.letter == "G"]
-        ms = {w.value for w in b.words if w.letter == "M"}
-        self.modes(b, gs)
-        codes = set(gs)
+        The hot loop of a job's validation (one call per line of the program), so it sorts
+        the words in one pass and leaves the uncommon checks behind cheap tests.
+        """
+        words: dict[str, float] = {}
+        gs: list[float] = []
+        ms: set[float] = set()
+        for letter, value in pairs:
+            if letter == "G":
+                gs.append(value)
+            elif letter == "M":
+                ms.add(value)
+            elif letter not in words:
+                words[letter] = value
+        codes: set[float] | frozenset[float] = _NO_CODES
+        if gs:
+            self.modes(line, gs)
+            codes = set(gs)
         # Sinumerik writes the dwell time as G4 F<seconds>; elsewhere F in a G4 block is the feed.
         dwell_by_f = 4.0 in codes and "F" in words and "P" not in words and "X" not in words
         if "F" in words and not dwell_by_f:
-            f = words["F"].value
+            f = words["F"]
             self.feed = f if self.feed_mode == 93.0 else f * self.unit
-        if b.block_delete:
-            self.note(b.line, "optional blocks (/) are counted as run", exact=True, key="block delete")
-        has_axes = any(a in words for a in AXES)
-        if 80.0 in codes or (5.3 in codes and self.motion == 5.2):
-            self.motion = None
-        motion = [g for g in gs if g in MOTION]
-        if motion:
-            self.motion = motion[-1]  # modal, even when a non-modal code below takes the axis words
-        if 4.0 in codes:
-            self.dwell(b.line, words, dwell_by_f)
+        if block_delete:
+            self.note(line, "optional blocks (/) are counted as run", exact=True, key="block delete")
+        has_axes = "X" in words or "Y" in words or "Z" in words
+        if gs:
+            if 80.0 in codes or (5.3 in codes and self.motion == 5.2):
+                self.motion = None
+            motion = [g for g in gs if g in MOTION]
+            if motion:
+                self.motion = motion[-1]  # modal, even when a non-modal code below takes the axis words
+        if not gs or codes.isdisjoint(_SPECIAL):
+            self.move(line, words, has_axes, 5.2 in codes)
+        elif 4.0 in codes:
+            self.dwell(line, words, dwell_by_f)
         elif 92.0 in codes:
-            self.set_offsets(words, b.line)
+            self.set_offsets(words, line)
         elif 10.0 in codes:
-            self.note(b.line, "G10 changes offsets; the estimate assumes the current coordinates do not move")
+            self.note(line, "G10 changes offsets; the estimate assumes the current coordinates do not move")
         elif codes & {28.0, 28.1, 30.0, 30.1}:
             if codes & {28.0, 30.0}:
-                self.skip(b.line, "return to a home position (G28/G30) is not estimated")
-                self.lose(b.line)
+                self.skip(line, "return to a home position (G28/G30) is not estimated")
+                self.lose(line)
                 self.moved = True
         elif 53.0 in codes and has_axes:
-            self.skip(b.line, "a move in machine coordinates (G53) is not estimated")
-            self.lose(b.line, "".join(a for a in AXES if a in words))
+            self.skip(line, "a move in machine coordinates (G53) is not estimated")
+            self.lose(line, "".join(a for a in AXES if a in words))
             self.moved = True
         else:
-            self.move(b, words, has_axes, 5.2 in codes)
-        for a in EXTRA_AXES:
-            if a in words and not (a == "U" and 4.0 in codes):
-                self.note(b.line, f"{a} axis motion is not included in the length", key=f"axis {a}")
-        if 0.0 in ms or 1.0 in ms:
-            self.note(b.line, "program stop (M0/M1): the wait for the operator is not counted", exact=True)
-        return bool(ms & {2.0, 30.0})
+            self.move(line, words, has_axes, 5.2 in codes)
+        if not _EXTRA.isdisjoint(words):
+            for a in EXTRA_AXES:
+                if a in words and not (a == "U" and 4.0 in codes):
+                    self.note(line, f"{a} axis motion is not included in the length", key=f"axis {a}")
+        if ms:
+            if 0.0 in ms or 1.0 in ms:
+                self.note(line, "program stop (M0/M1): the wait for the operator is not counted", exact=True)
+            return bool(ms & _END)
+        return False
 
-    def modes(self, b: Block, gs: list[float]) -> None:
+    def modes(self, line: int, gs: list[float]) -> None:
         for g in gs:
             if g == 20.0:
                 self.unit = INCH
@@ -324,34 +381,34 @@ class _Estimator:
             elif g in COORDINATE_SYSTEMS:
                 if self.system is not None and g != self.system:
                     self.note(
-                        b.line,
+                        line,
                         f"coordinate system G{format_number(g)}: its offset from the previous one is unknown",
                     )
-                    self.lose(b.line)
+                    self.lose(line)
                 self.system = g
             elif g in COMPENSATION:
                 self.note(
-                    b.line,
+                    line,
                     "cutter compensation: lengths are those of the programmed path",
                     exact=True,
                     key="comp",
                 )
             elif g in UNMODELLED:
-                self.note(b.line, UNMODELLED[g])
+                self.note(line, UNMODELLED[g])
             elif g == 92.1 or g == 92.2:
                 self.offset = [0.0, 0.0, 0.0]
             elif g == 92.3:
                 self.offset = list(self.saved_offset)
             elif g not in NEUTRAL and g not in MOTION:
-                self.note(b.line, f"unknown code G{format_number(g)}: its effect is not estimated")
+                self.note(line, f"unknown code G{format_number(g)}: its effect is not estimated")
 
-    def dwell(self, line: int, words: dict[str, Word], by_f: bool) -> None:
+    def dwell(self, line: int, words: dict[str, float], by_f: bool) -> None:
         if "P" in words:
-            seconds = words["P"].value * self.dwell_scale
+            seconds = words["P"] * self.dwell_scale
         elif "X" in words:
-            seconds = words["X"].value  # Fanuc: G4 X is seconds
+            seconds = words["X"]  # Fanuc: G4 X is seconds
         elif by_f:
-            seconds = words["F"].value  # Sinumerik: G4 F is seconds
+            seconds = words["F"]  # Sinumerik: G4 F is seconds
         else:
             self.skip(line, "a dwell (G4) without a time (P, X or F) is not estimated")
             return
@@ -361,11 +418,11 @@ class _Estimator:
         self.dwell_s += seconds
         self.timed += 1
 
-    def set_offsets(self, words: dict[str, Word], line: int) -> None:
+    def set_offsets(self, words: dict[str, float], line: int) -> None:
         """G92. Before any move it only says where the tool starts, so it sets the position instead."""
         for i, a in enumerate(AXES):
             if a in words:
-                value = words[a].value * self.unit
+                value = words[a] * self.unit
                 if not self.moved:
                     self.pos[i] = value
                     continue
@@ -375,11 +432,11 @@ class _Estimator:
 
     # --- motion --------------------------------------------------------------------------------
 
-    def target(self, words: dict[str, Word]) -> Position:
+    def target(self, words: dict[str, float]) -> Position:
         t = list(self.pos)
         for i, a in enumerate(AXES):
             if a in words:
-                value = words[a].value * self.unit
+                value = words[a] * self.unit
                 if self.absolute:
                     off = self.offset[i]
                     t[i] = None if off is None else value + off
@@ -388,41 +445,47 @@ class _Estimator:
                     t[i] = None if here is None else here + value
         return t
 
-    def move(self, b: Block, words: dict[str, Word], has_axes: bool, nurbs_start: bool) -> None:
+    def move(self, line: int, words: dict[str, float], has_axes: bool, nurbs_start: bool) -> None:
         polar = "^" in words or "@" in words
-        arc_words = any(k in words for k in "IJKR")
-        if not (has_axes or polar or (self.motion in (2.0, 3.0) and arc_words)):
-            return
+        if not (has_axes or polar):
+            arc_words = "I" in words or "J" in words or "K" in words or "R" in words
+            if not (self.motion in (2.0, 3.0) and arc_words):
+                return
         self.moved = True
         if self.motion is None:
-            self.skip(b.line, "axis words without a motion mode (G0, G1, G2 or G3) are not estimated")
+            self.skip(line, "axis words without a motion mode (G0, G1, G2 or G3) are not estimated")
             self.pos = self.target(words)
             return
         t = self.target(words)
         if self.motion in UNTIMED_MOTION:
-            self.untimed_motion(b, words, t, polar, nurbs_start)
+            self.untimed_motion(line, words, t, polar, nurbs_start)
             return
         if polar:
-            self.skip(b.line, "polar words (^ and @) are not estimated")
-            self.lose(b.line, "XY")
+            self.skip(line, "polar words (^ and @) are not estimated")
+            self.lose(line, "XY")
             return
-        moved = [i for i, a in enumerate(AXES) if a in words]
-        if any(self.pos[i] is None or t[i] is None for i in moved):
-            since = f" (unknown since line {self.lost_at})" if self.lost_at is not None else ""
-            self.skip(b.line, f"a move from an unknown position{since} is not estimated")
-            self.reach(t)
-            self.pos = t
-            return
+        pos = self.pos
+        square = 0.0  # of the straight distance; a float product overflows to inf, never raises
+        for i, axis in _AXIS_INDEX:
+            if axis in words:
+                end, start = t[i], pos[i]
+                if end is None or start is None:
+                    since = f" (unknown since line {self.lost_at})" if self.lost_at is not None else ""
+                    self.skip(line, f"a move from an unknown position{since} is not estimated")
+                    self.reach(t)
+                    self.pos = t
+                    return
+                delta = end - start
+                square += delta * delta
         if self.motion in (0.0, 1.0):
-            length = math.sqrt(sum((_known(t[i]) - _known(self.pos[i])) ** 2 for i in moved))
             self.reach(t)
             self.pos = t
-            self.count(b, length, rapid=self.motion == 0.0, words=words)
+            self.count(line, math.sqrt(square), rapid=self.motion == 0.0, words=words)
         else:
-            self.arc(b, words, t)
+            self.arc(line, words, t)
 
     def untimed_motion(
-        self, b: Block, words: dict[str, Word], t: Position, polar: bool, nurbs_start: bool
+        self, line: int, words: dict[str, float], t: Position, polar: bool, nurbs_start: bool
     ) -> None:
         """Splines, NURBS, cycles and probing: not timed; keep track of the position where we can."""
         assert self.motion is not None
@@ -431,32 +494,32 @@ class _Estimator:
             # Continuation lines carry control points; the curve stays inside their hull.
             if nurbs_start:
                 self.skip(
-                    b.line, "NURBS curve (G5.2 to G5.3) is not estimated; extents include its control points"
+                    line, "NURBS curve (G5.2 to G5.3) is not estimated; extents include its control points"
                 )
             else:
                 self.untimed += 1
         else:
-            self.skip(b.line, f"{UNTIMED_MOTION[self.motion]}{with_polar} is not estimated")
+            self.skip(line, f"{UNTIMED_MOTION[self.motion]}{with_polar} is not estimated")
         if polar or self.motion in (38.2, 38.3, 38.4, 38.5):
-            self.lose(b.line)
+            self.lose(line)
         elif self.motion in CANNED:
             # The holes' X/Y are known in G90 without repeats; Z ends at R or the initial level.
             if self.absolute and "L" not in words:
                 self.reach(t)
                 self.pos = [t[0], t[1], None]
-                self.lost_at = b.line
+                self.lost_at = line
             else:
-                self.lose(b.line)
+                self.lose(line)
         else:
             self.reach(t)
             self.pos = t
 
-    def arc(self, b: Block, words: dict[str, Word], t: Position) -> None:
+    def arc(self, line: int, words: dict[str, float], t: Position) -> None:
         (u, v, w), (cu_letter, cv_letter) = PLANES[self.plane]
         start = self.pos
         su, sv, eu, ev = start[u], start[v], t[u], t[v]
         if su is None or sv is None or eu is None or ev is None:
-            self.skip(b.line, "an arc from an unknown position is not estimated")
+            self.skip(line, "an arc from an unknown position is not estimated")
             self.pos = t
             return
         s2, e2 = (su, sv), (eu, ev)
@@ -465,18 +528,18 @@ class _Estimator:
         clockwise = self.motion == 2.0
         turns = 1
         if "P" in words:
-            p = words["P"].value
+            p = words["P"]
             if not (p.is_integer() and p >= 1):
-                self.skip(b.line, f"arc turns P{format_number(p)} must be a whole number >= 1; not estimated")
+                self.skip(line, f"arc turns P{format_number(p)} must be a whole number >= 1; not estimated")
                 self.pos = t
                 return
             turns = int(p)
         try:
             if "R" in words:
-                arc = arc_from_radius(s2, e2, words["R"].value * self.unit, clockwise, turns=turns, dw=dw)
+                arc = arc_from_radius(s2, e2, words["R"] * self.unit, clockwise, turns=turns, dw=dw)
             elif cu_letter in words or cv_letter in words:
-                cu = words[cu_letter].value * self.unit if cu_letter in words else 0.0
-                cv = words[cv_letter].value * self.unit if cv_letter in words else 0.0
+                cu = words[cu_letter] * self.unit if cu_letter in words else 0.0
+                cv = words[cv_letter] * self.unit if cv_letter in words else 0.0
                 if self.arc_absolute:
                     ou, ov = self.offset[u], self.offset[v]
                     if ou is None or ov is None:
@@ -488,13 +551,13 @@ class _Estimator:
             else:
                 raise ArcProblem(f"it has neither centre words ({cu_letter}, {cv_letter}) nor R")
         except ArcProblem as exc:
-            self.skip(b.line, f"arc not estimated: {exc}")
+            self.skip(line, f"arc not estimated: {exc}")
             self.reach(t)
             self.pos = t
             return
         if arc.mismatch > max(TOLERANCE, 0.001 * arc.r0):
             self.note(
-                b.line,
+                line,
                 f"the arc's end point is {arc.mismatch:.4f} mm off its circle "
                 "(the controller may refuse it); estimated as a spiral",
                 exact=True,
@@ -502,7 +565,7 @@ class _Estimator:
         self.reach_arc(arc, start, (u, v, w))
         self.reach(t)
         self.pos = t
-        self.count(b, arc.length, rapid=False, words=words)
+        self.count(line, arc.length, rapid=False, words=words)
 
     def reach_arc(self, arc: PlaneArc, start: Position, axes: tuple[int, int, int]) -> None:
         u, v, _ = axes
@@ -511,29 +574,29 @@ class _Estimator:
             point[u], point[v] = pu, pv
             self.reach(point)
 
-    def count(self, b: Block, length: float, *, rapid: bool, words: dict[str, Word]) -> None:
+    def count(self, line: int, length: float, *, rapid: bool, words: dict[str, float]) -> None:
         if rapid:
             self.rapid_mm += length
             self.rapid_s += length / self.rapid * 60.0
             self.timed += 1
             return
         self.cut_mm += length
-        seconds = self.feed_seconds(b.line, length, words)
+        seconds = self.feed_seconds(line, length, words)
         if seconds is None:
             self.untimed += 1
         else:
             self.cut_s += seconds
             self.timed += 1
 
-    def feed_seconds(self, line: int, length: float, words: dict[str, Word]) -> float | None:
+    def feed_seconds(self, line: int, length: float, words: dict[str, float]) -> float | None:
         if self.feed_mode == 95.0:
             self.note(line, "feed per revolution (G95) is not estimated")
             return None
         if self.feed_mode == 93.0:
-            if "F" not in words or words["F"].value <= 0:
+            if "F" not in words or words["F"] <= 0:
                 self.note(line, "an inverse-time (G93) move without its own F is not estimated")
                 return None
-            return 60.0 / words["F"].value
+            return 60.0 / words["F"]
         feed = self.feed
         if not feed:
             if self.default_feed is None:

@@ -29,9 +29,19 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from gateway.codecs.gcode import Block, GcodeError, Program, lex_lines, parse_program
+from gateway.codecs.gcode import (
+    Block,
+    GcodeError,
+    Plain,
+    Program,
+    format_number,
+    lex_compact,
+    lex_line,
+    parse_program,
+    split_lines,
+)
 from gateway.config.validation import ValidationRules
-from gateway.jobs.estimate import Estimate, Extents, estimate_program
+from gateway.jobs.estimate import Estimate, Extents, RunningEstimate
 from gateway.jobs.file_names import check_file_name, split_name
 from gateway.jobs.text_checks import TextScan, detect_binary, scan_text
 from gateway.jobs.verdict import MAX_REJECTIONS, Rejection, Verdict, capped
@@ -65,24 +75,20 @@ def validate_program(data: bytes, filename: str, rules: ValidationRules) -> Verd
     scan = scan_text(data, rules)
     rejections.extend(scan.rejections)
     warnings = list(scan.warnings)
-    parsed = assemble(lex_lines(scan.text))
+    reading = _Reading(rules)
+    reading.read(lex_compact(scan.text))
+    parsed = reading.parsed
     skipped = _syntax(parsed, scan, rules, rejections, warnings)
-    program = parsed.program
     _markers(parsed, rules, rejections, warnings)
-    if not any(b.words for b in program.blocks):
+    if not reading.any_words:
         rejections.append(
             Rejection("empty", "the program has no blocks with codes, only comments, markers or blank lines")
         )
     else:
-        _end_code(parsed, rules, rejections)
+        _end_code(reading, rules, rejections)
     name = _program_name(parsed, filename, rules, rejections)
-    _forbidden(program.blocks, scan, rules, rejections)
-    estimate = estimate_program(
-        program,
-        rapid_feed_mm_min=rules.rapid_feed,
-        default_feed_mm_min=rules.default_feed,
-        dwell_p=rules.dwell_p,
-    )
+    _forbidden(reading, scan, rules, rejections)
+    estimate = reading.estimate.result()
     if skipped:
         estimate = dataclasses.replace(
             estimate,
@@ -134,49 +140,142 @@ def assemble(items: Iterable[Block | GcodeError]) -> Parsed:
     before any content starts the program (its header may name it); the next `%`
     ends it, and what follows is never read by a controller.
     """
-    blocks: list[Block] = []
-    out = Parsed(Program((), False, False))
-    start = end = seen_content = seen_words = False
-    number: int | None = None
-    name: str | None = None
-    lines = 0
-    for item in items:
-        if end:
-            if isinstance(item, GcodeError) or not item.is_blank:
+    assembler = _Assembler()
+    blocks = [item for item in items if assembler.take(item)]
+    return assembler.finish(tuple(blocks))  # type: ignore[arg-type]
+
+
+class _Assembler:
+    """`assemble` one line at a time: `take(item)` says whether the item is a block of the program.
+
+    Items are what `lex_compact` yields (Blocks, GcodeErrors, and Plain tuples for
+    ordinary lines, which are never markers, never block-deleted and never hold an O word).
+    """
+
+    def __init__(self) -> None:
+        self.out = Parsed(Program((), False, False))
+        self.start = self.end = self.seen_content = self.seen_words = False
+        self.number: int | None = None
+        self.name: str | None = None
+        self.lines = 0
+
+    def take(self, item: Plain | Block | GcodeError) -> bool:
+        out = self.out
+        if type(item) is tuple:
+            line, _, words, comments = item
+            blank = not words and not comments and item[1] is None
+            if self.end:
+                out.trailing += not blank
+                return False
+            self.lines += 1
+            if blank:
+                return False
+            out.first_line = out.first_line or line
+            out.last_line = line
+            self.seen_content = True
+            self.seen_words = self.seen_words or bool(words)
+            return True
+        if self.end:
+            if isinstance(item, GcodeError) or not item.is_blank:  # type: ignore[union-attr]
                 out.trailing += 1
-            continue
-        lines += 1
+            return False
+        self.lines += 1
         if isinstance(item, GcodeError):
             out.errors.append(item)
-            seen_content = True
+            self.seen_content = True
             out.first_line = out.first_line or item.line
             out.last_line = item.line
-            continue
+            return False
+        assert isinstance(item, Block)
         if item.marker:
             out.marker_lines.append(item.line)
             out.first_line = out.first_line or item.line
-            if not seen_content and not start:
-                start = True
+            if not self.seen_content and not self.start:
+                self.start = True
                 header = parse_program(item.text)
-                number, name = header.program_number, header.program_name
-                if number is not None or name is not None:
+                self.number, self.name = header.program_number, header.program_name
+                if self.number is not None or self.name is not None:
                     out.name_line = item.line
-                continue
-            end = True
-            continue
+                return False
+            self.end = True
+            return False
         if item.is_blank:
-            continue
+            return False
         out.first_line = out.first_line or item.line
         out.last_line = item.line
-        if not seen_words and number is None and item.words and item.words[0].letter == "O":
-            number = int(item.words[0].value) if item.words[0].value.is_integer() else None
-            name = name or (item.comments[0].strip() if item.comments else None) or None
-            out.name_line = item.line
-        seen_content = True
-        seen_words = seen_words or bool(item.words)
-        blocks.append(item)
-    out.program = Program(tuple(blocks), start, end, number, name, lines)
-    return out
+        if not self.seen_words and self.number is None and item.words and item.words[0].letter == "O":
+            self.number = int(item.words[0].value) if item.words[0].value.is_integer() else None
+            self.name = self.name or (item.comments[0].strip() if item.comments else None) or None
+            self.out.name_line = item.line
+        self.seen_content = True
+        self.seen_words = self.seen_words or bool(item.words)
+        return True
+
+    def finish(self, blocks: tuple[Block, ...] = ()) -> Parsed:
+        self.out.program = Program(blocks, self.start, self.end, self.number, self.name, self.lines)
+        return self.out
+
+
+class _Reading:
+    """One pass over a lexed program that keeps no blocks: what `assemble` reads, plus the end
+    code, forbidden codes and the run-time estimate, so that memory does not grow with the
+    program (a 50 MB program is two and a half million blocks)."""
+
+    def __init__(self, rules: ValidationRules) -> None:
+        self.assembler = _Assembler()
+        self.estimate = RunningEstimate(
+            rapid_feed_mm_min=rules.rapid_feed, default_feed_mm_min=rules.default_feed, dwell_p=rules.dwell_p
+        )
+        self.end_codes = frozenset(rules.end_codes)
+        self.forbid_codes = frozenset(rules.forbid_codes)
+        self.any_words = False
+        self.end_block: tuple[int, str] | None = None  # (line, code) of the first block with an end code
+        self.after_end: int | None = None  # line of the first block with words after it
+        self.forbidden: list[tuple[int, int, str, Block | None]] = []  # (line, word index, code, block)
+        self._codes: dict[tuple[str, float], str] = {}
+
+    @property
+    def parsed(self) -> Parsed:
+        return self.assembler.finish()
+
+    def code(self, letter: str, value: float) -> str:
+        """`Word.code`, remembered: a program uses a handful of distinct G and M codes."""
+        key = (letter, value)
+        code = self._codes.get(key)
+        if code is None:
+            code = self._codes[key] = letter + format_number(value)
+        return code
+
+    def read(self, items: Iterable[Plain | Block | GcodeError]) -> None:
+        take = self.assembler.take
+        estimate = self.estimate.block
+        end_codes, forbid = self.end_codes, self.forbid_codes
+        for item in items:
+            if not take(item):
+                continue
+            if type(item) is tuple:
+                line, _, pairs, _ = item
+                block_delete = False
+                block = None
+            else:
+                line, block_delete, block = item.line, item.block_delete, item  # type: ignore[union-attr]
+                pairs = [(w.letter, w.value) for w in item.words]  # type: ignore[union-attr]
+            estimate(line, pairs, block_delete)
+            if not pairs:
+                continue
+            self.any_words = True
+            if self.end_block is not None:
+                if self.after_end is None:
+                    self.after_end = line
+            elif not block_delete and end_codes:
+                for letter, value in pairs:
+                    if (letter == "G" or letter == "M") and self.code(letter, value) in end_codes:
+                        self.end_block = (line, self.code(letter, value))
+                        break
+            if forbid:
+                for index, (letter, value) in enumerate(pairs):
+                    if (letter == "G" or letter == "M") and self.code(letter, value) in forbid:
+                        self.forbidden.append((line, index, self.code(letter, value), block))
 
 
 def _syntax(
@@ -256,22 +355,12 @@ def _markers(
         )
 
 
-def _end_code(parsed: Parsed, rules: ValidationRules, rejections: list[Rejection]) -> None:
+def _end_code(reading: _Reading, rules: ValidationRules, rejections: list[Rejection]) -> None:
     if rules.end_code == "optional":
         return
-    codes = set(rules.end_codes)
     names = " or ".join(rules.end_codes)
-    blocks = parsed.program.blocks
-    end_at = next(
-        (
-            i
-            for i, b in enumerate(blocks)
-            if not b.block_delete and any(w.code in codes for w in b.words if w.letter in "GM")
-        ),
-        None,
-    )
-    if end_at is None:
-        line = parsed.last_line or 1
+    if reading.end_block is None:
+        line = reading.parsed.last_line or 1
         rejections.append(
             Rejection(
                 "end-code",
@@ -281,20 +370,18 @@ def _end_code(parsed: Parsed, rules: ValidationRules, rejections: list[Rejection
             )
         )
         return
-    if rules.end_code != "last":
+    if rules.end_code != "last" or reading.after_end is None:
         return
-    end_block = blocks[end_at]
-    after = next((b for b in blocks[end_at + 1 :] if b.words), None)
-    if after is not None:
-        code = next(w.code for w in end_block.words if w.code in codes)
-        rejections.append(
-            Rejection(
-                "end-code",
-                f"line {after.line}: blocks after the end code {code} at line {end_block.line} "
-                "would never run; the end code must be the last block",
-                after.line,
-            )
+    end_line, code = reading.end_block
+    after = reading.after_end
+    rejections.append(
+        Rejection(
+            "end-code",
+            f"line {after}: blocks after the end code {code} at line {end_line} "
+            "would never run; the end code must be the last block",
+            after,
         )
+    )
 
 
 def _program_name(
@@ -342,22 +429,22 @@ def _program_name(
     return own
 
 
-def _forbidden(
-    blocks: tuple[Block, ...], scan: TextScan, rules: ValidationRules, rejections: list[Rejection]
-) -> None:
-    if not rules.forbid_codes:
+def _forbidden(reading: _Reading, scan: TextScan, rules: ValidationRules, rejections: list[Rejection]) -> None:
+    if not reading.forbidden:
         return
-    forbidden = set(rules.forbid_codes)
-    for block in blocks:
-        for word in block.words:
-            if word.letter in "GM" and word.code in forbidden:
-                column = scan.original_column(block.line, word.column)
-                rejections.append(
-                    Rejection(
-                        "forbidden-code",
-                        f"line {block.line}, column {column}: {word.code} is forbidden on this machine "
-                        "(forbid_codes)",
-                        block.line,
-                        column,
-                    )
-                )
+    lines: list[str] | None = None
+    for line, index, code, block in reading.forbidden:
+        if block is None:  # an ordinary line: lex it again for the word's column
+            if lines is None:
+                lines = split_lines(scan.text)
+            block = lex_line(lines[line - 1], line)
+        word = block.words[index]
+        column = scan.original_column(line, word.column)
+        rejections.append(
+            Rejection(
+                "forbidden-code",
+                f"line {line}, column {column}: {code} is forbidden on this machine (forbid_codes)",
+                line,
+                column,
+            )
+        )

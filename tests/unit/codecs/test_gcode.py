@@ -214,3 +214,59 @@ def test_fast_path_agrees_with_the_exact_lexer(line: str) -> None:
     if fast is None:
         return
     assert fast == _LineLexer(line, 7).run()
+
+
+# --- the compact reading for large programs (lex_compact) ----------------------------------------
+
+
+def _same_reading(compact: object, exact: Block | GcodeError) -> None:
+    """A Plain tuple reads like the Block of `lex_lines`; anything else is exactly that item."""
+    if isinstance(compact, tuple):
+        assert isinstance(exact, Block) and not exact.marker and not exact.block_delete
+        assert all(w.letter not in "NO" for w in exact.words)
+        line, number, pairs, comments = compact
+        assert (line, number, pairs, comments) == (
+            exact.line, exact.number, [(w.letter, w.value) for w in exact.words], bool(exact.comments)
+        )  # fmt: skip
+    elif isinstance(compact, GcodeError):
+        assert isinstance(exact, GcodeError)
+        assert (compact.line, compact.column, compact.reason) == (exact.line, exact.column, exact.reason)
+    else:
+        assert compact == exact
+
+
+@given(st.text(alphabet="GXYZgxyzFIJKMNnOoS0123456789.+- \t();%/#[]\r\n^@", max_size=200))
+@settings(max_examples=400)
+def test_compact_lexing_reads_like_lex_lines(text: str) -> None:
+    from gateway.codecs.gcode import lex_compact
+
+    compact, exact = list(lex_compact(text)), list(lex_lines(text))
+    assert len(compact) == len(exact)
+    for c, e in zip(compact, exact):
+        _same_reading(c, e)
+
+
+def test_compact_lexing_of_a_large_program_across_chunks() -> None:
+    """Runs longer than one findall chunk, broken by unusual lines, CRLF, and a last line without an end."""
+    from gateway.codecs.gcode import lex_compact
+
+    ordinary = [f"N{i} G1 X{i * 0.5:.3f} Y-{i % 97}. F3000 (cut) ; c" for i in range(12000)]
+    odd = ((500, "%"), (5000, "/G0 X1"), (9000, "O1234 (NAME)"), (11000, "G1 X#1"), (11500, "x" + "9" * 400))
+    for at, line in odd:
+        ordinary[at] = line
+    for text in ("\n".join(ordinary), "\r\n".join(ordinary) + "\r\n", "\n".join(ordinary) + "\n\n"):
+        compact, exact = list(lex_compact(text)), list(lex_lines(text))
+        assert len(compact) == len(exact) > 12000 - 1
+        # the fast path took nearly all of it (a number too large for a float sends its chunk to lex_line)
+        assert sum(isinstance(c, tuple) for c in compact) >= 10000
+        for c, e in zip(compact, exact):
+            _same_reading(c, e)
+
+
+def test_compact_lexing_does_not_backtrack_on_hostile_lines() -> None:
+    """A long line that almost reads as ordinary fails at once, not after exponential backtracking."""
+    from gateway.codecs.gcode import lex_compact
+
+    line = " ".join(f"X{'1' * 30}" for _ in range(3000)) + " #"
+    items = list(lex_compact(line + "\n"))
+    assert len(items) == 1 and isinstance(items[0], GcodeError)

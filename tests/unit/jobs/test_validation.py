@@ -493,3 +493,44 @@ def test_columns_after_a_removed_character_point_into_the_file() -> None:
         ("character", 1, 3),
         ("forbidden-code", 1, 9),
     ]
+
+
+_PIECES = [
+    "%", "%O1234 (X)", "O100 (NAME)", "N10 G1 X1 Y2", "G0 X5", "G1 X1.5 F300", "M30", "M2", "M02", "/M30",
+    "G2 X10 Y0 I5 J0", "G3 X1 Y1 R2", "G4 P1", "G92 X0 Y0", "M8", "G28", "G91", "G20", "(comment only)",
+    "; tail", "", "  ", "X1 Y2 Z3", "#1=5", "G1 X[1+2]", "G5.2 X1 Y2", "N20 M30", "X.5 Y-.5", "G1 A5", "M0",
+    "G53 X0", "G93 G1 X1 F2", "o100 sub", "G1 X" + "9" * 320,
+]  # fmt: skip
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    lines=st.lists(st.sampled_from(_PIECES), max_size=25),
+    crlf=st.booleans(),
+    dialect=st.sampled_from(["laser-sim", "fanuc", "generic", "linuxcnc"]),
+)
+def test_the_one_pass_reading_agrees_with_assemble_and_estimate_program(
+    lines: list[str], crlf: bool, dialect: str
+) -> None:
+    """validate_program reads a program in one pass without keeping its blocks (for 50 MB programs);
+    its estimate and end-code verdict are what the block-by-block reading gives."""
+    from gateway.jobs.estimate import estimate_program
+
+    text = ("\r\n" if crlf else "\n").join(lines) + "\n"
+    rules = ValidationRules.model_validate({"dialect": dialect, "forbid_codes": ["M8"]})
+    verdict = validate_program(text.encode(), "O100.nc", rules)
+    parsed = assemble(lex_lines(text))
+    if verdict.estimate is not None and not any(r.rule in ("size", "binary", "encoding") for r in verdict.rejections):
+        expected = estimate_program(
+            parsed.program, rapid_feed_mm_min=rules.rapid_feed, default_feed_mm_min=rules.default_feed,
+            dwell_p=rules.dwell_p,
+        )  # fmt: skip
+        got = verdict.estimate
+        assert (got.seconds, got.cut_mm, got.blocks, got.extents) == (
+            expected.seconds, expected.cut_mm, expected.blocks, expected.extents
+        )
+    forbidden_lines = sorted(r.line for r in verdict.rejections if r.rule == "forbidden-code")
+    expected_lines = sorted(
+        b.line for b in parsed.program.blocks for w in b.words if w.letter == "M" and w.value == 8.0
+    )
+    assert forbidden_lines == expected_lines

@@ -1,0 +1,65 @@
+"""The real gateway (gateway.app.Gateway) in its own process, with its diagnostics on request.
+
+`--inject` replaces the sources by the in-process injector (bench/agents/injector.py),
+so that the sinks are measured alone; `rate` then sets its load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import math
+from pathlib import Path
+from typing import Any
+
+from bench.agents.injector import Injector
+from bench.agents.protocol import serve, setup_logging
+from gateway.app import Gateway
+from gateway.config.loader import load
+from gateway.diagnostics import snapshot
+
+
+async def main(args: argparse.Namespace) -> None:
+    config = load([args.config])
+    gateway = Gateway(config)
+    injector: Injector | None = None
+    if args.inject:
+        gateway.sources = []
+        injector = Injector([n for m in gateway.tree.machines.values() for n in m.mapped])
+    tasks: list[asyncio.Task[None]] = []
+    async with gateway:
+        tasks.append(asyncio.create_task(gateway.run(), name="bench:gateway"))
+        if injector is not None:
+            tasks.append(asyncio.create_task(injector.run(), name="bench:injector"))
+
+        def snap(request: dict[str, Any]) -> dict[str, Any]:
+            out = snapshot(gateway)
+            out["running"] = not tasks[0].done()
+            if injector is not None:
+                out["injector"] = injector.stats()
+            return out
+
+        def rate(request: dict[str, Any]) -> dict[str, Any]:
+            if injector is None:
+                raise RuntimeError("rate needs --inject")
+            value = request["rate"]
+            injector.set_rate(math.inf if value in ("max", None) else float(value))
+            return {}
+
+        try:
+            await serve({"snap": snap, "rate": rate}, {"opcua": config.gateway.opcua.endpoint})
+        finally:
+            for task in tasks:
+                task.cancel()
+            for task in tasks:
+                with contextlib.suppress(BaseException):
+                    await task
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--config", type=Path, required=True)
+    parser.add_argument("--inject", action="store_true")
+    setup_logging()
+    asyncio.run(main(parser.parse_args()))

@@ -1,0 +1,205 @@
+"""Starting, asking and stopping the benchmark's processes: agents, Mosquitto, the gateway CLI.
+
+Each agent (bench/agents/) is a `python -m bench.agents.<name>` child that speaks
+one JSON line per command (bench/agents/protocol.py). Its stderr goes to a log
+file in the run's work directory, so a failing party can be diagnosed after the
+fact; the error message of a failed start names that file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import getpass
+import json
+import os
+import shutil
+import signal
+import socket
+import sys
+import time
+from pathlib import Path
+from typing import Any, Self
+
+import psutil
+
+ROOT = Path(__file__).resolve().parent.parent
+MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+
+
+class BenchError(Exception):
+    """A party of the benchmark did not start or answer; the message says which and where its log is."""
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def child_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    for key in ("http_proxy", "https_proxy", "all_proxy", "HTTP_PROXY", "HTTPS_PROXY", "ALL_PROXY"):
+        env.pop(key, None)
+    return env
+
+
+class Agent:
+    """One helper process; `await agent.ask("snap")` returns its answer as a dict."""
+
+    def __init__(self, name: str, proc: asyncio.subprocess.Process, log: Path) -> None:
+        self.name = name
+        self.proc = proc
+        self.log = log
+        self.ready: dict[str, Any] = {}
+        self._lock = asyncio.Lock()
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @classmethod
+    async def start(cls, name: str, module: str, args: list[str], workdir: Path, *, timeout: float = 90.0) -> Agent:
+        log = workdir / f"{name}.log"
+        with log.open("ab") as err:
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", module, *args,
+                stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, stderr=err,
+                env=child_env(), cwd=str(ROOT), limit=64 << 20,
+            )  # fmt: skip
+        agent = cls(name, proc, log)
+        try:
+            agent.ready = await agent._read(timeout)
+        except BenchError:
+            await agent.kill()
+            raise
+        return agent
+
+    async def _read(self, timeout: float) -> dict[str, Any]:
+        assert self.proc.stdout is not None
+        try:
+            async with asyncio.timeout(timeout):
+                line = await self.proc.stdout.readline()
+        except TimeoutError:
+            raise BenchError(f"{self.name} did not answer within {timeout:g} s (see {self.log})") from None
+        if not line:
+            await self.proc.wait()
+            raise BenchError(f"{self.name} exited with {self.proc.returncode} (see {self.log}):\n{_tail(self.log)}")
+        return json.loads(line)
+
+    async def ask(self, cmd: str, *, timeout: float = 60.0, **params: Any) -> dict[str, Any]:
+        async with self._lock:
+            assert self.proc.stdin is not None
+            try:
+                self.proc.stdin.write(json.dumps({"cmd": cmd, **params}).encode() + b"\n")
+                await self.proc.stdin.drain()
+            except (BrokenPipeError, ConnectionResetError):
+                raise BenchError(f"{self.name} is gone (see {self.log}):\n{_tail(self.log)}") from None
+            answer = await self._read(timeout)
+        if not answer.get("ok", False):
+            raise BenchError(f"{self.name}: {cmd} failed: {answer.get('error')} (see {self.log})")
+        return answer
+
+    async def stop(self, timeout: float = 10.0) -> dict[str, Any] | None:
+        """Ask it to stop; kill it if it does not. Returns its last words (CPU, memory) if it answered."""
+        answer = None
+        if self.proc.returncode is None:
+            with contextlib.suppress(BenchError, OSError, ValueError):
+                answer = await self.ask("stop", timeout=timeout)
+            try:
+                async with asyncio.timeout(timeout):
+                    await self.proc.wait()
+            except TimeoutError:
+                await self.kill()
+        return answer
+
+    async def kill(self) -> None:
+        if self.proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                self.proc.kill()
+            await self.proc.wait()
+
+
+def _tail(path: Path, lines: int = 15) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+class Mosquitto:
+    """A private Mosquitto on a free port; no persistence, deep queues, a wide QoS 1 window."""
+
+    def __init__(self, workdir: Path) -> None:
+        self.dir = workdir / f"mosquitto-{time.monotonic_ns()}"
+        self.port = free_port()
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def __aenter__(self) -> Self:
+        self.dir.mkdir(parents=True)
+        conf = self.dir / "mosquitto.conf"
+        conf.write_text(
+            f"listener {self.port} 127.0.0.1\n"
+            "allow_anonymous true\n"
+            f"user {getpass.getuser()}\n"
+            "persistence false\n"
+            "max_queued_messages 1000000\n"
+            "max_inflight_messages 1000\n"
+            "log_dest stderr\nlog_type error\nlog_type warning\n",
+            encoding="utf-8",
+        )
+        if not Path(MOSQUITTO).exists():
+            raise BenchError("mosquitto is not installed (make system-deps installs it)")
+        with (self.dir / "mosquitto.log").open("ab") as log:
+            self.proc = await asyncio.create_subprocess_exec(MOSQUITTO, "-c", str(conf), stdout=log, stderr=log)
+        deadline = time.monotonic() + 10
+        while not _listening(self.port):
+            if self.proc.returncode is not None or time.monotonic() > deadline:
+                raise BenchError(f"mosquitto did not start (see {self.dir / 'mosquitto.log'})")
+            await asyncio.sleep(0.02)
+        return self
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid if self.proc is not None else 0
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self.proc is not None and self.proc.returncode is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                async with asyncio.timeout(5):
+                    await self.proc.wait()
+            except TimeoutError:
+                self.proc.kill()
+                await self.proc.wait()
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.2)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+class Meter:
+    """CPU and memory of a process measured from outside (psutil), for processes that are not agents."""
+
+    def __init__(self, pid: int) -> None:
+        self.proc = psutil.Process(pid)
+        self.peak_rss = 0.0
+
+    def cpu(self) -> float:
+        t = self.proc.cpu_times()
+        return float(t.user + t.system)
+
+    def rss(self) -> float:
+        rss = float(self.proc.memory_info().rss)
+        self.peak_rss = max(self.peak_rss, rss)
+        return rss
+
+
+def load_average() -> list[float]:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return []
