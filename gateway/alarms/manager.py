@@ -4,7 +4,8 @@ The manager follows the mapped alarm variables through the change hub. Each
 time the list changes it compares it with the active occurrences (`diff`) and
 records the raises and clears in the store, in one transaction, before anyone
 hears of them. Acknowledge and Confirm (from any sink, with the caller's role
-checked) are recorded the same way. Listeners (the OPC UA conditions) and the
+checked) are recorded the same way, and go to the audit trail like writes and
+calls (kind "acknowledge"/"confirm", target `Alarms/<id>#<occurrence>`), refusals too. Listeners (the OPC UA conditions) and the
 event bus (MQTT: `alarms/events`, and the retained `alarms/active` list) learn
 of every change afterwards, in order.
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Awaitable, Callable
 from dataclasses import replace
 from datetime import datetime
@@ -25,6 +27,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from gateway.alarms.records import AlarmChange, AlarmRecord, Kind, Quality
 from gateway.alarms.sources import Reading, diff, source_for
 from gateway.alarms.store import AlarmStore, AlarmStoreError
+from gateway.audit.entry import as_text
 from gateway.config.alarms import AlarmsConfig
 from gateway.errors import InvalidState, WriteError
 from gateway.model.events import Event
@@ -38,9 +41,11 @@ log = logging.getLogger("gateway.alarms")
 T = TypeVar("T")
 Listener = Callable[[AlarmChange], Awaitable[None]]
 DbCall = Callable[..., Awaitable[Any]]
+Check = Callable[[], None]  # a sink's own check of a request: raises a WriteError to refuse it
 
 SETTLE = 0.5  # s to wait for the other arrays when one of them has changed length alone
 EVENTS = "alarms/events"
+OBJECT = "Alarms"  # audit targets: Alarms/<alarm id>#<occurrence>
 ACTIVE = "alarms/active"
 
 
@@ -183,9 +188,56 @@ class AlarmManager:
 
     # --- acknowledge and confirm -----------------------------------------------------------------
 
-    async def acknowledge(self, occurrence: int, ctx: WriteContext, comment: str = "") -> AlarmRecord:
-        """Record that `ctx`'s caller has seen the alarm. Raises a WriteError with the OPC UA status."""
+    async def acknowledge(
+        self, occurrence: int, ctx: WriteContext, comment: str = "", *, check: Check | None = None
+    ) -> AlarmRecord:
+        """Record that `ctx`'s caller has seen the alarm. Raises a WriteError with the OPC UA status.
+
+        `check` is the sink's own check of the request (OPC UA: a known EventId): it runs
+        after the role check and raises a WriteError to refuse, so its refusals are audited too.
+        """
+        return await self._audited("acknowledge", occurrence, ctx, comment, check, self._acknowledge)
+
+    async def confirm(
+        self, occurrence: int, ctx: WriteContext, comment: str = "", *, check: Check | None = None
+    ) -> AlarmRecord:
+        """Record that the cause has been dealt with (after the acknowledgement); `check` as for acknowledge."""
+        return await self._audited("confirm", occurrence, ctx, comment, check, self._confirm)
+
+    async def _audited(
+        self,
+        kind: str,
+        occurrence: int,
+        ctx: WriteContext,
+        comment: str,
+        check: Check | None,
+        action: Callable[[int, WriteContext, str, Check | None], Awaitable[AlarmRecord]],
+    ) -> AlarmRecord:
+        """Carry out an acknowledge or confirm and put it in the audit trail, refusals and failures included."""
+        started, at = time.monotonic(), utcnow()
+        known = self.records.get(occurrence)  # read first: an alarm that ends with this call leaves `records`
+        target = f"{OBJECT}/{known.id if known is not None else ''}#{occurrence}"
+
+        def audit(error: WriteError | None) -> None:
+            self.machine.audit(kind, target, ctx, new=as_text([comment]), error=error, at=at, started=started)
+
+        try:
+            record = await action(occurrence, ctx, comment, check)
+        except WriteError as exc:
+            audit(exc)
+            raise
+        except Exception as exc:
+            audit(WriteError(f"internal error: {exc}"))
+            raise
+        audit(None)
+        return record
+
+    async def _acknowledge(
+        self, occurrence: int, ctx: WriteContext, comment: str, check: Check | None
+    ) -> AlarmRecord:
         self.machine.tree.access.require(ctx.role, self.config.acknowledge_role, "acknowledge alarms")
+        if check is not None:
+            check()
         async with self._lock:
             record = self._get(occurrence)
             if record.acked:
@@ -199,9 +251,12 @@ class AlarmManager:
             await self._emit([self._put(Kind.ACKNOWLEDGED, new, now, user, comment)])
             return new
 
-    async def confirm(self, occurrence: int, ctx: WriteContext, comment: str = "") -> AlarmRecord:
-        """Record that the cause has been dealt with (after the acknowledgement)."""
+    async def _confirm(
+        self, occurrence: int, ctx: WriteContext, comment: str, check: Check | None
+    ) -> AlarmRecord:
         self.machine.tree.access.require(ctx.role, self.config.acknowledge_role, "confirm alarms")
+        if check is not None:
+            check()
         async with self._lock:
             record = self._get(occurrence)
             if record.confirmed:

@@ -1,4 +1,4 @@
-"""`cnc-gateway audit list`: who wrote what, and who called what, from the audit table in the state directory.
+"""`cnc-gateway audit list`: who wrote, called, acknowledged or confirmed what, from the state directory's audit table.
 
 Reads `<state_dir>/audit.sqlite3` directly, so it works whether the gateway runs
 or not (entries reach the table within a moment of the write).
@@ -23,10 +23,11 @@ from gateway.errors import ConfigError
 DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
 _RELATIVE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhd])\s*$")
 _UNITS = {"s": "seconds", "m": "minutes", "h": "hours", "d": "days"}
+KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("audit", help="the audit trail: every write and method call, who, what, and the result")
+    p = sub.add_parser("audit", help="the audit trail: every write, method call and alarm acknowledge/confirm, who, what, and the result")
     audit = p.add_subparsers(dest="audit_command", metavar="ACTION", required=True)
     q = audit.add_parser("list", help="audit entries, newest first")
     q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
@@ -106,7 +107,7 @@ def as_line(e: AuditEntry) -> str:
     else:
         what = f"{e.machine}/{e.target}({(e.new or '[]')[1:-1]})"
     result = "ok" if e.ok else f"{e.status}: {e.reason}"
-    return f"{local}  {e.kind:<5}  {who:<28}  {what}  {result}  ({e.duration * 1000:.0f} ms)"
+    return f"{local}  {e.kind:<{KIND_WIDTH}}  {who:<28}  {what}  {result}  ({e.duration * 1000:.0f} ms)"
 
 
 def as_json(e: AuditEntry) -> str:

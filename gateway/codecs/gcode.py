@@ -139,7 +139,7 @@ def lex_lines(text: str) -> Iterator[Block | GcodeError]:
 Plain = tuple[int, "int | None", list[tuple[str, float]], bool]
 
 
-def lex_compact(text: str) -> Iterator[Plain | Block | GcodeError]:
+def lex_compact(text: str, first_line: int = 1) -> Iterator[Plain | Block | GcodeError]:
     """`lex_lines` for programs of millions of lines: the same reading, in a lighter form.
 
     Ordinary lines (an optional N number, then words other than N and O, and
@@ -148,11 +148,11 @@ def lex_compact(text: str) -> Iterator[Plain | Block | GcodeError]:
     one Word object per word; any other line comes out exactly as `lex_lines`
     gives it (a Block or a GcodeError). For a Plain line, `lex_line` would give a
     Block with the same line, number, letters and values, and comments when the
-    flag says so (a property test holds the two to it).
+    flag says so (a property test holds the two to it). Lines are numbered from `first_line`.
     """
     end = len(text)
     pos = 0
-    line = 1
+    line = first_line
     run_match = _ORDINARY_RUN.match
     while pos < end:
         run = run_match(text, pos).end()  # type: ignore[union-attr]

@@ -139,6 +139,11 @@ class JobsConfig(Strict):
         default="size", description="After delivery, compare the size (SIZE or a listing), or download it back and hash"
     )
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
+    mqtt_retained_jobs: int = Field(
+        default=100, ge=0, le=100_000,
+        description="Ended jobs (DELIVERED, REJECTED, FAILED, CANCELLED) whose MQTT jobs/<id> record stays retained; "
+        "older ones are cleared from the broker. 0: cleared as soon as they end",
+    )  # fmt: skip
 
 
 def check_variable_path(path: str) -> str:

@@ -7,6 +7,12 @@ code in any sink. Events go on the tree's event bus:
 - `jobs/<job-id>` (retained): the job's whole record, with its progress;
 - `jobs/events`: one event per state change, in order.
 
+Retained records would pile up on the broker, one per job ever uploaded. Only
+the machine's `mqtt_retained_jobs` most recently ended jobs keep theirs: when
+one more ends, the oldest ended job's record is withdrawn (an empty retained
+message). Jobs that ended before this run are only known if the service hands
+them to `ended_before`.
+
 Everything is derived from the queue (which the CLI may change from another
 process), so the service only has to say "something changed" and call `sync`.
 """
@@ -14,16 +20,20 @@ process), so the service only has to say "something changed" and call `sync`.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections import OrderedDict
+from collections.abc import Iterable, Mapping
 from datetime import datetime, timezone
 from typing import Any
 
+from gateway.config.jobs import JobsConfig
 from gateway.jobs.queue import Job, JobState, Transition
+from gateway.jobs.records import TERMINAL
 from gateway.model.events import Event
 from gateway.model.tree import Machine, VariableNode, VariableTree
 
 NEVER = datetime(1601, 1, 1, tzinfo=timezone.utc)
 PROGRESS_EVERY = 0.5  # s between progress events of one job
+RETAINED_JOBS = JobsConfig.model_fields["mqtt_retained_jobs"].default
 
 
 def describe(job: Job | None) -> str:
@@ -55,10 +65,16 @@ class JobVariables:
 
 
 class JobPublisher:
-    def __init__(self, tree: VariableTree, machines: Iterable[str]) -> None:
+    def __init__(self, tree: VariableTree, machines: Mapping[str, JobsConfig] | Iterable[str]) -> None:
         self.tree = tree
         self.vars = {name: JobVariables(tree.machines[name]) for name in machines}
         self._progress_at: dict[int, float] = {}
+        # Per machine: how many ended jobs keep a retained record, and those that do (seq -> id), oldest first.
+        self.keep = {
+            name: machines[name].mqtt_retained_jobs if isinstance(machines, Mapping) else RETAINED_JOBS
+            for name in self.vars
+        }
+        self._ended: dict[str, OrderedDict[int, str]] = {name: OrderedDict() for name in self.vars}
 
     def summary(self, machine: str, *, waiting: int, failed: int, current: Job | None,
                 delivered: Job | None, failed_job: Job | None, rejected: Job | None) -> None:
@@ -88,6 +104,25 @@ class JobPublisher:
             progress = 100.0 if job.state is JobState.DELIVERED else 0.0
         record["progress"] = round(progress, 1)
         self.tree.events.publish(Event(job.machine, f"jobs/{job.id}", record, retain=True))
+        self._retire(job)
+
+    def ended_before(self, jobs: Iterable[Job]) -> None:
+        """Ended jobs whose records a previous run may have left retained, oldest first (at start-up)."""
+        for job in jobs:
+            self._retire(job)
+
+    def _retire(self, job: Job) -> None:
+        """Track which ended jobs keep a retained record; withdraw the oldest beyond the machine's limit."""
+        ended = self._ended.get(job.machine)
+        if ended is None:
+            return
+        if job.state not in TERMINAL:  # running again (a retry): its record is live, not an ended one
+            ended.pop(job.seq, None)
+            return
+        ended.setdefault(job.seq, job.id)  # a job republished while ended keeps its place
+        while len(ended) > self.keep[job.machine]:
+            _, old = ended.popitem(last=False)
+            self.tree.events.publish(Event(job.machine, f"jobs/{old}", None, retain=True))
 
     def transition(self, t: Transition, job: Job | None) -> None:
         payload: dict[str, Any] = {

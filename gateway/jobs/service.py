@@ -36,19 +36,21 @@ from gateway.jobs.accounts import Accounts
 from gateway.jobs.autostart import AutoStarter
 from gateway.jobs.controller_ftp import ProgramStore
 from gateway.jobs.delivery import DeliveryWorker
+from gateway.jobs.file_check import ISOLATE_ABOVE, validate_file
 from gateway.jobs.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
 from gateway.jobs.paths import PathRefused, check_file_name
 from gateway.jobs.programs import program_methods
 from gateway.jobs.publish import JobPublisher
 from gateway.jobs.queue import Job, JobQueue, JobState
 from gateway.jobs.threads import JobThreads
-from gateway.jobs.validation import Verdict, validate_program
+from gateway.jobs.verdict import Verdict
 from gateway.model.tree import VariableTree
 
 log = logging.getLogger("gateway.jobs")
 
 T = TypeVar("T")
 WATCH_INTERVAL = 1.0  # s between looks for changes made by other processes (the CLI)
+ENDED_SWEEP = 200  # ended jobs past a machine's retained limit whose records are cleared at start-up
 
 
 class Spool:
@@ -238,22 +240,23 @@ class JobService:
     async def _validate_and_queue(self, job: Job) -> UploadReply:
         rules = self.machines[job.machine].validation
         received = self.spool.received(job)
-        data = await self.threads.work(received.read_bytes)
-        verdict = await self.threads.work(validate_program, data, job.filename, rules)
+        # Large programs in the validation process: seconds of CPU in a thread would stall the event loop.
+        run = self.threads.process if job.size > ISOLATE_ABOVE else self.threads.work
+        checked = await run(validate_file, received, self.spool.program(job), job.filename, rules)
+        verdict = checked.verdict
         if not verdict.accepted:
             reason = summarize(verdict)
             await self.threads.work(self._keep_rejected, job, verdict)
             job = await self._q(self.queue.reject, job.seq, reason)
             log.warning("%s: %s (%s) rejected: %s", job.machine, job.id, job.filename, reason)
             return UploadReply(False, f"{job.id} rejected: {reason}", job.id)
-        await self.threads.work(_write_durably, self.spool.program(job), verdict.program)
         received.unlink(missing_ok=True)
         job, replaced = await self._q(
             self.queue.accept,
             job.seq,
             duplicates=self.machines[job.machine].duplicates,
-            program_size=len(verdict.program),
-            program_sha256=hashlib.sha256(verdict.program).hexdigest(),
+            program_size=checked.size,
+            program_sha256=checked.sha256,
             program_name=verdict.program_name,
             estimate=verdict.estimate.as_dict() if verdict.estimate is not None else None,
             warnings=verdict.warnings,
@@ -360,6 +363,14 @@ class JobService:
         for job in waiting:
             if job.machine in self.machines:
                 self.publisher.job(job)
+        for name in self.machines:  # records an earlier run left retained beyond the machine's limit
+            ended = await self.threads.queue(
+                self.queue.list,
+                machine=name,
+                states=(JobState.DELIVERED, JobState.REJECTED, JobState.CANCELLED),
+                limit=self.publisher.keep[name] + ENDED_SWEEP,
+            )
+            self.publisher.ended_before(reversed(ended))
 
     async def _sync(self) -> None:
         jobs = await self.threads.queue(self.queue.changes_since, self._rev)
@@ -393,16 +404,6 @@ class JobService:
             }
 
         self.publisher.summary(machine, **await self.threads.queue(read))
-
-
-def _write_durably(path: Path, data: bytes) -> None:
-    """Write, flush to disk, then rename into place: a crash leaves the old state or the new one."""
-    temp = path.with_name(path.name + ".writing")
-    with temp.open("wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(temp, path)
 
 
 def _validated_reason(verdict: Verdict) -> str:

@@ -1,18 +1,27 @@
-"""The job queue's own worker threads: one for the queue file, two for checks and file copies.
+"""The job queue's own workers: a thread for the queue file, two for checks and file copies, and one
+process, started on first use, for validating large programs.
 
 Blocking work (SQLite, reading and validating programs) runs off the event loop,
 but not in asyncio's shared default executor: that pool is small (cores + 4)
 and anything else in the process that blocks in it (a crowd of slow clients,
 another component) would stall the queue. One thread for the queue file also
 serialises its use without a lock held across awaits.
+
+Validating a large program is seconds of pure-Python CPU, and a thread holds the
+GIL meanwhile: the event loop (OPC UA, MQTT) would stall. That work goes to a
+separate process, started with "spawn" (forking a threaded process can copy a
+held lock into the child).
 """
 
 from __future__ import annotations
 
 import asyncio
 import functools
+import multiprocessing
+import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -22,6 +31,9 @@ class JobThreads:
     def __init__(self, workers: int = 2) -> None:
         self._queue = ThreadPoolExecutor(1, thread_name_prefix="jobs-queue")
         self._work = ThreadPoolExecutor(workers, thread_name_prefix="jobs-work")
+        self._processes: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+        self._closed = False
 
     async def queue(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         """Run a JobQueue call."""
@@ -31,7 +43,50 @@ class JobThreads:
         """Run file I/O or a validation."""
         return await asyncio.get_running_loop().run_in_executor(self._work, functools.partial(fn, *args, **kwargs))
 
+    async def process(self, fn: Callable[..., T], *args: Any) -> T:
+        """Run `fn(*args)` in the validation process (fn, args and result must pickle).
+
+        If the process dies (killed, out of memory), this call raises BrokenProcessPool
+        and the next call starts a new process.
+        """
+        pool = self._pool()
+        try:
+            return await asyncio.get_running_loop().run_in_executor(pool, functools.partial(fn, *args))
+        except BrokenProcessPool:
+            with self._lock:
+                if self._processes is pool:
+                    self._processes = None
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+    def _pool(self) -> ProcessPoolExecutor:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the job workers are shut down")
+            if self._processes is None:
+                self._processes = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            return self._processes
+
     async def shutdown(self) -> None:
-        """Wait for running calls to end (cancelled awaits do not stop a thread), then stop."""
+        """Stop the validation process at once (whatever it runs belongs to a cancelled job), wait for
+        running thread calls to end (cancelled awaits do not stop a thread), then stop."""
+        with self._lock:
+            self._closed = True
+            pool, self._processes = self._processes, None
+        if pool is not None:
+            await asyncio.to_thread(_stop_processes, pool)
         await asyncio.to_thread(self._work.shutdown, True, cancel_futures=True)
         await asyncio.to_thread(self._queue.shutdown, True, cancel_futures=True)
+
+
+def _stop_processes(pool: ProcessPoolExecutor) -> None:
+    # ProcessPoolExecutor (before Python 3.14) cannot stop a running call: end its worker, then
+    # let the executor notice and join its own thread.
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        if worker.is_alive():
+            worker.terminate()
+    pool.shutdown(wait=True)
+    for worker in workers:
+        worker.join()

@@ -35,13 +35,13 @@ from gateway.codecs.gcode import (
     Plain,
     Program,
     format_number,
-    lex_compact,
     lex_line,
     parse_program,
     split_lines,
 )
 from gateway.config.validation import ValidationRules
 from gateway.jobs.estimate import Estimate, Extents, RunningEstimate
+from gateway.jobs.fast_read import read_text
 from gateway.jobs.file_names import check_file_name, split_name
 from gateway.jobs.text_checks import TextScan, detect_binary, scan_text
 from gateway.jobs.verdict import MAX_REJECTIONS, Rejection, Verdict, capped
@@ -76,7 +76,7 @@ def validate_program(data: bytes, filename: str, rules: ValidationRules) -> Verd
     rejections.extend(scan.rejections)
     warnings = list(scan.warnings)
     reading = _Reading(rules)
-    reading.read(lex_compact(scan.text))
+    read_text(reading, scan.text)
     parsed = reading.parsed
     skipped = _syntax(parsed, scan, rules, rejections, warnings)
     _markers(parsed, rules, rejections, warnings)

@@ -28,11 +28,12 @@ class Event:
     a job's current record); others are a stream (every one matters, in order).
     `payload` must be JSON-serialisable: an object, or a list for state that is a
     list (a machine's active alarms), which is published as it is, without `ts`.
+    None, retained, withdraws the state (MQTT: an empty retained message clears the topic).
     """
 
     machine: str | None
     channel: str
-    payload: Mapping[str, Any] | Sequence[Any]
+    payload: Mapping[str, Any] | Sequence[Any] | None
     retain: bool = False
     ts: datetime = field(default_factory=utcnow)
 

@@ -106,14 +106,23 @@ def test_run_refuses_a_broken_mapping_without_starting(tmp_path: Path) -> None:
     assert "6 errors; nothing was started." in proc.stderr
 
 
-async def test_check_prints_the_tree_with_type_unit_and_access() -> None:
+async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_copydata_targets() -> None:
     proc = subprocess.run(
         [str(BIN / "cnc-gateway"), "check", str(ROOT / "mappings/laser-sim.yaml")],
         capture_output=True, text=True, timeout=60,
     )
     assert proc.returncode == 0, proc.stderr
-    override = next(line for line in proc.stdout.splitlines() if line.strip().startswith("Override"))
+    lines = proc.stdout.splitlines()
+    override = next(line for line in lines if line.strip().startswith("Override"))
     assert override.split()[1:4] == ["UInt16", "%", "readwrite"]
+    assert "copydata 6" in override and "role" not in override  # no users: roles are not shown on variables
+    assert lines[-1] == "access control off (no users in the gateway file): roles are not enforced"
+    command = next(line for line in lines if line.strip().startswith("select-program"))
+    assert command.split() == ["select-program(name:", "String)", "operator", "Machine/State", "is", "Idle", "or", "Alarm"]
+    assert next(line for line in lines if line.strip().startswith("stop ")).split() == ["stop", "operator", "any", "state"]
+    nesting = next(line for line in lines if line.strip().startswith("nesting"))
+    assert nesting.split()[1] == "tcp-server" and "ids 1-11, 14-16 (14 variables)" in nesting
+    assert "connected 100" in nesting and "accepts writes" in nesting
 
 
 async def test_demo_runs_the_simulator_and_keeps_a_program_running(

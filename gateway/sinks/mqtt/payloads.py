@@ -118,7 +118,12 @@ def encode_document(doc: dict[str, Any]) -> bytes:
 
 
 def encode_event(event: Event) -> bytes:
-    """An event's payload with its time: `{"ts": …, …payload}` as compact JSON (a list payload: the list)."""
+    """An event's payload with its time: `{"ts": …, …payload}` as compact JSON (a list payload: the list).
+
+    No payload is an empty message: retained, it deletes the topic's retained message.
+    """
+    if event.payload is None:
+        return b""
     if not isinstance(event.payload, Mapping):
         return _dumps(plain(list(event.payload))).encode()
     return _dumps({"ts": iso(event.ts), **plain_dict(dict(event.payload))}).encode()

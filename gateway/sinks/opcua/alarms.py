@@ -11,7 +11,8 @@ with the same EventId. When an occurrence ends (Retain false) its node goes.
 Clients acknowledge and confirm by calling the standard methods
 AcknowledgeableConditionType.Acknowledge/Confirm (i=9111/9113) on the condition
 node with an EventId the condition reported and a comment; the alarm manager
-checks the caller's role and records it before the answer goes back.
+checks the caller's role, records it, and puts it in the audit trail (refusals
+too) before the answer goes back.
 ConditionType.ConditionRefresh (i=3875, and ConditionRefresh2) sends the calling
 subscription a RefreshStartEvent, the latest event of every retained condition, and
 RefreshEndEvent, so that a client that connects late sees the alarms in force.
@@ -31,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
 
-from gateway.alarms.manager import AlarmManager
+from gateway.alarms.manager import AlarmManager, Check
 from gateway.alarms.records import AlarmChange, AlarmRecord
 from gateway.errors import WriteError
 from gateway.model.sample import utcnow
@@ -170,17 +171,23 @@ class OpcUaAlarms:
 
     # --- Acknowledge and Confirm -------------------------------------------------------------
 
-    def _method(self, action: Callable[[AlarmManager, int, Any, str], Awaitable[Any]]) -> Callable[..., Any]:
+    def _method(
+        self, action: Callable[[AlarmManager, int, Any, str, Check], Awaitable[Any]]
+    ) -> Callable[..., Any]:
         async def callback(parent: ua.NodeId, *inputs: ua.Variant) -> ua.CallMethodResult:
             return await self._respond(parent, inputs, action)
 
         return callback
 
-    async def _acknowledge(self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str) -> Any:
-        return await manager.acknowledge(occurrence, ctx, comment)
+    async def _acknowledge(
+        self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str, check: Check
+    ) -> Any:
+        return await manager.acknowledge(occurrence, ctx, comment, check=check)
 
-    async def _confirm(self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str) -> Any:
-        return await manager.confirm(occurrence, ctx, comment)
+    async def _confirm(
+        self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str, check: Check
+    ) -> Any:
+        return await manager.confirm(occurrence, ctx, comment, check=check)
 
     async def _respond(
         self, parent: ua.NodeId, inputs: Sequence[ua.Variant], action: Callable[..., Awaitable[Any]]
@@ -202,11 +209,17 @@ class OpcUaAlarms:
         condition = self._conditions.get(parent)
         if condition is None:
             return ua.CallMethodResult(StatusCode=_status("BadNodeIdUnknown"), InputArgumentResults=results)
-        if bytes(event_id.Value) not in condition.event_ids:
-            return ua.CallMethodResult(StatusCode=_status("BadEventIdUnknown"), InputArgumentResults=results)
+        known = bytes(event_id.Value) in condition.event_ids
+
+        def check() -> None:  # after the role check, in the manager, so that the refusal is audited
+            if not known:
+                raise WriteError("the EventId is not one this condition reported", status="BadEventIdUnknown")
+
         text = comment.Value.Text if isinstance(comment.Value, ua.LocalizedText) else comment.Value
         try:
-            await action(condition.manager, condition.occurrence, self.sink.caller_context(), str(text or ""))
+            await action(
+                condition.manager, condition.occurrence, self.sink.caller_context(), str(text or ""), check
+            )
         except WriteError as exc:
             log.info("OPC UA %s of alarm occurrence %d refused (%s): %s",
                      getattr(action, "__name__", "call").strip("_"), condition.occurrence, exc.status, exc.reason)

@@ -28,3 +28,11 @@ def test_one_line_says_who_what_and_the_result() -> None:
                       "BadUserAccessDenied", "role 'viewer' may not …", 0.0)
     assert 'anonymous@opcua/viewer' in as_line(call) and 'Programs.Delete("a.nc")  BadUserAccessDenied' in as_line(call)
     assert '"user": null' in as_json(call) and '"time": "2026-05-06T12:00:00.000000Z"' in as_json(call)
+
+
+def test_an_acknowledgement_reads_like_a_call_with_its_comment() -> None:
+    ack = AuditEntry(NOW, "acknowledge", "laser-sim", "Alarms/1001#3", "opcua", "otto", "operator", None,
+                     '["saw it"]', "Good", "", 0.004)
+    write = AuditEntry(NOW, "write", "laser-sim", "Feed/Override", "opcua", "otto", "operator", "1", "2", "Good", "", 0)
+    assert 'laser-sim/Alarms/1001#3("saw it")  ok' in as_line(ack)
+    assert as_line(ack).index("otto@") == as_line(write).index("otto@")  # the kind column fits "acknowledge"
