@@ -44,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"run only these scenarios: {', '.join(SCENARIOS)}")
     p.add_argument("--out", type=Path, default=RESULTS, help="folder for the JSON results (default bench/results)")
     p.add_argument("--profile", action="store_true",
-                   help="sample the gateway with py-spy during the flat-out mirror steps and report where time goes")
+                   help="sample the gateway with py-spy during each mirror configuration's last step (flat out by default) and report where time goes")
     p.add_argument("--keep", action="store_true", help="keep the work directory (logs, configs, profiles)")
     p.add_argument("--window", type=float, default=None, help="seconds per measurement window")
     p.add_argument("--sizes", type=int, nargs="+", metavar="N", help="mirror: numbers of variables")

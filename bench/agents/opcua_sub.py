@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import logging
 import time
 from datetime import UTC
 from pathlib import Path
@@ -35,6 +36,8 @@ class Counter:
         self.good = 0
         self.last: list[float | None] = [None] * n
         self.latencies: list[float] = []
+        self.timeouts = 0  # Publish requests the server did not answer in time (then asked again)
+        self.errors = 0  # Publish requests that failed otherwise (logged, then asked again)
 
     def take(self, items: list[Any]) -> None:
         now = time.time()
@@ -54,7 +57,7 @@ class Counter:
 
     def snap(self, request: dict[str, Any]) -> dict[str, Any]:
         latencies, self.latencies = self.latencies, []
-        return {"count": self.count, "good": self.good, "latency": percentiles(latencies)}
+        return {"count": self.count, "good": self.good, "timeouts": self.timeouts, "errors": self.errors, "latency": percentiles(latencies)}
 
     def values(self, request: dict[str, Any]) -> dict[str, Any]:
         return {"last": self.last}
@@ -65,8 +68,15 @@ async def publish_loop(session: Any, counter: Counter) -> None:
     while True:
         try:
             response = await session.publish(acks)
-        except ua.uaerrors.BadTimeout:
+        except (ua.uaerrors.BadTimeout, TimeoutError):  # a server slow under overload: ask again
             acks = []
+            counter.timeouts += 1
+            continue
+        except Exception as exc:  # noqa: BLE001 - counted and logged; a dead loop would stop counting
+            logging.getLogger("bench.opcua_sub").warning("publish failed: %s: %s", type(exc).__name__, exc)
+            acks = []
+            counter.errors += 1
+            await asyncio.sleep(0.05)
             continue
         result = response.Parameters
         message = result.NotificationMessage
@@ -81,7 +91,9 @@ async def publish_loop(session: Any, counter: Counter) -> None:
 async def main(args: argparse.Namespace) -> None:
     lines = [line.strip() for line in args.ids.read_text().splitlines() if line.strip()]
     counter = Counter(len(lines))
-    client = Client(args.endpoint, timeout=60)
+    # asyncua's 1-s watchdog would drop the session when the gateway answers late under flat-out
+    # overload (its loop then lags by seconds); this subscriber counts what arrives, it does not judge.
+    client = Client(args.endpoint, timeout=60, watchdog_intervall=30)
     await client.connect()
     try:
         namespaces = await client.get_namespace_array()
