@@ -177,10 +177,11 @@ async def run_mqtt(rec: Recorder, kind: str, cases: list[dict[str, Any]]) -> lis
     """Each request from a real paho client; its answer on `<topic>/result` must refuse it, with the status.
 
     Retained requests were published before the gateway subscribed (`publish_retained`): the broker replays
-    them to it then, and their answers are already there or on their way.
+    them to it then, and their answers are already there or on their way. They are judged first, so that
+    the first answer on their topic is theirs and no later request takes it for its own.
     """
     out = []
-    for case in cases:
+    for case in sorted(cases, key=lambda c: not c.get("retain")):
         topic, expect = case["topic"], case["expect"]
         answer_topic = f"{topic}/result"
         before = 0 if case.get("retain") else len(rec.on(answer_topic))
