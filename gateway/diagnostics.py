@@ -9,6 +9,8 @@ costs one pass over the variables, about a millisecond per 10,000).
 
 from __future__ import annotations
 
+import gc
+import time
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -36,7 +38,49 @@ def snapshot(gateway: Gateway) -> dict[str, Any]:
             if node.sample.good:
                 good += 1
         machines[name] = {"variables": mapped, "good": good, "state": machine.status.state}
-    return {"hub": hub, "sinks": sinks, "machines": machines}
+    return {"hub": hub, "sinks": sinks, "machines": machines, "gc": GC_PAUSES.stats()}
+
+
+class GcPauses:
+    """How long Python's cyclic garbage collector stopped the process, per generation.
+
+    Every sink waits while it runs, so its passes show up directly as latency; this
+    tells a collector pause from a slow sink. Off until `install()` (a callback per pass).
+    """
+
+    def __init__(self) -> None:
+        self.installed = False
+        self._started = 0.0
+        self.count = [0, 0, 0]
+        self.total = [0.0, 0.0, 0.0]  # seconds
+        self.longest = [0.0, 0.0, 0.0]
+
+    def install(self) -> None:
+        if not self.installed:
+            gc.callbacks.append(self._callback)
+            self.installed = True
+
+    def _callback(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self._started = time.perf_counter()
+            return
+        took = time.perf_counter() - self._started
+        gen = info.get("generation", 2)
+        self.count[gen] += 1
+        self.total[gen] += took
+        if took > self.longest[gen]:
+            self.longest[gen] = took
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "installed": self.installed,
+            "count": list(self.count),
+            "total_ms": [round(t * 1000, 1) for t in self.total],
+            "longest_ms": [round(t * 1000, 1) for t in self.longest],
+        }
+
+
+GC_PAUSES = GcPauses()
 
 
 def _sink(sink: Any) -> dict[str, Any]:

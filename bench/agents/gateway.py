@@ -17,10 +17,11 @@ from bench.agents.injector import Injector
 from bench.agents.protocol import serve, setup_logging
 from gateway.app import Gateway
 from gateway.config.loader import load
-from gateway.diagnostics import snapshot
+from gateway.diagnostics import GC_PAUSES, snapshot
 
 
 async def main(args: argparse.Namespace) -> None:
+    GC_PAUSES.install()  # the collector's pauses, per step (bench/scenarios/mirror.py)
     config = load([args.config])
     gateway = Gateway(config)
     injector: Injector | None = None

@@ -60,6 +60,7 @@ class Step:
     growing: bool = False
     coalesced_opcua: float = 0.0  # /s: intermediate values the OPC UA sink skipped (latest-value mode)
     dropped: int = 0
+    gc: dict[str, Any] = field(default_factory=dict)  # the gateway's collector passes in the window
     lagged: int = 0  # changes the source could not produce at the set rate
 
     @property
@@ -158,6 +159,7 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
                     f"({_ms(step.p99_median)})  "
                     f"cpu {step.cpu:3.0f}% (sim {step.source_cpu:3.0f}%, subs+broker "
                     f"{sum(step.others_cpu.values()):3.0f}%)  {'backlog GROWS' if step.growing else ''}"
+                    + (f"  gc {step.gc['passes']} {step.gc['paused_ms']:.0f} ms" if step.gc else "")
                 )
                 await _drain(driver, mqtt_sub)
             final = await final_values(driver, gw, mqtt_sub, opcua_sub, n, source)
@@ -253,6 +255,13 @@ async def measure(ctx: Context, driver: Agent, gw: Agent, mqtt_sub: Agent, opcua
     opc0, opc1 = gw0["hub"].get("opcua", {}), gw1["hub"].get("opcua", {})
     step.coalesced_opcua = (opc1.get("coalesced", 0) - opc0.get("coalesced", 0)) / seconds
     step.dropped = int(gw1["sinks"].get("mqtt", {}).get("dropped", 0))
+    g0, g1 = gw0.get("gc", {}), gw1.get("gc", {})
+    if g1.get("installed"):
+        step.gc = {
+            "passes": [b - a for a, b in zip(g0["count"], g1["count"], strict=True)],
+            "paused_ms": round(sum(g1["total_ms"]) - sum(g0["total_ms"]), 1),
+            "longest_gen2_ms": g1["longest_ms"][2],
+        }
     received_total = step.received * seconds
     growth = step.backlog[-1]["mqtt"] - step.backlog[0]["mqtt"]
     step.growing = growth > max(500.0, 0.05 * received_total)

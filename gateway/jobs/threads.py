@@ -18,7 +18,9 @@ from __future__ import annotations
 import asyncio
 import functools
 import multiprocessing
+import os
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -64,7 +66,12 @@ class JobThreads:
             if self._closed:
                 raise RuntimeError("the job workers are shut down")
             if self._processes is None:
-                self._processes = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+                self._processes = ProcessPoolExecutor(
+                    1,
+                    mp_context=multiprocessing.get_context("spawn"),
+                    initializer=follow_parent,
+                    initargs=(os.getpid(),),
+                )
             return self._processes
 
     async def shutdown(self) -> None:
@@ -90,3 +97,22 @@ def _stop_processes(pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True)
     for worker in workers:
         worker.join()
+
+
+PARENT_CHECK = 0.5  # s between the validation process's looks at whether the gateway still runs
+
+
+def follow_parent(parent: int) -> None:
+    """In the validation process: exit when the gateway that started it is gone.
+
+    A gateway killed with SIGKILL (the OOM killer, a service manager's last resort)
+    cannot stop its worker, and the worker would wait for work forever, one orphan
+    per restart. The worker's parent then becomes init (or a subreaper).
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_CHECK)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="follow-parent", daemon=True).start()

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from gateway.app import settled_heap
+from gateway.app import YOUNG_THRESHOLD, settled_heap
 
 
 class Node:
@@ -18,9 +18,10 @@ class Node:
 
 @pytest.fixture(autouse=True)
 def restore_gc() -> Iterator[None]:
-    enabled = gc.isenabled()
+    enabled, threshold = gc.isenabled(), gc.get_threshold()
     yield
     gc.unfreeze()
+    gc.set_threshold(*threshold)
     if enabled:
         gc.enable()
 
@@ -28,11 +29,13 @@ def restore_gc() -> Iterator[None]:
 def test_start_up_objects_are_frozen_and_the_collector_is_on_again() -> None:
     gc.enable()
     gc.unfreeze()
+    gc.set_threshold(700, 10, 10)
     with settled_heap():
         assert not gc.isenabled()  # no passes while start-up builds its objects
         kept = [Node() for _ in range(100)]
     assert gc.isenabled()
     assert gc.get_freeze_count() >= len(kept)
+    assert gc.get_threshold()[0] == YOUNG_THRESHOLD  # fewer young passes, so fewer promotions and full passes
 
 
 def test_start_up_garbage_is_collected_not_frozen() -> None:
