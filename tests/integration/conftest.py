@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import socket
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
+
+from tests.integration.mqtt.conftest import Mosquitto, Recorder
+from tests.waiting import free_port
 
 # Gateway OPC UA, simulator OPC UA, FTP inbox, simulator FTP, COPYDATA. (1883 is the system broker's.)
 DEFAULT_PORTS = (4840, 4841, 2121, 2122, 5020)
@@ -31,3 +35,23 @@ def default_ports_are_off_limits() -> Iterator[list[int]]:
     yield [s.getsockname()[1] for s in held]
     for s in held:
         s.close()
+
+
+@pytest.fixture
+def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
+    """A real Mosquitto on a free loopback port, for any integration test."""
+    broker = Mosquitto(tmp_path / "mosquitto", free_port())
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.stop()
+
+
+@pytest.fixture
+def recorders() -> Iterator[list[Recorder]]:
+    """MQTT subscribers a test starts (tests.integration.mqtt.conftest.subscriber), stopped at its end."""
+    made: list[Recorder] = []
+    yield made
+    for rec in made:
+        rec.stop()

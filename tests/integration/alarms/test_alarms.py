@@ -4,7 +4,6 @@ acknowledgement survives a gateway restart, and `cnc-gateway alarms list` shows 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -17,31 +16,13 @@ from simulator.machine import MachineState
 from simulator.runner import Simulator
 from tests.integration.laser_rig import MACHINE, Events, LaserRig, laser_rig, text
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
-from tests.waiting import free_port, wait_until
+from tests.waiting import wait_until
 
 SOFT_LIMIT = "Soft limit X+ exceeded at line 7"
 EVENTS = f"cnc/{MACHINE}/alarms/events"
 ACTIVE = f"cnc/{MACHINE}/alarms/active"
 ACK = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
 CONFIRM = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Confirm)
-
-
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
-    broker = Mosquitto(tmp_path / "mosquitto", free_port())
-    broker.start()
-    try:
-        yield broker
-    finally:
-        broker.stop()
-
-
-@pytest.fixture
-def recorders() -> Iterator[list[Recorder]]:
-    made: list[Recorder] = []
-    yield made
-    for rec in made:
-        rec.stop()
 
 
 async def raise_soft_limit(rig: LaserRig, client: Client) -> None:

@@ -4,7 +4,6 @@ guards, deadlines and argument checks answered the way each protocol expects."""
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,27 +17,9 @@ from gateway.model.tree import WriteContext
 from simulator.machine import MachineState
 from tests.integration.laser_rig import MACHINE, laser_rig, text
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
-from tests.waiting import free_port, wait_until
+from tests.waiting import wait_until
 
 PREFIX = f"cnc/{MACHINE}/commands"
-
-
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
-    broker = Mosquitto(tmp_path / "mosquitto", free_port())
-    broker.start()
-    try:
-        yield broker
-    finally:
-        broker.stop()
-
-
-@pytest.fixture
-def recorders() -> Iterator[list[Recorder]]:
-    made: list[Recorder] = []
-    yield made
-    for rec in made:
-        rec.stop()
 
 
 def bad(info: pytest.ExceptionInfo[Any]) -> str:

@@ -21,7 +21,7 @@ from gateway.config.loader import Config, load
 from gateway.jobs.queue import JobState
 from gateway.model.events import Event
 from simulator.runner import Simulator
-from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, recorders, subscriber  # noqa: F401
+from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, subscriber  # noqa: F401
 from tests.waiting import free_port, wait_until
 
 PART = b"%\nO2001 (DEMO PART)\nG21 G90\nG0 X20 Y20\nG1 X60 F6000\nG1 Y40\nG1 X20\nG1 Y20\nM30\n%\n"

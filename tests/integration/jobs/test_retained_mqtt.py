@@ -7,10 +7,7 @@ from __future__ import annotations
 import asyncio
 import re
 import uuid
-from collections.abc import Iterator
 from pathlib import Path
-
-import pytest
 
 from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
@@ -21,28 +18,10 @@ from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.sink import MqttSink
 from tests.integration.jobs.conftest import Store, mapping_text, program
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
-from tests.waiting import free_port, wait_until
+from tests.waiting import wait_until
 
 JOBS = "cnc/laser/jobs/+"
 RECORD = re.compile(r"^cnc/laser/jobs/J\d{6}$")
-
-
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
-    broker = Mosquitto(tmp_path / "mosquitto", free_port())
-    broker.start()
-    try:
-        yield broker
-    finally:
-        broker.stop()
-
-
-@pytest.fixture
-def recorders() -> Iterator[list[Recorder]]:
-    made: list[Recorder] = []
-    yield made
-    for rec in made:
-        rec.stop()
 
 
 async def test_only_the_newest_ended_jobs_stay_retained(

@@ -18,13 +18,11 @@ import subprocess
 import threading
 import time
 import uuid
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import paho.mqtt.client as paho
-import pytest
 from paho.mqtt.enums import CallbackAPIVersion
 
 from gateway.config.gateway import GatewayConfig
@@ -97,16 +95,6 @@ class Mosquitto:
                 self.proc.wait(timeout=10)
         self.proc = None
         wait_until_sync(lambda: not _listening(self.port), timeout=5, message="the port to close")
-
-
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
-    broker = Mosquitto(tmp_path / "mosquitto", free_port())
-    broker.start()
-    try:
-        yield broker
-    finally:
-        broker.stop()
 
 
 @dataclass
@@ -211,14 +199,6 @@ class Recorder:
     ) -> None:
         assert self.client is not None
         self.client.publish(topic, payload, qos, retain, properties)
-
-
-@pytest.fixture
-def recorders() -> Iterator[list[Recorder]]:
-    made: list[Recorder] = []
-    yield made
-    for rec in made:
-        rec.stop()
 
 
 def subscriber(recorders: list[Recorder], port: int, **kwargs: Any) -> Recorder:

@@ -17,7 +17,6 @@ from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mapping import MachineMapping
 from simulator.runner import Simulator
-from tests.integration.mqtt.conftest import mosquitto, recorders  # noqa: F401  (fixtures for test_mqtt_roles)
 from tests.waiting import free_port
 
 ROOT = Path(__file__).resolve().parents[3]
