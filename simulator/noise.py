@@ -83,15 +83,17 @@ class NoiseStats:
     since: float  # time.monotonic() when the rate was last set
 
 
-class Noise:
-    """Writes the noise variables of a running PlcServer at the set rate (see the module docstring)."""
+class Pacer:
+    """Keeps a stream of writes to a set total rate: how many are owed now, never a burst of catch-up.
 
-    def __init__(self, spec: NoiseSpec) -> None:
-        self.spec = spec
-        self.variables = noise_variables(spec)
+    Shared by the noise below and the benchmark's in-process source
+    (bench/agents/injector.py), so that both count `written` and `lagged` alike.
+    """
+
+    def __init__(self, rate: float = 0.0) -> None:
         self.written = 0
         self.lagged = 0
-        self._rate = spec.rate
+        self._rate = rate
         self._since = time.monotonic()
         self._written_at_set = 0
         self._pace = (self._since, 0)  # (when, written then): the origin that pacing counts from
@@ -113,7 +115,41 @@ class Noise:
     def stats(self) -> NoiseStats:
         elapsed = time.monotonic() - self._since
         done = self.written - self._written_at_set
-        return NoiseStats(self.written, self.lagged, self._rate, done / elapsed if elapsed > 0 else 0.0, self._since)
+        achieved = done / elapsed if elapsed > 0 else 0.0
+        return NoiseStats(self.written, self.lagged, self._rate, achieved, self._since)
+
+    async def owed(self) -> int:
+        """Wait until writes are due (paused at rate 0); how many, at most CHUNK.
+
+        The caller counts what it wrote in `written`."""
+        while True:
+            rate = self._rate
+            if rate <= 0:
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            if math.isinf(rate):
+                return CHUNK
+            now = time.monotonic()
+            since, base = self._pace
+            owed = (now - since) * rate - (self.written - base)
+            if owed > rate * MAX_CATCH_UP:  # fell behind: say so, and count afresh from now
+                self.lagged += int(owed)
+                self._pace = (now, self.written)
+                owed = 0.0
+            if owed < 1:
+                await asyncio.sleep(max(TICK, (1 - owed) / rate))
+                continue
+            return min(int(owed), CHUNK)
+
+
+class Noise(Pacer):
+    """Writes the noise variables of a running PlcServer at the set rate (see the module docstring)."""
+
+    def __init__(self, spec: NoiseSpec) -> None:
+        super().__init__(spec.rate)
+        self.spec = spec
+        self.variables = noise_variables(spec)
 
     async def run(self, server: Any, ns: int) -> None:
         """Write changes into `server` (an asyncua Server) until cancelled."""
@@ -124,25 +160,7 @@ class Noise:
         double = ua.VariantType.Double
         variant, datavalue = ua.Variant, ua.DataValue
         while True:
-            rate = self._rate
-            if rate <= 0:
-                self._wake.clear()
-                await self._wake.wait()
-                continue
-            if math.isinf(rate):
-                due = CHUNK
-            else:
-                now = time.monotonic()
-                since, base = self._pace
-                owed = (now - since) * rate - (self.written - base)
-                if owed > rate * MAX_CATCH_UP:  # fell behind: say so, and count afresh from now
-                    self.lagged += int(owed)
-                    self._pace = (now, self.written)
-                    owed = 0.0
-                if owed < 1:
-                    await asyncio.sleep(max(TICK, (1 - owed) / rate))
-                    continue
-                due = min(int(owed), CHUNK)
+            due = await self.owed()
             stamp = datetime.now(UTC)
             seq = self.written
             deadline = time.monotonic() + SLICE

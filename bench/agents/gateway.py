@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -38,7 +39,7 @@ async def main(args: argparse.Namespace) -> None:
             out = snapshot(gateway)
             out["running"] = not tasks[0].done()
             if injector is not None:
-                out["injector"] = injector.stats()
+                out["injector"] = dataclasses.asdict(injector.stats())
             return out
 
         def rate(request: dict[str, Any]) -> dict[str, Any]:
