@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import sys
 from datetime import datetime, timedelta, timezone
@@ -21,11 +20,8 @@ from typing import Any, TextIO
 
 from gateway.alarms.records import AlarmRecord
 from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
-from gateway.cli.check import report_config_error
-from gateway.config.loader import load
-from gateway.errors import ConfigError
+from gateway.cli.state_dir import resolve_state_dir
 
-DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhdw])\s*$")
 _UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400, "w": 604800}
 
@@ -70,23 +66,7 @@ def since_arg(text: str) -> datetime:
 
 
 def state_dir(args: argparse.Namespace) -> Path:
-    if args.state_dir is not None:
-        return Path(args.state_dir)
-    if args.config:
-        try:
-            return load(args.config).state_dir
-        except ConfigError as exc:
-            report_config_error(exc)
-            raise SystemExit(2) from None
-    env = os.environ.get("CNC_GATEWAY_STATE_DIR")
-    if env:
-        return Path(env)
-    found = [d for d in DEFAULT_STATE_DIRS if store_path(d).is_file()]
-    if not found:
-        return DEFAULT_STATE_DIRS[0]
-    chosen = max(found, key=lambda d: store_path(d).stat().st_mtime)
-    print(f"(alarms: {store_path(chosen)}; -c FILE or --state-dir to choose)", file=sys.stderr)
-    return chosen
+    return resolve_state_dir(args, "alarms", store_path)
 
 
 def handle_list(args: argparse.Namespace) -> int:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import sys
 from datetime import datetime, timedelta, timezone
@@ -16,11 +15,8 @@ from pathlib import Path
 
 from gateway.audit.entry import AuditEntry
 from gateway.audit.store import AuditStore, audit_path, iso
-from gateway.cli.check import report_config_error
-from gateway.config.loader import load
-from gateway.errors import ConfigError
+from gateway.cli.state_dir import resolve_state_dir
 
-DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
 _RELATIVE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhd])\s*$")
 _UNITS = {"s": "seconds", "m": "minutes", "h": "hours", "d": "days"}
 KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
@@ -57,23 +53,7 @@ def parse_since(text: str, now: datetime | None = None) -> datetime:
 
 
 def state_dir(args: argparse.Namespace) -> Path:
-    if args.state_dir is not None:
-        return args.state_dir
-    if args.config:
-        try:
-            return load(args.config).state_dir
-        except ConfigError as exc:
-            report_config_error(exc)
-            raise SystemExit(2) from None
-    env = os.environ.get("CNC_GATEWAY_STATE_DIR")
-    if env:
-        return Path(env)
-    found = [d for d in DEFAULT_STATE_DIRS if audit_path(d).is_file()]
-    if not found:
-        return DEFAULT_STATE_DIRS[0]
-    chosen = max(found, key=lambda d: audit_path(d).stat().st_mtime)
-    print(f"(audit: {audit_path(chosen)}; -c FILE or --state-dir to choose)", file=sys.stderr)
-    return chosen
+    return resolve_state_dir(args, "audit", audit_path)
 
 
 def handle_list(args: argparse.Namespace) -> int:

@@ -17,12 +17,10 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from gateway.cli.check import report_config_error
-from gateway.config.loader import Config, load
-from gateway.errors import ConfigError, JobError
+from gateway.cli.state_dir import load_config, resolve_state_dir
+from gateway.errors import JobError
 from gateway.jobs.queue import Job, JobQueue, JobState, parse_job_id
 
-DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
 PASSWORD_ENV = "CNC_INBOX_PASSWORD"
 
 
@@ -84,31 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 # --- finding the queue ------------------------------------------------------------------------------
 
 
-def load_config(args: argparse.Namespace) -> Config | None:
-    if not args.config:
-        return None
-    try:
-        return load(args.config)
-    except ConfigError as exc:
-        report_config_error(exc)
-        raise SystemExit(2) from None
-
-
 def state_dir(args: argparse.Namespace) -> Path:
-    if args.state_dir is not None:
-        return args.state_dir
-    config = load_config(args)
-    if config is not None:
-        return config.state_dir
-    env = os.environ.get("CNC_GATEWAY_STATE_DIR")
-    if env:
-        return Path(env)
-    found = [c for c in DEFAULT_STATE_DIRS if (c / "jobs" / "queue.sqlite3").is_file()]
-    if not found:
-        return DEFAULT_STATE_DIRS[0]
-    chosen = max(found, key=_last_written)  # ./state (cnc-gateway run) or ./state/demo (make demo)
-    print(f"(queue: {chosen / 'jobs' / 'queue.sqlite3'}; -c FILE or --state-dir to choose)", file=sys.stderr)
-    return chosen
+    return resolve_state_dir(args, "queue", lambda d: d / "jobs" / "queue.sqlite3", _last_written)
 
 
 def _last_written(state: Path) -> float:
