@@ -14,15 +14,14 @@ from __future__ import annotations
 
 import json
 import sqlite3
-import threading
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Self
+from typing import Any
 
 from gateway.alarms.records import ActiveAlarm, AlarmRecord, Kind, iso, parse_iso
 from gateway.errors import GatewayError
+from gateway.sqlite_file import SqliteFile
 
 SCHEMA_VERSION = 1
 FILE_NAME = "alarms.sqlite3"
@@ -90,71 +89,13 @@ def _record(row: sqlite3.Row) -> AlarmRecord:
     )
 
 
-class AlarmStore:
+class AlarmStore(SqliteFile):
     """The alarm file. `with AlarmStore(path) as store:` (or open()/close())."""
 
-    def __init__(self, path: Path, *, busy_timeout: float = 10.0) -> None:
-        self.path = Path(path)
-        self.busy_timeout = busy_timeout
-        self._db: sqlite3.Connection | None = None
-        self._lock = threading.RLock()
-
-    # --- lifecycle -------------------------------------------------------------------------------
-
-    def open(self, *, create: bool = True) -> Self:
-        if not create and not self.path.is_file():
-            raise AlarmStoreError(f"no alarm history at {self.path}")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        db = sqlite3.connect(self.path, timeout=self.busy_timeout, isolation_level=None, check_same_thread=False)
-        db.row_factory = sqlite3.Row
-        try:
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")  # an acknowledgement stays acknowledged through a power cut
-            db.execute(f"PRAGMA busy_timeout={int(self.busy_timeout * 1000)}")
-            version = db.execute("PRAGMA user_version").fetchone()[0]
-            if version > SCHEMA_VERSION:
-                raise AlarmStoreError(f"{self.path} was written by a newer cnc-gateway (schema {version})")
-            if version < SCHEMA_VERSION:
-                db.executescript(_SCHEMA)
-                db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-        except sqlite3.DatabaseError as exc:
-            db.close()
-            raise AlarmStoreError(f"cannot use the alarm history {self.path}: {exc}") from None
-        self._db = db
-        return self
-
-    def close(self) -> None:
-        with self._lock:
-            if self._db is not None:
-                self._db.close()
-                self._db = None
-
-    def __enter__(self) -> Self:
-        return self.open()
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
-    @property
-    def db(self) -> sqlite3.Connection:
-        if self._db is None:
-            raise AlarmStoreError("the alarm history is not open")
-        return self._db
-
-    @contextmanager
-    def _write(self) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            db = self.db
-            try:
-                db.execute("BEGIN IMMEDIATE")
-            except sqlite3.OperationalError as exc:
-                raise AlarmStoreError(f"the alarm history is busy: {exc}") from None
-            try:
-                yield db
-            except BaseException:
-                db.execute("ROLLBACK")
-                raise
-            db.execute("COMMIT")
+    noun = "alarm history"
+    schema = _SCHEMA
+    schema_version = SCHEMA_VERSION
+    error = AlarmStoreError
 
     # --- transitions -----------------------------------------------------------------------------
 

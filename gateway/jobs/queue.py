@@ -21,12 +21,10 @@ from __future__ import annotations
 
 import json
 import sqlite3
-import threading
 import time
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Literal, Self
+from typing import Any, Literal
 
 from gateway.errors import JobError
 from gateway.jobs.records import (
@@ -41,6 +39,7 @@ from gateway.jobs.records import (
     parse_job_id,
     parse_ts,
 )
+from gateway.sqlite_file import SqliteFile
 
 __all__ = ["ALLOWED", "TERMINAL", "Job", "JobQueue", "JobState", "Transition", "job_id", "parse_job_id"]
 
@@ -116,71 +115,17 @@ def _job(row: sqlite3.Row) -> Job:
     )
 
 
-class JobQueue:
+class JobQueue(SqliteFile):
     """The queue file. Open it with `with JobQueue(path) as q:` (or open()/close())."""
 
+    noun = "job queue"
+    schema = _SCHEMA
+    schema_version = SCHEMA_VERSION
+    error = JobError
+
     def __init__(self, path: Path, *, busy_timeout: float = 10.0, clock: Any = time.time) -> None:
-        self.path = Path(path)
-        self.busy_timeout = busy_timeout
+        super().__init__(path, busy_timeout=busy_timeout)
         self.clock = clock
-        self._db: sqlite3.Connection | None = None
-        self._lock = threading.RLock()
-
-    # --- lifecycle -------------------------------------------------------------------------------
-
-    def open(self) -> Self:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        db = sqlite3.connect(self.path, timeout=self.busy_timeout, isolation_level=None, check_same_thread=False)
-        db.row_factory = sqlite3.Row
-        try:
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")  # a delivered job stays delivered through a power cut
-            db.execute(f"PRAGMA busy_timeout={int(self.busy_timeout * 1000)}")
-            version = db.execute("PRAGMA user_version").fetchone()[0]
-            if version > SCHEMA_VERSION:
-                raise JobError(f"{self.path} was written by a newer cnc-gateway (schema {version})")
-            if version < SCHEMA_VERSION:  # a new file (later: migrations); otherwise opening takes no write lock
-                db.executescript(_SCHEMA)
-                db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-        except sqlite3.DatabaseError as exc:
-            db.close()
-            raise JobError(f"cannot use the job queue {self.path}: {exc}") from None
-        self._db = db
-        return self
-
-    def close(self) -> None:
-        with self._lock:
-            if self._db is not None:
-                self._db.close()
-                self._db = None
-
-    def __enter__(self) -> Self:
-        return self.open()
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
-    @property
-    def db(self) -> sqlite3.Connection:
-        if self._db is None:
-            raise JobError("the job queue is not open")
-        return self._db
-
-    @contextmanager
-    def _write(self) -> Iterator[sqlite3.Connection]:
-        """One write transaction, taken at once (BEGIN IMMEDIATE) so it never deadlocks on upgrade."""
-        with self._lock:
-            db = self.db
-            try:
-                db.execute("BEGIN IMMEDIATE")
-            except sqlite3.OperationalError as exc:
-                raise JobError(f"the job queue is busy: {exc}") from None
-            try:
-                yield db
-            except BaseException:
-                db.execute("ROLLBACK")
-                raise
-            db.execute("COMMIT")
 
     def _next_rev(self, db: sqlite3.Connection) -> int:
         db.execute("UPDATE meta SET value = value + 1 WHERE key = 'rev'")
