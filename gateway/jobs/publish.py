@@ -33,7 +33,6 @@ from gateway.model.tree import Machine, VariableNode, VariableTree
 
 NEVER = datetime(1601, 1, 1, tzinfo=timezone.utc)
 PROGRESS_EVERY = 0.5  # s between progress events of one job
-RETAINED_JOBS = JobsConfig.model_fields["mqtt_retained_jobs"].default
 
 
 def describe(job: Job | None) -> str:
@@ -65,15 +64,12 @@ class JobVariables:
 
 
 class JobPublisher:
-    def __init__(self, tree: VariableTree, machines: Mapping[str, JobsConfig] | Iterable[str]) -> None:
+    def __init__(self, tree: VariableTree, machines: Mapping[str, JobsConfig]) -> None:
         self.tree = tree
         self.vars = {name: JobVariables(tree.machines[name]) for name in machines}
         self._progress_at: dict[int, float] = {}
         # Per machine: how many ended jobs keep a retained record, and those that do (seq -> id), oldest first.
-        self.keep = {
-            name: machines[name].mqtt_retained_jobs if isinstance(machines, Mapping) else RETAINED_JOBS
-            for name in self.vars
-        }
+        self.keep = {name: jobs.mqtt_retained_jobs for name, jobs in machines.items()}
         self._ended: dict[str, OrderedDict[int, str]] = {name: OrderedDict() for name in self.vars}
 
     def summary(self, machine: str, *, waiting: int, failed: int, current: Job | None,
