@@ -6,7 +6,8 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test unit integration install system-deps schema soak bench clean
 
-$(STAMP): pyproject.toml
+# setup.py builds gateway/jobs/_plain.c (validation's compiled reader) in place; a change to it reinstalls.
+$(STAMP): pyproject.toml setup.py gateway/jobs/_plain.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
@@ -14,7 +15,7 @@ $(STAMP): pyproject.toml
 
 BENCH_STAMP := $(VENV)/.bench-installed
 
-$(BENCH_STAMP): $(STAMP) pyproject.toml
+$(BENCH_STAMP): $(STAMP)
 	$(BIN)/pip install --quiet -e '.[test,bench]'
 	touch $(BENCH_STAMP)
 

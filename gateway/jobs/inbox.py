@@ -27,14 +27,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import ssl
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Self
 
 from gateway.config.jobs import InboxConfig
 from gateway.errors import SinkError
 from gateway.jobs.accounts import Accounts
-from gateway.jobs.inbox_server import STAGING, InboxServer, Submit, Upload, UploadReply
+from gateway.jobs.inbox_server import STAGING, CheckUpload, InboxServer, Submit, Upload, UploadReply
 from gateway.jobs.paths import TMP
 
 __all__ = ["STAGING", "Inbox", "Submit", "Upload", "UploadReply", "tls_context"]
@@ -73,12 +73,14 @@ class Inbox:
         accounts: Accounts,
         submit: Submit,
         tls: ssl.SSLContext | None = None,
+        jobs_coming: Callable[[], None] | None = None,
+        check_upload: CheckUpload | None = None,
     ) -> None:
         self.config = config
         self.root = root
         self.machines = sorted(machines)
         self.port = config.port
-        self._server = InboxServer(config, root, accounts, submit, tls)
+        self._server = InboxServer(config, root, accounts, submit, tls, jobs_coming, check_upload)
         self._started = False
 
     @property

@@ -16,6 +16,7 @@ import os
 import ssl
 import time
 import uuid
+from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -26,8 +27,10 @@ from aioftp.server import AbstractUserManager, Connection, ConnectionConditions
 
 from gateway.config.jobs import InboxConfig
 from gateway.jobs.accounts import Accounts
+from gateway.jobs.file_check import ISOLATE_ABOVE as LARGE_UPLOAD
 from gateway.jobs.inbox_browse import BrowseCommands, Session, login_required, refusals, session_of
 from gateway.jobs.paths import InboxPath, PathRefused, resolve
+from gateway.jobs.upload_check import UploadCheck
 
 log = logging.getLogger("gateway.jobs.inbox")
 
@@ -51,6 +54,7 @@ class Upload:
     user: str
     client: str
     priority: int = 0
+    check: UploadCheck | None = None  # the content checked as it arrived (same size and digest), if it was
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,6 +65,26 @@ class UploadReply:
 
 
 Submit = Callable[[Upload], Awaitable[UploadReply]]
+#: A new UploadCheck for an upload to this machine's folder, or None (no checking while uploads arrive).
+CheckUpload = Callable[[str], "UploadCheck | None"]
+#: Uploads to temporary names whose checks wait for the rename that commits them.
+MAX_WAITING_CHECKS = 16
+
+
+@dataclass(frozen=True, slots=True)
+class _Checked:
+    """An upload to a temporary name, checked as it arrived; valid while the file is unchanged."""
+
+    machine: str
+    size: int
+    digest: str
+    stamp: tuple[int, int, int]  # (inode, size, mtime in ns) right after the upload
+    check: UploadCheck
+
+
+def _stamp(path: Path) -> tuple[int, int, int]:
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
 
 
 class _Users(AbstractUserManager):
@@ -83,7 +107,14 @@ class _Users(AbstractUserManager):
 
 class InboxServer(BrowseCommands, aioftp.Server):
     def __init__(
-        self, config: InboxConfig, root: Path, accounts: Accounts, submit: Submit, tls: ssl.SSLContext | None
+        self,
+        config: InboxConfig,
+        root: Path,
+        accounts: Accounts,
+        submit: Submit,
+        tls: ssl.SSLContext | None,
+        jobs_coming: Callable[[], None] | None = None,
+        check_upload: CheckUpload | None = None,
     ) -> None:
         super().__init__(
             _Users(root),
@@ -101,6 +132,11 @@ class InboxServer(BrowseCommands, aioftp.Server):
         self.root = root
         self.accounts = accounts
         self.submit = submit
+        #: Called when a client logs in and when an upload turns out large: the job service gets its
+        #: validation process ready (starting one takes a few tenths of a second; idempotent).
+        self.jobs_coming = jobs_coming
+        self.check_upload = check_upload
+        self._waiting: OrderedDict[Path, _Checked] = OrderedDict()
         self.commands_mapping.update(
             {
                 "size": self.size,
@@ -196,6 +232,8 @@ class InboxServer(BrowseCommands, aioftp.Server):
         connection.current_directory = PurePosixPath("/")
         folders = ", ".join(f"/{m}/" for m in sorted(account.machines)) or "none"
         log.info("inbox: %s logged in from %s", account.user, session.client)
+        if self.jobs_coming is not None:
+            self.jobs_coming()
         connection.response("230", f"logged in; machine folders: {folders}")
         return True
 
@@ -244,6 +282,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
     async def dele(self, connection: Connection, rest: str) -> bool:
         place, real, _ = self._existing_file(connection, rest)
         real.unlink()
+        self._waiting.pop(real, None)
         connection.response("250", f"{place.virtual} deleted")
         return True
 
@@ -264,20 +303,28 @@ class InboxServer(BrowseCommands, aioftp.Server):
         source_real = self._real(source)
         if not source_real.is_file():
             raise PathRefused(f"{source.virtual}: no such file")
+        waiting = self._waiting.pop(source_real, None)
         if target.is_temporary(self.config.temp_suffixes):
             if target_real.exists():
                 raise PathRefused(f"{target.virtual} exists")
             os.replace(source_real, target_real)
+            if waiting is not None:
+                self._waiting[target_real] = waiting
             connection.response("250", f"renamed to {target.virtual}")
             return True
         staging = self._staging()
         os.replace(source_real, staging)
-        size, digest = await asyncio.to_thread(_digest, staging)
+        check = None
+        if waiting is not None and waiting.machine == target.machine and waiting.stamp == _stamp(staging):
+            # Unchanged since it was checked on the way in: its size and digest are known too.
+            size, digest, check = waiting.size, waiting.digest, waiting.check
+        else:
+            size, digest = await asyncio.to_thread(_digest, staging)
         if size > self.config.max_file_size:
             staging.unlink(missing_ok=True)
             connection.response("552", f"{target.name} is larger than {int(self.config.max_file_size)} bytes")
             return True
-        reply = await self._commit(connection, target, staging, size, digest)
+        reply = await self._commit(connection, target, staging, size, digest, check)
         connection.response("250" if reply.ok else "550", reply.message)
         return True
 
@@ -321,14 +368,18 @@ class InboxServer(BrowseCommands, aioftp.Server):
             stream = await self._data_connection(connection)
             if stream is None:
                 return True
-            size, digest = await self._copy(stream, place, target, mode, offset)
+            self._waiting.pop(target, None)  # a new upload, an append or a resume: an earlier check is void
+            check = self.check_upload(place.machine) if self.check_upload and not offset and mode == "wb" else None
+            size, digest = await self._copy(stream, place, target, mode, offset, check)
             if temporary:
+                if check is not None:
+                    self._wait(target, _Checked(place.machine, size, digest, _stamp(target), check))
                 connection.response("226", f"stored {place.virtual}; rename it into /{place.machine}/ to submit it")
                 return True
             # A client killed mid-transfer closes both connections; wait to see the control one survive.
             await asyncio.sleep(COMMIT_GRACE)
             handed_over = True
-            reply = await self._commit(connection, place, target, size, digest)
+            reply = await self._commit(connection, place, target, size, digest, check)
             connection.response("226" if reply.ok else "550", reply.message)
             return True
         except _TooLarge:
@@ -355,13 +406,21 @@ class InboxServer(BrowseCommands, aioftp.Server):
             if not handed_over and not temporary:
                 target.unlink(missing_ok=True)
 
+    def _wait(self, path: Path, checked: _Checked) -> None:
+        """Keep the check of an upload to a temporary name for its rename (the oldest go beyond a few)."""
+        self._waiting[path] = checked
+        while len(self._waiting) > MAX_WAITING_CHECKS:
+            self._waiting.popitem(last=False)
+
     async def _copy(
-        self, stream: aioftp.StreamIO, place: InboxPath, target: Path, mode: str, offset: int
+        self, stream: aioftp.StreamIO, place: InboxPath, target: Path, mode: str, offset: int,
+        check: UploadCheck | None = None,
     ) -> tuple[int, str]:
-        """Data connection to file, within the size limit; (size, SHA-256) of what arrived."""
+        """Data connection to file, within the size limit, fed to `check` too; (size, SHA-256) of what arrived."""
         digest = hashlib.sha256()
         limit = int(self.config.max_file_size)
         size = offset
+        large = self.jobs_coming  # again, in case the validation process has died since the login
         with open(target, "r+b" if offset else mode) as out:
             if offset:
                 out.seek(offset)
@@ -371,13 +430,21 @@ class InboxServer(BrowseCommands, aioftp.Server):
                     size += len(block)
                     if size > limit:
                         raise _TooLarge
+                    if large is not None and size > LARGE_UPLOAD:
+                        large()  # the job service gets its validation process ready
+                        large = None
                     out.write(block)
                     digest.update(block)
+                    if check is not None:
+                        await check.feed(block)
             out.flush()
             os.fsync(out.fileno())
         return size, digest.hexdigest()
 
-    async def _commit(self, connection: Connection, place: InboxPath, staged: Path, size: int, digest: str) -> UploadReply:
+    async def _commit(
+        self, connection: Connection, place: InboxPath, staged: Path, size: int, digest: str,
+        check: UploadCheck | None = None,
+    ) -> UploadReply:
         session = session_of(connection)
         assert session is not None and session.account is not None and place.machine and place.name
         upload = Upload(
@@ -389,6 +456,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
             user=session.account.user,
             client=session.client,
             priority=session.priority,
+            check=check,
         )
         try:
             reply = await self.submit(upload)

@@ -20,6 +20,7 @@ Files under the state directory:
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 import logging
 import os
@@ -32,17 +33,19 @@ from typing import Any, Self, TypeVar
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import ConfigError, JobError, SinkError
+from gateway.jobs import compiled
 from gateway.jobs.accounts import Accounts
 from gateway.jobs.autostart import AutoStarter
 from gateway.jobs.controller_ftp import ProgramStore
 from gateway.jobs.delivery import DeliveryWorker
-from gateway.jobs.file_check import ISOLATE_ABOVE, validate_file
+from gateway.jobs.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
 from gateway.jobs.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
 from gateway.jobs.paths import PathRefused, check_file_name
 from gateway.jobs.programs import program_methods
 from gateway.jobs.publish import JobPublisher
 from gateway.jobs.queue import Job, JobQueue, JobState
 from gateway.jobs.threads import JobThreads
+from gateway.jobs.upload_check import UploadCheck
 from gateway.jobs.verdict import Verdict
 from gateway.model.tree import VariableTree
 
@@ -165,7 +168,17 @@ class JobService:
             log.warning("the FTP inbox is not started: the gateway file's inbox section has no accounts")
             return None
         tls = tls_context(self.config.state_dir, cfg.tls.cert, cfg.tls.key) if cfg.tls is not None else None
-        return Inbox(cfg, root=self.inbox_root, machines=self.machines, accounts=accounts, submit=self.submit, tls=tls)
+        return Inbox(
+            cfg, root=self.inbox_root, machines=self.machines, accounts=accounts, submit=self.submit, tls=tls,
+            jobs_coming=functools.partial(self.threads.warm, ready), check_upload=self._upload_check,
+        )
+
+    def _upload_check(self, machine: str) -> UploadCheck | None:
+        """A check for an upload as it streams in; None where the reader is pure Python (it would hold the
+        GIL for seconds: the validation process does that work instead)."""
+        if compiled.plain is None or machine not in self.machines:
+            return None
+        return UploadCheck(self.machines[machine].validation, self.threads.checking)
 
     async def run(self) -> None:
         """Deliver and publish until cancelled."""
@@ -219,14 +232,14 @@ class JobService:
             holder["job"] = job
             log.info("%s: %s received %s (%d bytes) from %s@%s", job.machine, job.id, job.filename, job.size,
                      upload.user, upload.client)
-            return await self._process(job)
+            return await self._process(job, upload.check)
         finally:
             self._processing[upload.machine] -= 1
 
-    async def _process(self, job: Job) -> UploadReply:
+    async def _process(self, job: Job, check: UploadCheck | None = None) -> UploadReply:
         """RECEIVED -> validated and QUEUED, or REJECTED with the reason (the file kept in rejected/)."""
         try:
-            return await self._validate_and_queue(job)
+            return await self._validate_and_queue(job, check)
         except asyncio.CancelledError:
             raise
         except Exception as exc:
@@ -237,12 +250,14 @@ class JobService:
                 pass
             return UploadReply(False, f"{job.id} could not be processed: {exc}", job.id)
 
-    async def _validate_and_queue(self, job: Job) -> UploadReply:
+    async def _validate_and_queue(self, job: Job, check: UploadCheck | None = None) -> UploadReply:
         rules = self.machines[job.machine].validation
         received = self.spool.received(job)
-        # Large programs in the validation process: seconds of CPU in a thread would stall the event loop.
-        run = self.threads.process if job.size > ISOLATE_ABOVE else self.threads.work
-        checked = await run(validate_file, received, self.spool.program(job), job.filename, rules)
+        checked = await self._checked_on_arrival(job, check) if check is not None else None
+        if checked is None:
+            # Large programs in the validation process: seconds of CPU in a thread would stall the event loop.
+            run = self.threads.process if job.size > ISOLATE_ABOVE else self.threads.work
+            checked = await run(validate_file, received, self.spool.program(job), job.filename, rules, job.sha256)
         verdict = checked.verdict
         if not verdict.accepted:
             reason = summarize(verdict)
@@ -273,6 +288,21 @@ class JobService:
         estimate = f", estimated {seconds:.0f} s" if isinstance(seconds, (int, float)) else ""
         log.info("%s: %s queued (%s%s)", job.machine, job.id, job.filename, estimate)
         return UploadReply(True, f"{job.id} queued for {job.machine}{estimate}", job.id)
+
+    async def _checked_on_arrival(self, job: Job, check: UploadCheck) -> Checked | None:
+        """The verdict of the check made as the upload arrived, the program stored; None to validate anew
+        (the check failed, or the program to deliver differs from the upload)."""
+        try:
+            verdict = await check.verdict(job.filename)
+        except Exception:
+            log.exception("%s: %s: the check on arrival failed; validating the stored upload", job.machine, job.id)
+            return None
+        if check.changed:
+            return None  # XON/XOFF bytes to strip: validate_file writes the program without them
+        if verdict.accepted and not await self.threads.work(link_durably, self.spool.received(job), self.spool.program(job)):
+            return None
+        size, digest = (job.size, job.sha256) if verdict.accepted else (0, "")
+        return Checked(verdict, size, digest, os.getpid())
 
     def _keep_rejected(self, job: Job, verdict: Verdict) -> None:
         target = self.rejected_dir / f"{job.id}-{job.filename}"

@@ -17,6 +17,7 @@ import unicodedata
 from dataclasses import dataclass, field
 
 from gateway.config.validation import ValidationRules
+from gateway.jobs import compiled
 from gateway.jobs.verdict import Rejection
 
 TEXT_BYTES = bytes(range(0x20, 0x7F)) + b"\t\n\r"
@@ -52,29 +53,45 @@ def line_column(data: bytes, index: int) -> tuple[int, int]:
     return line, index - start + 1
 
 
-def detect_binary(data: bytes) -> Rejection | None:
-    """One rejection for a file that is not text at all (an image, an archive, UTF-16), or None."""
+@dataclass
+class NulWatch:
+    """NUL bytes, a block of whole lines at a time: how many, and the line and column of the first."""
+
+    count: int = 0
+    first: tuple[int, int] | None = None
+
+    def block(self, raw: bytes, first_line: int, found: int) -> None:
+        """`found` NUL bytes are in `raw`, whose first line is `first_line`."""
+        if found and self.first is None:
+            line, column = line_column(raw, raw.find(0))
+            self.first = (first_line + line - 1, column)
+        self.count += found
+
+
+def detect_binary(head: bytes, nuls: NulWatch) -> Rejection | None:
+    """One rejection for a file that is not text at all (an image, an archive, UTF-16), or None.
+
+    `head` is the file's first SAMPLE bytes; `nuls` watched all of it.
+    """
     for magic, kind in MAGIC:
-        if data.startswith(magic):
+        if head.startswith(magic):
             return Rejection("binary", f"the file is {kind}, not a G-code program")
-    if data.startswith((b"\xff\xfe", b"\xfe\xff")) or _looks_utf16(data[:SAMPLE]):
+    sample = head[:SAMPLE]
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or _looks_utf16(sample):
         return Rejection(
             "encoding", "the file is UTF-16 text; save it as ASCII (or UTF-8) for the controller"
         )
-    sample = data[:SAMPLE]
     odd = len(sample) - len(sample.translate(None, BINARY_BYTES))
     odd += sample.decode("utf-8", errors="replace").count("\ufffd")
     binary = odd >= 16 and odd > BINARY_SHARE * len(sample)
-    nul = data.find(b"\x00")
-    if nul >= 0:
-        line, column = line_column(data, nul)
-        count = data.count(b"\x00")
+    if nuls.first is not None:
+        line, column = nuls.first
         what = (
             "this is a binary file, not a G-code program"
             if binary
             else "no G-code program holds one (padding from a transfer, or a binary file)"
         )
-        first = "NUL byte (0x00)" if count == 1 else f"the first of {count} NUL bytes (0x00)"
+        first = "NUL byte (0x00)" if nuls.count == 1 else f"the first of {nuls.count} NUL bytes (0x00)"
         return Rejection("binary", f"line {line}, column {column}: {first}: {what}", line, column)
     if binary:
         share = 100.0 * odd / len(sample)
@@ -118,60 +135,105 @@ class TextScan:
         return index + 1
 
 
-def scan_text(data: bytes, rules: ValidationRules) -> TextScan:
-    """Check encoding, characters, XON/XOFF bytes and line lengths; never raises."""
-    program = data
-    warnings: list[str] = []
-    if rules.xon_xoff == "strip" and data.translate(None, XON_XOFF) != data:
-        program = data.translate(None, XON_XOFF)
-        first = min(i for i in (data.find(bytes([b])) for b in XON_XOFF) if i >= 0)
-        warnings.append(
-            f"removed {len(data) - len(program)} XON/XOFF handshake bytes (DC1-DC4), the first at line "
-            f"{line_column(data, first)[0]}; the delivered program is without them"
-        )
-    lines = program.split(b"\n")
+class TextScanner:
+    """The character checks, a block of whole lines at a time (an upload is checked as it arrives).
+
+    `block` takes lines that end with LF (the last block may lack it) and returns
+    the text for the lexer, XON/XOFF bytes stripped where the rules say so;
+    `finish` returns what was found, in the order of the lines: every line-length
+    problem, then every character problem.
+    """
+
+    def __init__(self, rules: ValidationRules) -> None:
+        self.rules = rules
+        self.lengths: list[Rejection] = []
+        self.characters: list[Rejection] = []
+        self.removed: dict[int, list[int]] = {}
+        self.utf8_lines: list[int] = []
+        self.stripped = 0  # XON/XOFF bytes removed (xon_xoff: strip)
+        self.stripped_line: int | None = None  # where the first was
+
+    def block(self, raw: bytes, first: int, stats: tuple[int, bool, int, int]) -> str | bytes:
+        """Check the lines of `raw`, the first of them line `first`; `stats` are its `text_stats`.
+
+        Clean ASCII comes back as bytes (the readers take it as it is), anything else as the str to lex.
+        """
+        rules = self.rules
+        longest, clean, _, _ = stats
+        program = raw
+        if not clean and rules.xon_xoff == "strip":
+            program = raw.translate(None, XON_XOFF)
+            if len(program) != len(raw):
+                if self.stripped_line is None:
+                    index = min(i for i in (raw.find(bytes([b])) for b in XON_XOFF) if i >= 0)
+                    self.stripped_line = first + raw.count(b"\n", 0, index)
+                self.stripped += len(raw) - len(program)
+                longest, clean, _, _ = text_stats(program)
+        limit = rules.max_line_length
+        lines: list[bytes] = []
+        if longest > limit or not clean:
+            lines = program.split(b"\n")
+            if lines and lines[-1] == b"":
+                lines.pop()
+        if longest > limit:
+            for number, line in enumerate(lines, start=first):
+                size = len(line) - line.endswith(b"\r")
+                if size > limit:
+                    self.lengths.append(
+                        Rejection(
+                            "line-length",
+                            f"line {number} is {size} bytes long; this controller takes at most {limit}",
+                            number,
+                            limit + 1,
+                        )
+                    )
+        if clean:
+            return program
+        texts: list[str] = []
+        for number, line in enumerate(lines, start=first):
+            body = line[:-1] if line.endswith(b"\r") else line
+            if not body.translate(None, TEXT_BYTES) and b"\r" not in body:
+                texts.append(body.decode("ascii"))
+                continue
+            text, found, utf8, gone = _scan_line(number, body, rules)
+            texts.append(text)
+            self.characters.extend(found)
+            if gone:
+                self.removed[number] = gone
+            if utf8:
+                self.utf8_lines.append(number)
+        return "\n".join(texts) + ("\n" if program.endswith(b"\n") else "")
+
+    def finish(self) -> TextScan:
+        """What the blocks held; `text` and `program` are left empty (they went to the lexer)."""
+        warnings: list[str] = []
+        if self.stripped:
+            warnings.append(
+                f"removed {self.stripped} XON/XOFF handshake bytes (DC1-DC4), the first at line "
+                f"{self.stripped_line}; the delivered program is without them"
+            )
+        if self.utf8_lines:
+            lines = self.utf8_lines
+            more = f" and {len(lines) - 1} more" if len(lines) > 1 else ""
+            warnings.append(f"UTF-8 text in comments (line {lines[0]}{more}); utf8_comments allows it")
+        return TextScan("", b"", [*self.lengths, *self.characters], warnings, self.removed)
+
+
+def text_stats(data: bytes) -> tuple[int, bool, int, int]:
+    """The longest line (bytes, a CR before LF included), whether the text is clean ASCII, and how
+    many LF and NUL bytes it holds.
+
+    Clean: only printable ASCII, TAB, LF, and CR directly before LF. One pass in
+    the compiled module where it is built; a few bytes methods otherwise.
+    """
+    if compiled.plain is not None:
+        return compiled.plain.text_stats(data)  # type: ignore[no-any-return]
+    lines = data.split(b"\n")
     if lines and lines[-1] == b"":
         lines.pop()
-    rejections: list[Rejection] = []
-    limit = rules.max_line_length
-    if lines and max(map(len, lines)) > limit:
-        for number, raw in enumerate(lines, start=1):
-            size = len(raw) - raw.endswith(b"\r")
-            if size > limit:
-                rejections.append(
-                    Rejection(
-                        "line-length",
-                        f"line {number} is {size} bytes long; this controller takes at most {limit}",
-                        number,
-                        limit + 1,
-                    )
-                )
-    clean = not program.translate(None, TEXT_BYTES) and not _has_inner_cr(program)
-    if clean:
-        return TextScan(program.decode("ascii"), program, rejections, warnings)
-    texts: list[str] = []
-    utf8_lines: list[int] = []
-    removed: dict[int, list[int]] = {}
-    for number, raw in enumerate(lines, start=1):
-        body = raw[:-1] if raw.endswith(b"\r") else raw
-        if not body.translate(None, TEXT_BYTES) and b"\r" not in body:
-            texts.append(body.decode("ascii"))
-            continue
-        text, found, utf8, gone = _scan_line(number, body, rules)
-        texts.append(text)
-        rejections.extend(found)
-        if gone:
-            removed[number] = gone
-        if utf8:
-            utf8_lines.append(number)
-    if utf8_lines:
-        more = f" and {len(utf8_lines) - 1} more" if len(utf8_lines) > 1 else ""
-        warnings.append(f"UTF-8 text in comments (line {utf8_lines[0]}{more}); utf8_comments allows it")
-    return TextScan("\n".join(texts), program, rejections, warnings, removed)
-
-
-def _has_inner_cr(data: bytes) -> bool:
-    return data.count(b"\r") != data.count(b"\r\n")
+    longest = max(map(len, lines), default=0)
+    clean = not data.translate(None, TEXT_BYTES) and data.count(b"\r") == data.count(b"\r\n")
+    return longest, clean, data.count(b"\n"), 0 if clean else data.count(0)
 
 
 def comment_mask(text: str) -> list[bool]:

@@ -1,5 +1,6 @@
-"""The job queue's own workers: a thread for the queue file, two for checks and file copies, and one
-process, started on first use, for validating large programs.
+"""The job queue's own workers: a thread for the queue file, two for checks and file copies, one that
+checks uploads as they stream in, and one process for validating large programs otherwise, started
+when a client first logs in to the inbox.
 
 Blocking work (SQLite, reading and validating programs) runs off the event loop,
 but not in asyncio's shared default executor: that pool is small (cores + 4)
@@ -22,7 +23,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
@@ -33,6 +34,7 @@ class JobThreads:
     def __init__(self, workers: int = 2) -> None:
         self._queue = ThreadPoolExecutor(1, thread_name_prefix="jobs-queue")
         self._work = ThreadPoolExecutor(workers, thread_name_prefix="jobs-work")
+        self._check = ThreadPoolExecutor(1, thread_name_prefix="jobs-check")
         self._processes: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
         self._closed = False
@@ -44,6 +46,11 @@ class JobThreads:
     async def work(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         """Run file I/O or a validation."""
         return await asyncio.get_running_loop().run_in_executor(self._work, functools.partial(fn, *args, **kwargs))
+
+    def checking(self, fn: Callable[..., T], *args: Any) -> Future[T]:
+        """Run `fn(*args)` in the check thread, after every call submitted before it (uploads checked as
+        they stream in; see upload_check.py)."""
+        return self._check.submit(fn, *args)
 
     async def process(self, fn: Callable[..., T], *args: Any) -> T:
         """Run `fn(*args)` in the validation process (fn, args and result must pickle).
@@ -60,6 +67,21 @@ class JobThreads:
                     self._processes = None
             pool.shutdown(wait=False, cancel_futures=True)
             raise
+
+    def warm(self, ready: Callable[[], Any] = os.getpid) -> None:
+        """Start the validation process now, if it is not running: uploads are on their way.
+
+        Starting a Python process takes a few tenths of a second, as long as a large
+        upload takes on a LAN; started at the login, it is ready when the upload is
+        committed. The process then stays for the gateway's lifetime. `ready` is run
+        in it, so that what the first real call needs is imported by then.
+        """
+        try:
+            pool = self._pool()
+        except RuntimeError:
+            return  # shut down
+        if not getattr(pool, "_processes", None):
+            pool.submit(ready)
 
     def _pool(self) -> ProcessPoolExecutor:
         with self._lock:
@@ -82,6 +104,7 @@ class JobThreads:
             pool, self._processes = self._processes, None
         if pool is not None:
             await asyncio.to_thread(_stop_processes, pool)
+        await asyncio.to_thread(self._check.shutdown, True, cancel_futures=True)
         await asyncio.to_thread(self._work.shutdown, True, cancel_futures=True)
         await asyncio.to_thread(self._queue.shutdown, True, cancel_futures=True)
 

@@ -26,77 +26,186 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from collections.abc import Iterable
-from dataclasses import dataclass, field
 
-from gateway.codecs.gcode import (
-    Block,
-    GcodeError,
-    Plain,
-    Program,
-    format_number,
-    lex_line,
-    parse_program,
-    split_lines,
-)
+from gateway.codecs.gcode import lex_line, split_lines
 from gateway.config.validation import ValidationRules
-from gateway.jobs.estimate import Estimate, Extents, RunningEstimate
-from gateway.jobs.fast_read import read_text
+from gateway.jobs.estimate import Estimate, Extents
+from gateway.jobs.fast_read import read_ascii, read_text
 from gateway.jobs.file_names import check_file_name, split_name
-from gateway.jobs.text_checks import TextScan, detect_binary, scan_text
+from gateway.jobs.reading import Parsed, Reading, assemble
+from gateway.jobs.text_checks import (
+    SAMPLE,
+    XON_XOFF,
+    NulWatch,
+    TextScan,
+    TextScanner,
+    detect_binary,
+    text_stats,
+)
 from gateway.jobs.verdict import MAX_REJECTIONS, Rejection, Verdict, capped
 
-__all__ = ["Estimate", "Extents", "MAX_REJECTIONS", "Rejection", "Verdict", "validate_program"]
+__all__ = [
+    "MAX_REJECTIONS",
+    "Estimate",
+    "Extents",
+    "ProgramCheck",
+    "Rejection",
+    "Verdict",
+    "assemble",
+    "validate_program",
+]
 
 #: Warnings beyond this are summarised in one last warning.
 MAX_WARNINGS = 50
 _SINUMERIK_HEADER = re.compile(r"^_N_([A-Za-z0-9_]+)_([A-Za-z]{3})$")
+_CONTENT = re.compile(rb"[^ \t\n\r\x0b\x0c]")  # what bytes.strip() would keep
+#: Bytes held back before reading starts (the binary check looks at the first SAMPLE); tests lower it.
+_HEAD = SAMPLE
 
 
 def validate_program(data: bytes, filename: str, rules: ValidationRules) -> Verdict:
-    """Check `data`, to be stored as `filename` on a controller with these `rules`."""
-    rejections = check_file_name(filename, rules)
-    if len(data) > rules.max_size:
-        # Not read further: the inbox limits uploads too, and reading a huge file helps nobody.
-        rejections.append(
-            Rejection(
-                "size", f"the program is {len(data)} bytes; this machine takes at most {rules.max_size}"
+    """Check `data`, to be stored as `filename` on a controller with these `rules`.
+
+    The verdict's `program` is what would be delivered: `data` itself, or `data`
+    without its XON/XOFF bytes where the rules strip them.
+    """
+    check = ProgramCheck(rules)
+    check.feed(data)
+    verdict = check.finish(filename)
+    program = data.translate(None, XON_XOFF) if check.changed else data
+    return dataclasses.replace(verdict, program=program)
+
+
+class ProgramCheck:
+    """`validate_program` in pieces: `feed` the bytes as they arrive, then `finish` with the file name.
+
+    The inbox checks an upload while it streams in, so that a 50 MB program is
+    judged moments after its last byte instead of after another read of the whole
+    file. Pieces may split lines anywhere; lines are read once they are whole.
+    Nothing is read until the first SAMPLE bytes are in (they decide whether the
+    file is binary), nor beyond `max_size`, nor after a NUL byte. The tests feed
+    programs split at every offset and compare with the whole-file verdict.
+    """
+
+    def __init__(self, rules: ValidationRules) -> None:
+        self.rules = rules
+        self.size = 0
+        self.content = False  # any byte that is not white space
+        self.head = b""  # the first SAMPLE bytes
+        self.nuls = NulWatch()
+        self.scanner = TextScanner(rules)
+        self.reading = Reading(rules)
+        self._pending = b""  # bytes not read yet: the head while it is short, then a partial last line
+        self._started = False  # the head is complete and was looked at
+        self._scan = True  # False once the file is known to be binary by its head
+        self._line = 1  # the number of the next line to read
+
+    @property
+    def changed(self) -> bool:
+        """Whether the program to deliver differs from the bytes fed (XON/XOFF bytes stripped)."""
+        return self.scanner.stripped > 0 and self._scan and self.nuls.first is None and self.size <= self.rules.max_size
+
+    def feed(self, data: bytes) -> None:
+        if not data:
+            return
+        self.size += len(data)
+        if self.size > self.rules.max_size:
+            self._pending = b""  # judged by its size alone
+            return
+        if not self.content and _CONTENT.search(data):
+            self.content = True
+        if len(self.head) < SAMPLE:
+            self.head += data[: SAMPLE - len(self.head)]
+        buffer = self._pending + data if self._pending else data
+        if not self._started:
+            if self.size < _HEAD:
+                self._pending = buffer
+                return
+            self._start()
+        cut = buffer.rfind(b"\n") + 1
+        if cut == 0:
+            self._pending = buffer
+            return
+        block, self._pending = (buffer, b"") if cut == len(buffer) else (buffer[:cut], buffer[cut:])
+        self._block(block)
+
+    def finish(self, filename: str) -> Verdict:
+        """The verdict for everything fed, to be stored as `filename` (its `program` is empty)."""
+        rules = self.rules
+        rejections = check_file_name(filename, rules)
+        if self.size > rules.max_size:
+            # Not read further: the inbox limits uploads too, and reading a huge file helps nobody.
+            rejections.append(
+                Rejection(
+                    "size", f"the program is {self.size} bytes; this machine takes at most {rules.max_size}"
+                )
             )
-        )
-        return _verdict(rejections, [], data, None, None)
-    if not data.strip():
-        what = "the file is empty" if not data else "the file holds only blank lines"
-        rejections.append(Rejection("empty", what))
-        return _verdict(rejections, [], data, None, None)
-    binary = detect_binary(data)
-    if binary is not None:
-        rejections.append(binary)
-        return _verdict(rejections, [], data, None, None)
-    scan = scan_text(data, rules)
-    rejections.extend(scan.rejections)
-    warnings = list(scan.warnings)
-    reading = _Reading(rules)
-    read_text(reading, scan.text)
-    parsed = reading.parsed
-    skipped = _syntax(parsed, scan, rules, rejections, warnings)
-    _markers(parsed, rules, rejections, warnings)
-    if not reading.any_words:
-        rejections.append(
-            Rejection("empty", "the program has no blocks with codes, only comments, markers or blank lines")
-        )
-    else:
-        _end_code(reading, rules, rejections)
-    name = _program_name(parsed, filename, rules, rejections)
-    _forbidden(reading, scan, rules, rejections)
-    estimate = reading.estimate.result()
-    if skipped:
-        estimate = dataclasses.replace(
-            estimate,
-            exact=False,
-            notes=(*estimate.notes, f"{_lines(skipped)}: could not be read, so not estimated"),
-        )
-    warnings.extend(estimate.notes)
-    return _verdict(rejections, warnings, scan.program, estimate, name)
+            return _verdict(rejections, [], b"", None, None)
+        if not self._started:
+            self._start(final=True)
+        if self._pending:
+            pending, self._pending = self._pending, b""
+            self._block(pending)
+        if not self.content:
+            what = "the file is empty" if not self.size else "the file holds only blank lines"
+            rejections.append(Rejection("empty", what))
+            return _verdict(rejections, [], b"", None, None)
+        binary = detect_binary(self.head, self.nuls)
+        if binary is not None:
+            rejections.append(binary)
+            return _verdict(rejections, [], b"", None, None)
+        scan = self.scanner.finish()
+        rejections.extend(scan.rejections)
+        warnings = list(scan.warnings)
+        reading = self.reading
+        parsed = reading.parsed
+        skipped = _syntax(parsed, scan, rules, rejections, warnings)
+        _markers(parsed, rules, rejections, warnings)
+        if not reading.any_words:
+            rejections.append(
+                Rejection("empty", "the program has no blocks with codes, only comments, markers or blank lines")
+            )
+        else:
+            _end_code(reading, rules, rejections)
+        name = _program_name(parsed, filename, rules, rejections)
+        _forbidden(reading, scan, rejections)
+        estimate = reading.estimate.result()
+        if skipped:
+            estimate = dataclasses.replace(
+                estimate,
+                exact=False,
+                notes=(*estimate.notes, f"{_lines(skipped)}: could not be read, so not estimated"),
+            )
+        warnings.extend(estimate.notes)
+        return _verdict(rejections, warnings, b"", estimate, name)
+
+    def _start(self, final: bool = False) -> None:
+        """Reading begins: not at all if the head shows a binary file (magic, UTF-16, mostly not text).
+
+        A head cut short (only where tests lower _HEAD) decides nothing: `finish` judges the file.
+        """
+        self._started = True
+        if final or len(self.head) >= SAMPLE:
+            self._scan = detect_binary(self.head, NulWatch()) is None
+
+    def _block(self, raw: bytes) -> None:
+        """Read whole lines (the last block of a file may end without LF)."""
+        stats = text_stats(raw)
+        first = self._line
+        self._line += stats[2]
+        if stats[3]:
+            self.nuls.block(raw, first, stats[3])
+        if not self._scan or self.nuls.first is not None:
+            return  # the verdict is "binary" whatever the lines say
+        text = self.scanner.block(raw, first, stats)
+        reading = self.reading
+        before = len(reading.forbidden)
+        if isinstance(text, bytes):
+            read_ascii(reading, text, first)
+        else:
+            read_text(reading, text, first)
+        if len(reading.forbidden) > before:
+            _locate_forbidden(reading, before, text if isinstance(text, str) else text.decode("ascii"), first)
 
 
 def _verdict(
@@ -115,167 +224,6 @@ def _lines(numbers: list[int]) -> str:
     shown = ", ".join(str(n) for n in numbers[:10])
     more = f" and {len(numbers) - 10} more" if len(numbers) > 10 else ""
     return f"line {shown}" if len(numbers) == 1 else f"lines {shown}{more}"
-
-
-# --- the program's structure -------------------------------------------------------------------
-
-
-@dataclass
-class Parsed:
-    """A program as `parse_program` builds it, plus what validation needs to locate problems."""
-
-    program: Program
-    errors: list[GcodeError] = field(default_factory=list)
-    marker_lines: list[int] = field(default_factory=list)
-    first_line: int | None = None  # first non-blank line of the program
-    last_line: int | None = None  # last non-blank line before the closing %
-    name_line: int | None = None  # where the O-number or header name is
-    trailing: int = 0  # non-blank lines after the closing %
-
-
-def assemble(items: Iterable[Block | GcodeError]) -> Parsed:
-    """`parse_program`'s reading of the lexed lines, without stopping at the first error.
-
-    Lines with errors count as content and are left out of the blocks. A `%`
-    before any content starts the program (its header may name it); the next `%`
-    ends it, and what follows is never read by a controller.
-    """
-    assembler = _Assembler()
-    blocks = [item for item in items if assembler.take(item)]
-    return assembler.finish(tuple(blocks))  # type: ignore[arg-type]
-
-
-class _Assembler:
-    """`assemble` one line at a time: `take(item)` says whether the item is a block of the program.
-
-    Items are what `lex_compact` yields (Blocks, GcodeErrors, and Plain tuples for
-    ordinary lines, which are never markers, never block-deleted and never hold an O word).
-    """
-
-    def __init__(self) -> None:
-        self.out = Parsed(Program((), False, False))
-        self.start = self.end = self.seen_content = self.seen_words = False
-        self.number: int | None = None
-        self.name: str | None = None
-        self.lines = 0
-
-    def take(self, item: Plain | Block | GcodeError) -> bool:
-        out = self.out
-        if type(item) is tuple:
-            line, _, words, comments = item
-            blank = not words and not comments and item[1] is None
-            if self.end:
-                out.trailing += not blank
-                return False
-            self.lines += 1
-            if blank:
-                return False
-            out.first_line = out.first_line or line
-            out.last_line = line
-            self.seen_content = True
-            self.seen_words = self.seen_words or bool(words)
-            return True
-        if self.end:
-            if isinstance(item, GcodeError) or not item.is_blank:  # type: ignore[union-attr]
-                out.trailing += 1
-            return False
-        self.lines += 1
-        if isinstance(item, GcodeError):
-            out.errors.append(item)
-            self.seen_content = True
-            out.first_line = out.first_line or item.line
-            out.last_line = item.line
-            return False
-        assert isinstance(item, Block)
-        if item.marker:
-            out.marker_lines.append(item.line)
-            out.first_line = out.first_line or item.line
-            if not self.seen_content and not self.start:
-                self.start = True
-                header = parse_program(item.text)
-                self.number, self.name = header.program_number, header.program_name
-                if self.number is not None or self.name is not None:
-                    out.name_line = item.line
-                return False
-            self.end = True
-            return False
-        if item.is_blank:
-            return False
-        out.first_line = out.first_line or item.line
-        out.last_line = item.line
-        if not self.seen_words and self.number is None and item.words and item.words[0].letter == "O":
-            self.number = int(item.words[0].value) if item.words[0].value.is_integer() else None
-            self.name = self.name or (item.comments[0].strip() if item.comments else None) or None
-            self.out.name_line = item.line
-        self.seen_content = True
-        self.seen_words = self.seen_words or bool(item.words)
-        return True
-
-    def finish(self, blocks: tuple[Block, ...] = ()) -> Parsed:
-        self.out.program = Program(blocks, self.start, self.end, self.number, self.name, self.lines)
-        return self.out
-
-
-class _Reading:
-    """One pass over a lexed program that keeps no blocks: what `assemble` reads, plus the end
-    code, forbidden codes and the run-time estimate, so that memory does not grow with the
-    program (a 50 MB program is two and a half million blocks)."""
-
-    def __init__(self, rules: ValidationRules) -> None:
-        self.assembler = _Assembler()
-        self.estimate = RunningEstimate(
-            rapid_feed_mm_min=rules.rapid_feed, default_feed_mm_min=rules.default_feed, dwell_p=rules.dwell_p
-        )
-        self.end_codes = frozenset(rules.end_codes)
-        self.forbid_codes = frozenset(rules.forbid_codes)
-        self.any_words = False
-        self.end_block: tuple[int, str] | None = None  # (line, code) of the first block with an end code
-        self.after_end: int | None = None  # line of the first block with words after it
-        self.forbidden: list[tuple[int, int, str, Block | None]] = []  # (line, word index, code, block)
-        self._codes: dict[tuple[str, float], str] = {}
-
-    @property
-    def parsed(self) -> Parsed:
-        return self.assembler.finish()
-
-    def code(self, letter: str, value: float) -> str:
-        """`Word.code`, remembered: a program uses a handful of distinct G and M codes."""
-        key = (letter, value)
-        code = self._codes.get(key)
-        if code is None:
-            code = self._codes[key] = letter + format_number(value)
-        return code
-
-    def read(self, items: Iterable[Plain | Block | GcodeError]) -> None:
-        take = self.assembler.take
-        estimate = self.estimate.block
-        end_codes, forbid = self.end_codes, self.forbid_codes
-        for item in items:
-            if not take(item):
-                continue
-            if type(item) is tuple:
-                line, _, pairs, _ = item
-                block_delete = False
-                block = None
-            else:
-                line, block_delete, block = item.line, item.block_delete, item  # type: ignore[union-attr]
-                pairs = [(w.letter, w.value) for w in item.words]  # type: ignore[union-attr]
-            estimate(line, pairs, block_delete)
-            if not pairs:
-                continue
-            self.any_words = True
-            if self.end_block is not None:
-                if self.after_end is None:
-                    self.after_end = line
-            elif not block_delete and end_codes:
-                for letter, value in pairs:
-                    if (letter == "G" or letter == "M") and self.code(letter, value) in end_codes:
-                        self.end_block = (line, self.code(letter, value))
-                        break
-            if forbid:
-                for index, (letter, value) in enumerate(pairs):
-                    if (letter == "G" or letter == "M") and self.code(letter, value) in forbid:
-                        self.forbidden.append((line, index, self.code(letter, value), block))
 
 
 def _syntax(
@@ -355,7 +303,7 @@ def _markers(
         )
 
 
-def _end_code(reading: _Reading, rules: ValidationRules, rejections: list[Rejection]) -> None:
+def _end_code(reading: Reading, rules: ValidationRules, rejections: list[Rejection]) -> None:
     if rules.end_code == "optional":
         return
     names = " or ".join(rules.end_codes)
@@ -429,15 +377,18 @@ def _program_name(
     return own
 
 
-def _forbidden(reading: _Reading, scan: TextScan, rules: ValidationRules, rejections: list[Rejection]) -> None:
-    if not reading.forbidden:
-        return
-    lines: list[str] | None = None
+def _locate_forbidden(reading: Reading, since: int, text: str, first: int) -> None:
+    """Lex the plain lines (of `text`, from line `first`) that hold forbidden codes, for their columns."""
+    lines = split_lines(text)
+    for k in range(since, len(reading.forbidden)):
+        line, index, code, block = reading.forbidden[k]
+        if block is None:
+            reading.forbidden[k] = (line, index, code, lex_line(lines[line - first], line))
+
+
+def _forbidden(reading: Reading, scan: TextScan, rejections: list[Rejection]) -> None:
     for line, index, code, block in reading.forbidden:
-        if block is None:  # an ordinary line: lex it again for the word's column
-            if lines is None:
-                lines = split_lines(scan.text)
-            block = lex_line(lines[line - 1], line)
+        assert block is not None  # _locate_forbidden lexed it
         word = block.words[index]
         column = scan.original_column(line, word.column)
         rejections.append(

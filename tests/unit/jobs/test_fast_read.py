@@ -1,11 +1,15 @@
-"""The fast path of validation (gateway.jobs.fast_read) gives exactly the general path's verdicts.
+"""The fast paths of validation (gateway.jobs.fast_read) give exactly the general path's verdicts.
 
-Each program is validated twice, with the fast path on and forced off, and the
-verdicts must be equal: rejections, warnings, estimate numbers, extents, name.
+Each program is validated three times: with the fast path forced off, with the
+regex fast path alone, and with the compiled reader (`_plain.c`) in front of it.
+The verdicts must be equal: rejections, warnings, estimate numbers to the bit,
+extents, name.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,7 +20,7 @@ from hypothesis import strategies as st
 
 from bench.gcode_gen import laser_program
 from gateway.config.validation import ValidationRules
-from gateway.jobs import fast_read
+from gateway.jobs import compiled, fast_read, text_checks
 from gateway.jobs.validation import Verdict, validate_program
 from tests.unit.jobs.test_validation import CASES, header
 
@@ -24,23 +28,40 @@ DIALECTS = ("generic", "fanuc", "linuxcnc", "sinumerik", "laser-sim")
 
 
 @contextmanager
-def fast(enabled: bool, chunk: int | None = None) -> Iterator[None]:
-    saved = fast_read._ENABLED, fast_read._CHUNK
+def fast(enabled: bool, chunk: int | None = None, compiled_reader: bool = False) -> Iterator[None]:
+    saved = fast_read._ENABLED, fast_read._CHUNK, fast_read._COMPILED
     fast_read._ENABLED = enabled
     fast_read._CHUNK = chunk or saved[1]
+    fast_read._COMPILED = compiled_reader
     try:
         yield
     finally:
-        fast_read._ENABLED, fast_read._CHUNK = saved
+        fast_read._ENABLED, fast_read._CHUNK, fast_read._COMPILED = saved
 
 
 def both(data: bytes, name: str, rules: ValidationRules, chunk: int | None = None) -> Verdict:
+    """The general path, the regex fast path and the compiled reader agree; the latter's verdict."""
     with fast(False):
         general = validate_program(data, name, rules)
     with fast(True, chunk):
         quick = validate_program(data, name, rules)
     assert quick == general
-    return quick
+    if compiled.plain is None:
+        return quick
+    with fast(True, chunk, compiled_reader=True):
+        native = validate_program(data, name, rules)
+    assert native == general
+    return native
+
+
+needs_compiled = pytest.mark.skipif(compiled.plain is None, reason="the compiled reader is not built here")
+
+
+def test_the_compiled_reader_is_built_where_a_compiler_is() -> None:
+    """`pip install -e .` builds `_plain.c`; a silent fallback would cost thirty times the time."""
+    if compiled.plain is None and not (os.environ.get("CI") or shutil.which("cc") or shutil.which("gcc")):
+        pytest.skip("no C compiler here: the pure-Python readers do the work")
+    assert compiled.plain is not None, "gateway/jobs/_plain.c was not built: run `pip install -e .` again"
 
 
 @pytest.mark.parametrize("path", CASES, ids=lambda p: p.name)
@@ -74,17 +95,76 @@ def test_the_fast_path_reads_most_of_a_plain_program() -> None:
 
     fast_read._FastReader.store = counting  # type: ignore[method-assign]
     try:
-        verdict = validate_program(data, "O13.nc", rules)
+        with fast(True):
+            verdict = validate_program(data, "O13.nc", rules)
     finally:
         fast_read._FastReader.store = original  # type: ignore[method-assign]
     assert verdict.estimate is not None
     assert taken > 0.9 * verdict.estimate.blocks
 
 
+@needs_compiled
+def test_the_compiled_reader_reads_most_of_a_plain_program() -> None:
+    """Not a timing: the compiled reader must take nearly every block of a nest itself."""
+    data = laser_program(60_000, seed=9, number=14)
+    rules = ValidationRules.for_dialect("laser-sim")
+    assert compiled.plain is not None
+    original, taken = compiled.plain.read_rows, 0
+
+    def counting(*args: object) -> tuple[int, int, int, int, int, bool]:
+        nonlocal taken
+        result = original(*args)  # type: ignore[arg-type]
+        taken += result[2]
+        return result  # type: ignore[no-any-return]
+
+    compiled.plain.read_rows = counting
+    try:
+        with fast(True, compiled_reader=True):
+            verdict = validate_program(data, "O14.nc", rules)
+    finally:
+        compiled.plain.read_rows = original
+    assert verdict.estimate is not None
+    assert taken > 0.99 * verdict.estimate.blocks
+
+
+@needs_compiled
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G1 X0.1234567890123456789012 Y1\n",  # more digits than the exact conversion takes
+        "G1 X123456789012345678901234567890 Y2\n",  # 30 integer digits
+        "G1 X1234567890123456789012345678901 Y2\n",  # 31: not a plain block
+        "G1 X0.00000000000000000000000001 Y1\n",  # a fraction beyond 1e-22
+        "G1 X9007199254740993 Y1\n",  # above 2**53
+        "G1 X-0 Y-0.0 M100\n",  # negative zeros, an M code beyond the table
+        "G1 X1 Y1 M123456789\nG1 X1 Y1 M1234567890\n",
+        "G1 X1\r\nG1 Y2\r\r\nG1 X3",  # CR LF, a stray CR, no final LF
+        "G1 X1 Y1 S.\nG1 X2 S-.5\n",
+    ],
+)
+def test_awkward_numbers_and_lines_read_the_same(text: str) -> None:
+    program = "G21 G90\nG0 X0 Y0 Z0\nG1 F1000\n" + text + "\nG1 X5 Y5\nM30\n"
+    both(program.encode(), "job.nc", ValidationRules.for_dialect("generic"))
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"", b"\n", b"G1\n", b"G1 X1\r\nG2", b"G1\rX\n", b"ab\tc\n\x7f\n", b"a\r", b"\xc3\xa9\n", b"x" * 300 + b"\n",
+        b"G1\x00X\n\x00\n", b"\x00", b"\x11G1\n",
+    ],
+)
+def test_text_stats_agree_with_the_python_reading(data: bytes, monkeypatch: pytest.MonkeyPatch) -> None:
+    native = text_checks.text_stats(data)
+    monkeypatch.setattr(compiled, "plain", None)
+    assert text_checks.text_stats(data) == native
+
+
 # --- generated programs ------------------------------------------------------------------------
 
 NUMBERS = st.one_of(
     st.integers(-3000, 3000).map(str),
+    st.decimals(-1e6, 1e6, allow_nan=False, allow_infinity=False, places=25).map(lambda d: f"{d:f}"),
     st.floats(-3000, 3000, allow_nan=False).map(lambda v: f"{v:.3f}"),
     st.sampled_from(
         ["0", "-0", "0.", ".5", "-.5", "10.", "1e3", "1.2.3", "1-2", "", "-", "9" * 40, "+1", "50000"]
@@ -216,3 +296,17 @@ def program(draw: st.DrawFn) -> tuple[bytes, ValidationRules]:
 def test_generated_programs_read_the_same(case: tuple[bytes, ValidationRules], chunk: int | None) -> None:
     data, rules = case
     both(data, "job.nc", rules, chunk)
+
+
+@needs_compiled
+@settings(max_examples=2000, deadline=None)
+@given(st.lists(st.sampled_from([b"G1 X1.5", b"\n", b"\r", b"\r\n", b"\t", b"\x00", b"\x7e", b"\x7f", b"\x80",
+                                 b"\x1f", b"\x20", b"\xc3\xa9", b"\x11", bytes(range(0x20, 0x7f))]), max_size=60))
+def test_text_stats_agree_with_the_python_reading_on_any_bytes(parts: list[bytes]) -> None:
+    data = b"".join(parts)
+    native = text_checks.text_stats(data)
+    saved, compiled.plain = compiled.plain, None
+    try:
+        assert text_checks.text_stats(data) == native
+    finally:
+        compiled.plain = saved
