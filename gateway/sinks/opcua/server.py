@@ -43,7 +43,7 @@ from gateway.model.sample import utcnow
 from gateway.auth.users import UserDirectory
 from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
 from gateway.sinks.opcua.address_space import AddressSpacePlan
-from gateway.sinks.opcua.asyncua_tuning import keep_written_values
+from gateway.sinks.opcua.asyncua_tuning import SharedAttributes, keep_written_values
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -256,6 +256,7 @@ class OpcUaSink:
         self.certificates: ClientCertificates | None = None
         self._methods: dict[ua.NodeId, tuple[Machine, Method]] = {}
         self._server: Server | None = None
+        self._shared: SharedAttributes | None = None
         self._plan: AddressSpacePlan | None = None
         self._sub: Subscription | None = None
         self._vars: dict[VariableNode, _Variable] = {}
@@ -300,6 +301,8 @@ class OpcUaSink:
                         f"OPC UA server refused node {item.RequestedNewNodeId.to_string()}: {result.StatusCode.name}"
                     )
                 added.append(result.AddedNodeId)
+            if self._shared is not None:
+                self._shared.share(added[-len(chunk) :])
             await asyncio.sleep(0)
         return added
 
@@ -373,6 +376,8 @@ class OpcUaSink:
         server.product_uri = "urn:cnc-gateway"
         server.manufacturer_name = "cnc-gateway"
         await server.init()
+        self._shared = SharedAttributes(server)
+        self._shared.share()  # the standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py)
         await server.set_application_uri(self.application_uri)
         await server.set_build_info(server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow())
         server.set_endpoint(self.endpoint)

@@ -167,6 +167,33 @@ async def test_variable_attributes_by_browse_path(env: Env) -> None:
     assert (rng.Low, rng.High) == (0.0, 3000.0)
 
 
+async def test_equal_constant_attributes_are_one_object_and_stay_apart_when_set(env: Env) -> None:
+    """Memory: the two Double positions share their ValueRank, DataType, ... DataValues (asyncua_tuning.py);
+    setting one node's attribute replaces its value only, and clients read each node's own."""
+    nodes = env.sink.server.iserver.aspace._nodes
+    x = nodes[ua.NodeId("laser/Axes/X/Position", 2)].attributes
+    y = nodes[ua.NodeId("laser/Axes/Y/Position", 2)].attributes
+    for attribute in (ua.AttributeIds.ValueRank, ua.AttributeIds.DataType, ua.AttributeIds.AccessLevel,
+                      ua.AttributeIds.WriteMask, ua.AttributeIds.Historizing):
+        assert x[attribute].value is y[attribute].value, attribute.name
+    target = nodes[ua.NodeId("laser/Axes/X/Target", 2)].attributes
+    assert x[ua.AttributeIds.AccessLevel].value is not target[ua.AttributeIds.AccessLevel].value  # not equal
+    shared = y[ua.AttributeIds.MinimumSamplingInterval].value
+    await env.sink.server.write_attribute_value(
+        ua.NodeId("laser/Axes/X/Position", 2), ua.DataValue(ua.Variant(250.0, ua.VariantType.Double)),
+        ua.AttributeIds.MinimumSamplingInterval,
+    )
+    try:
+        assert y[ua.AttributeIds.MinimumSamplingInterval].value is shared
+        read = await env.client.read_attributes(
+            [await env.var("laser", "Axes/X/Position"), await env.var("laser", "Axes/Y/Position")],
+            ua.AttributeIds.MinimumSamplingInterval,
+        )
+        assert [dv.Value.Value for dv in read] == [250.0, shared.Value.Value]
+    finally:
+        x[ua.AttributeIds.MinimumSamplingInterval].value = shared
+
+
 async def test_writable_variable_and_unknown_unit(env: Env) -> None:
     target = await env.var("laser", "Axes/X/Target")
     read_write = ua.AccessLevel.CurrentRead.mask | ua.AccessLevel.CurrentWrite.mask
