@@ -38,7 +38,7 @@ class Settings:
     def full(cls) -> Settings:
         return cls(
             quick=False, warmup=2.0, window=6.0, repeats=3,
-            mirror_sizes=[1000, 10000], mirror_rates=[1000, 5000, 10000, 15000, MAX],
+            mirror_sizes=[1000, 10000], mirror_rates=[1000, 5000, 10000, 15000, 17500, 20000, MAX],
             mirror_qos=[0, 1], mirror_sources=["opcua", "inproc"], naive_rates=[1000, 5000, MAX],
             scale_machines=20, scale_per_machine=500, scale_phase=5.0,
             jobs_small=50, jobs_small_size=100_000, jobs_large_size=50_000_000,
