@@ -150,8 +150,18 @@ def test_awkward_numbers_and_lines_read_the_same(text: str) -> None:
 @pytest.mark.parametrize(
     "data",
     [
-        b"", b"\n", b"G1\n", b"G1 X1\r\nG2", b"G1\rX\n", b"ab\tc\n\x7f\n", b"a\r", b"\xc3\xa9\n", b"x" * 300 + b"\n",
-        b"G1\x00X\n\x00\n", b"\x00", b"\x11G1\n",
+        b"",
+        b"\n",
+        b"G1\n",
+        b"G1 X1\r\nG2",
+        b"G1\rX\n",
+        b"ab\tc\n\x7f\n",
+        b"a\r",
+        b"\xc3\xa9\n",
+        b"x" * 300 + b"\n",
+        b"G1\x00X\n\x00\n",
+        b"\x00",
+        b"\x11G1\n",
     ],
 )
 def test_text_stats_agree_with_the_python_reading(data: bytes, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -300,8 +310,29 @@ def test_generated_programs_read_the_same(case: tuple[bytes, ValidationRules], c
 
 @needs_compiled
 @settings(max_examples=2000, deadline=None)
-@given(st.lists(st.sampled_from([b"G1 X1.5", b"\n", b"\r", b"\r\n", b"\t", b"\x00", b"\x7e", b"\x7f", b"\x80",
-                                 b"\x1f", b"\x20", b"\xc3\xa9", b"\x11", bytes(range(0x20, 0x7f))]), max_size=60))
+@given(
+    st.lists(
+        st.sampled_from(
+            [
+                b"G1 X1.5",
+                b"\n",
+                b"\r",
+                b"\r\n",
+                b"\t",
+                b"\x00",
+                b"\x7e",
+                b"\x7f",
+                b"\x80",
+                b"\x1f",
+                b"\x20",
+                b"\xc3\xa9",
+                b"\x11",
+                bytes(range(0x20, 0x7F)),
+            ]
+        ),
+        max_size=60,
+    )
+)
 def test_text_stats_agree_with_the_python_reading_on_any_bytes(parts: list[bytes]) -> None:
     data = b"".join(parts)
     native = text_checks.text_stats(data)
@@ -310,3 +341,16 @@ def test_text_stats_agree_with_the_python_reading_on_any_bytes(parts: list[bytes
         assert text_checks.text_stats(data) == native
     finally:
         compiled.plain = saved
+
+
+GCODE_ALPHABET = "GXYZIJRFMS0123456789.- \n\r\t%()/;Na"
+
+
+@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.one_of(st.text(alphabet=GCODE_ALPHABET, max_size=400).map(str.encode), st.binary(max_size=200)),
+    st.sampled_from(DIALECTS),
+)
+def test_arbitrary_text_reads_the_same_and_never_crashes(data: bytes, dialect: str) -> None:
+    """Fuzzing the compiled reader against the Python readers with G-code's own letters in any order."""
+    both(b"G21 G90\nG0 X0 Y0 Z0\nG1 F1000\n" + data, "job.nc", ValidationRules.for_dialect(dialect))
