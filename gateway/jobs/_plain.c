@@ -129,6 +129,16 @@ typedef struct {
 enum { WX, WY, WZ, WI, WJ, WR, WF, WS };
 static const char LETTERS[] = "XYZIJRF";
 
+/* Where the value of word `letter` begins, if the block goes on with it at p (after one optional space). */
+static inline const unsigned char *
+word(const unsigned char *p, const unsigned char *end, char letter)
+{
+    if (p < end && *p == ' ') {
+        p++;
+    }
+    return p < end && *p == (unsigned char)letter ? p + 1 : NULL;
+}
+
 /*
  * Whether [p, end) is a plain block as fast_read._ROW reads one: upper-case words in
  * the order G X Y Z I J R F M S, each at most once, single spaces between them at
@@ -153,59 +163,36 @@ parse_row(const unsigned char *p, const unsigned char *end, Row *row, PyThreadSt
         p += 2;
         any = 1;
     }
+    const unsigned char *q;
     for (int k = 0; k < 7; k++) {
-        const unsigned char *q = p;
-        if (q < end && *q == ' ') {
-            q++;
-        }
-        if (q < end && *q == (unsigned char)LETTERS[k]) {
-            q = number(q + 1, end, &row->v[k], released);
-            if (q == NULL) {
+        if ((q = word(p, end, LETTERS[k])) != NULL) {
+            if ((p = number(q, end, &row->v[k], released)) == NULL) {
                 return 0;
             }
-            row->has[k] = 1;
-            p = q;
-            any = 1;
+            row->has[k] = any = 1;
         }
     }
-    {
-        const unsigned char *q = p;
-        if (q < end && *q == ' ') {
-            q++;
-        }
-        if (q < end && *q == 'M') {
-            q++;
-            long m = 0;
-            int count = 0;
-            while (q < end && is_digit(*q)) {
-                if (++count > 9) {
-                    return 0;
-                }
-                m = m * 10 + (*q - '0');
-                q++;
-            }
-            if (!count) {
+    if ((q = word(p, end, 'M')) != NULL) {
+        long m = 0;
+        int count = 0;
+        for (; q < end && is_digit(*q); q++) {
+            if (++count > 9) {
                 return 0;
             }
-            row->m = m;
-            p = q;
-            any = 1;
+            m = m * 10 + (*q - '0');
         }
+        if (!count) {
+            return 0;
+        }
+        row->m = m;
+        p = q;
+        any = 1;
     }
-    {
-        const unsigned char *q = p;
-        if (q < end && *q == ' ') {
-            q++;
+    if ((q = word(p, end, 'S')) != NULL) {
+        if ((p = number(q, end, &row->v[WS], released)) == NULL) {
+            return 0;
         }
-        if (q < end && *q == 'S') {
-            q = number(q + 1, end, &row->v[WS], released);
-            if (q == NULL) {
-                return 0;
-            }
-            row->has[WS] = 1;
-            p = q;
-            any = 1;
-        }
+        row->has[WS] = any = 1;
     }
     return any && p == end;
 }
@@ -320,6 +307,17 @@ make_arc(double mo, double px, double py, double pz, double tx, double ty, doubl
     return 1;
 }
 
+/* The extents reach (x, y, z): fast_read's `lox = x if x < lox else lox` per axis, NaN and all. */
+static inline void
+extend(double *lo, double *hi, double x, double y, double z)
+{
+    const double point[3] = {x, y, z};
+    for (int k = 0; k < 3; k++) {
+        lo[k] = point[k] < lo[k] ? point[k] : lo[k];
+        hi[k] = point[k] > hi[k] ? point[k] : hi[k];
+    }
+}
+
 static inline double arc_length(const Arc *arc) { return distance(0.5 * (arc->r0 + arc->r1) * arc->sweep, arc->dw); }
 
 static inline int all_finite(const double *v, int n)
@@ -381,7 +379,7 @@ read_blocks(const unsigned char *p, const unsigned char *end, const Params *prm,
                     fe = rapid;
                 }
             }
-            double nlox = lox, nloy = loy, nloz = loz, nhix = hix, nhiy = hiy, nhiz = hiz;
+            double nlo[3] = {lox, loy, loz}, nhi[3] = {hix, hiy, hiz};
             double ncut_mm = cut_mm, nrapid_mm = rapid_mm, ncut_s = cut_s, nrapid_s = rapid_s;
             if (mo < 2.0) {
                 double square = 0.0, d;
@@ -416,32 +414,21 @@ read_blocks(const unsigned char *p, const unsigned char *end, const Params *prm,
                     if (offset <= arc.sweep) {
                         double f = arc.sweep ? offset / arc.sweep : 0.0;
                         double r = arc.r0 + (arc.r1 - arc.r0) * (1.0 < f ? 1.0 : f);
-                        double pu = arc.cu + r * COS[k], pv = arc.cv + r * SIN[k];
-                        nlox = pu < nlox ? pu : nlox;
-                        nhix = pu > nhix ? pu : nhix;
-                        nloy = pv < nloy ? pv : nloy;
-                        nhiy = pv > nhiy ? pv : nhiy;
-                        nloz = pz < nloz ? pz : nloz;
-                        nhiz = pz > nhiz ? pz : nhiz;
+                        extend(nlo, nhi, arc.cu + r * COS[k], arc.cv + r * SIN[k], pz);
                     }
                 }
                 double length = arc_length(&arc);
                 ncut_mm += length;
                 ncut_s += length / fe * 60.0;
             }
-            nlox = tx < nlox ? tx : nlox;
-            nhix = tx > nhix ? tx : nhix;
-            nloy = ty < nloy ? ty : nloy;
-            nhiy = ty > nhiy ? ty : nhiy;
-            nloz = tz < nloz ? tz : nloz;
-            nhiz = tz > nhiz ? tz : nhiz;
+            extend(nlo, nhi, tx, ty, tz);
             {
-                double check[13] = {tx, ty, tz, nlox, nloy, nloz, nhix, nhiy, nhiz, ncut_mm, nrapid_mm, ncut_s, nrapid_s};
+                double check[13] = {tx, ty, tz, nlo[0], nlo[1], nlo[2], nhi[0], nhi[1], nhi[2], ncut_mm, nrapid_mm, ncut_s, nrapid_s};
                 if (!all_finite(check, 13)) {
                     break; /* Python says what overflowed */
                 }
             }
-            lox = nlox, loy = nloy, loz = nloz, hix = nhix, hiy = nhiy, hiz = nhiz;
+            lox = nlo[0], loy = nlo[1], loz = nlo[2], hix = nhi[0], hiy = nhi[1], hiz = nhi[2];
             cut_mm = ncut_mm, rapid_mm = nrapid_mm, cut_s = ncut_s, rapid_s = nrapid_s;
             px = tx, py = ty, pz = tz;
             motion = mo;
