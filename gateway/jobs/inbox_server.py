@@ -27,7 +27,6 @@ from aioftp.server import AbstractUserManager, Connection, ConnectionConditions
 
 from gateway.config.jobs import InboxConfig
 from gateway.jobs.accounts import Accounts
-from gateway.jobs.file_check import ISOLATE_ABOVE as LARGE_UPLOAD
 from gateway.jobs.inbox_browse import BrowseCommands, Session, login_required, refusals, session_of
 from gateway.jobs.paths import InboxPath, PathRefused, resolve
 from gateway.jobs.upload_check import UploadCheck
@@ -132,8 +131,8 @@ class InboxServer(BrowseCommands, aioftp.Server):
         self.root = root
         self.accounts = accounts
         self.submit = submit
-        #: Called when a client logs in and when an upload turns out large: the job service gets its
-        #: validation process ready (starting one takes a few tenths of a second; idempotent).
+        #: Called when a client logs in: the job service gets its validation process ready (starting
+        #: one takes a few tenths of a second; idempotent, and a process that died is started anew).
         self.jobs_coming = jobs_coming
         self.check_upload = check_upload
         self._waiting: OrderedDict[Path, _Checked] = OrderedDict()
@@ -420,7 +419,6 @@ class InboxServer(BrowseCommands, aioftp.Server):
         digest = hashlib.sha256()
         limit = int(self.config.max_file_size)
         size = offset
-        large = self.jobs_coming  # again, in case the validation process has died since the login
         with open(target, "r+b" if offset else mode) as out:
             if offset:
                 out.seek(offset)
@@ -430,9 +428,6 @@ class InboxServer(BrowseCommands, aioftp.Server):
                     size += len(block)
                     if size > limit:
                         raise _TooLarge
-                    if large is not None and size > LARGE_UPLOAD:
-                        large()  # the job service gets its validation process ready
-                        large = None
                     out.write(block)
                     digest.update(block)
                     if check is not None:

@@ -80,7 +80,6 @@ class SharedAttributes:
     def __init__(self, server: Any) -> None:
         self._nodes: dict[Any, Any] = server.iserver.aspace._nodes
         self._canonical: dict[tuple[Any, ...], Any] = {}
-        self.dropped = 0
 
     def share(self, nodeids: Any = None) -> int:
         """Share the constant attributes of these nodes (all nodes if None); how many DataValues were dropped."""
@@ -99,7 +98,6 @@ class SharedAttributes:
                 if shared is not value:
                     held.value = shared
                     dropped += 1
-        self.dropped += dropped
         return dropped
 
 

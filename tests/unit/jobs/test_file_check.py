@@ -18,7 +18,7 @@ import pytest
 
 from bench.gcode_gen import laser_program
 from gateway.config.validation import ValidationRules
-from gateway.jobs.file_check import ISOLATE_ABOVE, validate_file
+from gateway.jobs.file_check import ISOLATE_ABOVE, Checked, validate_file
 from gateway.jobs.threads import JobThreads
 from gateway.jobs.validation import validate_program
 from tests.waiting import wait_until
@@ -27,14 +27,19 @@ RULES = ValidationRules.model_validate({"dialect": "laser-sim"})
 LARGE = laser_program(2 * ISOLATE_ABOVE, seed=3, number=4321)
 
 
-async def test_a_large_program_is_validated_in_another_process_with_the_same_verdict(tmp_path: Path) -> None:
-    source, destination = tmp_path / "job.received", tmp_path / "job.program"
-    source.write_bytes(LARGE)
+async def in_process(data: bytes, source: Path, destination: Path) -> Checked:
+    """`data` uploaded to `source`, validated as O4321.nc in the validation process."""
+    source.write_bytes(data)
     threads = JobThreads()
     try:
-        checked = await threads.process(validate_file, source, destination, "O4321.nc", RULES)
+        return await threads.process(validate_file, source, destination, "O4321.nc", RULES)
     finally:
         await threads.shutdown()
+
+
+async def test_a_large_program_is_validated_in_another_process_with_the_same_verdict(tmp_path: Path) -> None:
+    source, destination = tmp_path / "job.received", tmp_path / "job.program"
+    checked = await in_process(LARGE, source, destination)
     expected = validate_program(LARGE, "O4321.nc", RULES)
     assert len(LARGE) > ISOLATE_ABOVE
     assert checked.pid != os.getpid()
@@ -51,12 +56,7 @@ async def test_a_rejected_large_program_is_still_rejected_with_its_reason(tmp_pa
     lines[middle] = lines[middle] + b" #1"  # a parameter, which laser-sim rules reject
     bad = b"\n".join(lines).replace(b"M30\n", b"")  # and no end code
     source, destination = tmp_path / "bad.received", tmp_path / "bad.program"
-    source.write_bytes(bad)
-    threads = JobThreads()
-    try:
-        checked = await threads.process(validate_file, source, destination, "O4321.nc", RULES)
-    finally:
-        await threads.shutdown()
+    checked = await in_process(bad, source, destination)
     expected = validate_program(bad, "O4321.nc", RULES)
     assert checked.pid != os.getpid()
     assert not checked.verdict.accepted
