@@ -131,7 +131,7 @@ def handle_decode(args: argparse.Namespace) -> int:
         frames = decoder.feed(data)
         decoder.feed_eof()
     except CopydataError as exc:
-        frames, error = list(exc.frames), exc  # type: ignore[arg-type]
+        frames, error = list(exc.frames), exc
     offset, bad = 0, False
     for frame in frames:
         cbdata = sum(layout.header.size + len(item.data) for item in frame.items)
@@ -278,7 +278,7 @@ async def read_stream(reader: asyncio.StreamReader, printer: Printer, settings: 
             frames = decoder.feed(data)
         except CopydataError as exc:
             for frame in exc.frames:
-                printer.frame(frame)  # type: ignore[arg-type]
+                printer.frame(frame)
             return f"malformed stream: {exc}"
         for frame in frames:
             printer.frame(frame)

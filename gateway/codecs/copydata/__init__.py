@@ -34,9 +34,8 @@ from gateway.codecs.copydata.errors import (
     ValueTypeError,
     WrongSize,
 )
+from gateway.codecs.copydata.frame import Frame, Item
 from gateway.codecs.copydata.frames import (
-    Frame,
-    Item,
     decode_lpdata,
     encode_lpdata,
     encode_multi,

@@ -11,6 +11,7 @@ receivers that want to tell cases apart catch the subclass.
 
 from __future__ import annotations
 
+from gateway.codecs.copydata.frame import Frame
 from gateway.errors import CodecError
 
 
@@ -24,7 +25,7 @@ class CopydataError(CodecError):
         self.message = message
         self.offset = offset
         # Frames a FrameDecoder completed in the same feed() before it met this fault.
-        self.frames: tuple[object, ...] = ()
+        self.frames: tuple[Frame, ...] = ()
 
     def __str__(self) -> str:
         if self.offset is None:

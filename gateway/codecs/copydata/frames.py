@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 from gateway.codecs.copydata.errors import (
     CopydataError,
@@ -24,35 +23,8 @@ from gateway.codecs.copydata.errors import (
     UnknownDwData,
     ValueTypeError,
 )
+from gateway.codecs.copydata.frame import Frame, Item
 from gateway.codecs.copydata.layout import DWDATA_MULTI, DWDATA_SINGLE, DWDATA_VALUES, TCP_HEADER, Layout
-
-
-@dataclass(frozen=True, slots=True)
-class Item:
-    """One variable's triple: its id and its already-encoded data bytes."""
-
-    id: int
-    data: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class Frame:
-    """What one WM_COPYDATA message (or one TCP/UDP frame) carries."""
-
-    dwdata: int
-    items: tuple[Item, ...]
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.items, tuple):
-            object.__setattr__(self, "items", tuple(self.items))
-
-    @classmethod
-    def single(cls, item: Item) -> Frame:
-        return cls(DWDATA_SINGLE, (item,))
-
-    @classmethod
-    def multi(cls, items: Iterable[Item]) -> Frame:
-        return cls(DWDATA_MULTI, tuple(items))
 
 
 # --- encode ----------------------------------------------------------------------------------

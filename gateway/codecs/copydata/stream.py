@@ -11,7 +11,8 @@ from __future__ import annotations
 import struct
 
 from gateway.codecs.copydata.errors import CopydataError, DecoderFailed, FrameTooLarge, TruncatedFrame
-from gateway.codecs.copydata.frames import Frame, check_dwdata, decode_lpdata
+from gateway.codecs.copydata.frame import Frame
+from gateway.codecs.copydata.frames import check_dwdata, decode_lpdata
 from gateway.codecs.copydata.layout import TCP_HEADER, Layout
 
 _DWDATA = struct.Struct("<I")

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gateway.codecs.copydata.errors import CopydataError, UnknownId
-from gateway.codecs.copydata.frames import Frame, Item
+from gateway.codecs.copydata.frame import Frame, Item
 from gateway.codecs.copydata.layout import DWDATA_MULTI, DWDATA_SINGLE, U32_MAX, Layout
 from gateway.codecs.copydata.values import decode_value, encode_value
 from gateway.model.types import TypeSpec
