@@ -22,7 +22,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from collections.abc import Callable, Coroutine, Iterator, Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from datetime import datetime
 from typing import Any, Self
 
@@ -41,8 +41,8 @@ from gateway.errors import ControllerRefused, ControllerUnavailable
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
+from gateway.reconnect import Backoff, OutageLog
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
-from gateway.sources.backoff import backoff_delays
 from gateway.sources.opcua_address import AddressError, OpcUaAddress, parse_address
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
 
@@ -183,7 +183,7 @@ class OpcUaSource:
         self._connected = False
         self._publish_task: asyncio.Task[None] | None = None
         self._last_reason = "not connected yet"
-        self._down_logged = False
+        self._outage = OutageLog(log)  # says the controller's absence once, and its return
         # Parsed once; resolved to NodeIds at every connect (namespace indexes may change).
         self._addresses: dict[VariableNode, OpcUaAddress] = {}
         self._address_errors: dict[VariableNode, str] = {}
@@ -230,7 +230,7 @@ class OpcUaSource:
 
     async def run(self) -> None:
         """Connect, subscribe, reconnect with backoff, until cancelled. Never raises for controller trouble."""
-        delays = self._delays()
+        backoff = Backoff.of(self.driver.reconnect)
         try:
             while True:
                 self.machine.status.connecting()
@@ -240,16 +240,12 @@ class OpcUaSource:
                     status, reason, expected = describe_error(exc)
                     await self._drop(status, reason, None if expected else exc)
                 else:
-                    delays = self._delays()
+                    backoff.reset()
                     status, reason = await loss
                     await self._drop(status, reason, None)
-                await asyncio.sleep(next(delays))
+                await asyncio.sleep(backoff.next())
         finally:
             await self._stop()
-
-    def _delays(self) -> Iterator[float]:
-        r = self.driver.reconnect
-        return backoff_delays(r.initial, r.factor, r.max)
 
     # --- connecting ------------------------------------------------------------------------
 
@@ -294,10 +290,9 @@ class OpcUaSource:
             name=f"opcua-publish:{self.machine.name}",
         )
         self._connected = True
-        self._down_logged = False
         self.machine.status.connected()
         problems = unresolved + refused
-        log.info(
+        self._outage.recovered(
             "%s: connected to %s, %d variables subscribed%s",
             self.machine.name,
             d.endpoint,
@@ -385,18 +380,15 @@ class OpcUaSource:
         self.machine.invalidate(status, reason)
         self._mark_bad_addresses()
         self.machine.status.disconnected(reason)
-        name, endpoint = self.machine.name, self.driver.endpoint
-        if unexpected is not None and (was_connected or not self._down_logged or reason != self._last_reason):
-            log.error("%s: %s; retrying", name, reason, exc_info=unexpected)
+        name, endpoint, outage = self.machine.name, self.driver.endpoint, self._outage
+        if unexpected is not None:
+            outage.failed(reason, "%s: %s; retrying", name, reason, level=logging.ERROR, exc_info=unexpected)
         elif was_connected:
-            log.warning("%s: lost connection to %s: %s; reconnecting", name, endpoint, reason)
-        elif not self._down_logged:
-            log.warning("%s: cannot connect to %s: %s; will keep retrying", name, endpoint, reason)
-        elif reason != self._last_reason:
-            log.info("%s: still cannot connect to %s: %s", name, endpoint, reason)
+            outage.failed(reason, "%s: lost connection to %s: %s; reconnecting", name, endpoint, reason)
+        elif not outage.down:
+            outage.failed(reason, "%s: cannot connect to %s: %s; will keep retrying", name, endpoint, reason)
         else:
-            log.debug("%s: connect attempt to %s failed: %s", name, endpoint, reason)
-        self._down_logged = True
+            outage.failed(reason, "%s: still cannot connect to %s: %s", name, endpoint, reason, level=logging.INFO)
         self._last_reason = reason
 
     async def _close(self, *, polite: bool) -> None:

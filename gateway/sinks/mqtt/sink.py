@@ -28,6 +28,7 @@ from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
 from gateway.sinks.mqtt.client import (
     BrokerSettings,
@@ -44,7 +45,6 @@ from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_p
 from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
 from gateway.sinks.mqtt.commands import CommandRequests
 from gateway.sinks.mqtt.writes import WriteBack
-from gateway.sources.backoff import backoff_delays
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +117,7 @@ class MqttSink:
         self._lost = asyncio.Event()
         self._pump_scheduled = False
         self._dropped_reported = 0
-        self._last_log: tuple[str, float] = ("", 0.0)
+        self._outage = OutageLog(log, remind_every=REMIND_EVERY)  # the broker's absence, said once a while
 
     def _add_status_variables(self, machine: Machine) -> None:
         self._link_nodes[machine.name] = machine.add_internal(
@@ -234,49 +234,39 @@ class MqttSink:
     async def _connection(self) -> None:
         assert self._client is not None
         client = self._client
-        cfg = self.config.reconnect
-        loop = asyncio.get_running_loop()
-        delays = backoff_delays(cfg.initial, cfg.factor, cfg.max)
+        backoff = Backoff.of(self.config.reconnect, stable_after=STABLE_AFTER)
         while True:
             self._set_state(STATE_CONNECTING, self.last_error)
             try:
                 info = await client.connect()
             except BrokerError as exc:
-                delay = next(delays)
+                delay = backoff.next()
                 self.attempts += 1
                 self.last_delay = delay
                 self._connect_failed(exc, delay)
                 await asyncio.sleep(delay)
                 continue
-            since = loop.time()
+            backoff.connected()
             self._on_connected(info)
             await self._lost.wait()
             self._lost.clear()
-            if loop.time() - since >= STABLE_AFTER:
-                delays = backoff_delays(cfg.initial, cfg.factor, cfg.max)
-            else:  # a broker that drops us at once (ACL, a twin with our client id) is not hammered
-                await asyncio.sleep(next(delays))
+            if not backoff.ended():  # a broker that drops us at once (ACL, a twin with our client id)
+                await asyncio.sleep(backoff.next())  # is not hammered
 
     def _connect_failed(self, exc: BrokerError, delay: float) -> None:
         reason = exc.reason
         self._set_state(STATE_DISCONNECTED, reason)
-        now = asyncio.get_running_loop().time()
-        last_reason, last_time = self._last_log
-        if reason != last_reason or now - last_time >= REMIND_EVERY:
-            self._last_log = (reason, now)
-            waiting = len(self.backlog) if self.backlog is not None else 0
-            if isinstance(exc, BrokerRefused):
-                log.error(
-                    "MQTT: %s; check mqtt.username/password and the broker's ACL. Retrying in %.1f s "
-                    "(%d messages waiting)",
-                    reason,
-                    delay,
-                    waiting,
-                )
-            else:
-                log.warning("MQTT: %s; retrying in %.1f s (%d messages waiting)", reason, delay, waiting)
+        waiting = len(self.backlog) if self.backlog is not None else 0
+        if isinstance(exc, BrokerRefused):
+            self._outage.failed(
+                reason,
+                "MQTT: %s; check mqtt.username/password and the broker's ACL. Retrying in %.1f s "
+                "(%d messages waiting)",
+                reason, delay, waiting,
+                level=logging.ERROR,
+            )  # fmt: skip
         else:
-            log.debug("MQTT: %s; retrying in %.1f s", reason, delay)
+            self._outage.failed(reason, "MQTT: %s; retrying in %.1f s (%d messages waiting)", reason, delay, waiting)
 
     def _on_connected(self, info: Connected) -> None:
         assert self._client is not None and self.backlog is not None
@@ -284,7 +274,6 @@ class MqttSink:
         self.connects += 1
         self._window = min(self.config.max_inflight, info.receive_maximum or self.config.max_inflight)
         self._online = True
-        self._last_log = ("", 0.0)
         self._set_state(STATE_CONNECTED, "")
         try:
             client.subscribe(set_filters(self.config.prefix, self.routes.depths()), qos=1)
@@ -299,7 +288,7 @@ class MqttSink:
         self.backlog.discard_latest(self.routes.status_topic)
         self._publish_now(self.routes.status_topic, self._online_payload(), 1, True, None, True)
         waiting = len(self.backlog)
-        log.info(
+        self._outage.recovered(
             "MQTT: connected to %s as %s%s",
             self.endpoint,
             self.settings.client_id,
