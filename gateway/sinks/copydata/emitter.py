@@ -15,18 +15,18 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import sys
-from typing import Any, Protocol, Self
+from collections.abc import Callable
+from typing import Any, Self
 
 from gateway.codecs.copydata import Frame, Layout
 from gateway.config.copydata import CopydataTarget
-from gateway.errors import SinkError
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import Sample
 from gateway.model.tree import Machine, VariableNode
 from gateway.sinks.copydata.channel import Channel, OutFrame, RateLimiter
 from gateway.sinks.copydata.encoder import TargetEncoder, sendable
 from gateway.sinks.copydata.feedback import Feedback
+from gateway.sinks.copydata.port import Transport, TransportPort
 from gateway.sinks.copydata.status import CopydataStatus
 from gateway.sinks.copydata.throttle import LogThrottle
 
@@ -34,17 +34,8 @@ log = logging.getLogger("gateway.sinks.copydata")
 
 UDP_MAX_CBDATA = 65507 - 8  # the largest UDP payload over IPv4, less the frame header
 
-
-class Transport(Protocol):
-    """Carries one target's frames to its receiver(s), and their replies back (see tcp.py, udp.py, win32.py)."""
-
-    def describe(self) -> str:
-        """Where it sends and how the link is, for Status/CopydataTargets."""
-        ...
-
-    async def run(self) -> None:
-        """Serve until cancelled; never raises for a receiver's problem (logs, retries)."""
-        ...
+TransportFactory = Callable[[TransportPort], Transport]
+"""Builds a target's transport when its emitter is entered (sink.make_transport)."""
 
 
 def target_nodes(machine: Machine, target: CopydataTarget) -> list[tuple[VariableNode, int]]:
@@ -67,9 +58,19 @@ def target_layout(target: CopydataTarget) -> Layout:
 
 
 class Emitter:
-    """Frames for one target of one machine (an async context manager with a long-running `run()`)."""
+    """Frames for one target of one machine (an async context manager with a long-running `run()`).
 
-    def __init__(self, machine: Machine, target: CopydataTarget, status: CopydataStatus) -> None:
+    It is the `TransportPort` of its transport, which `make_transport` builds when the emitter
+    is entered (so that a target this system cannot serve fails the start, not the construction).
+    """
+
+    def __init__(
+        self,
+        machine: Machine,
+        target: CopydataTarget,
+        status: CopydataStatus,
+        make_transport: TransportFactory,
+    ) -> None:
         self.machine = machine
         self.target = target
         self.name = f"{machine.name}/{target.name}"
@@ -87,6 +88,7 @@ class Emitter:
         self.closed_sent = 0  # frames sent on channels that are gone
         self.closed_dropped = 0
         self.transport: Transport | None = None
+        self._make_transport = make_transport
         self._state = "starting"
         self._sub: Subscription | None = None
         self._pending: dict[VariableNode, Sample] = {}
@@ -98,7 +100,7 @@ class Emitter:
     # --- lifecycle -----------------------------------------------------------------------------
 
     async def __aenter__(self) -> Self:
-        self.transport = make_transport(self)
+        self.transport = self._make_transport(self)
         self._sub = self.machine.tree.hub.subscribe(f"copydata:{self.name}")
         return self
 
@@ -126,7 +128,7 @@ class Emitter:
             raise RuntimeError("the emitter is not entered")
         return self._sub
 
-    # --- what transports call ------------------------------------------------------------------
+    # --- what transports call (TransportPort) ----------------------------------------------------
 
     def open_channel(self, peer: str) -> Channel:
         """A receiver connected: it gets its own bounded queue, starting with a snapshot."""
@@ -255,32 +257,3 @@ class Emitter:
             for channel in self.channels:
                 channel.offer(frames)
 
-
-def make_transport(emitter: Emitter) -> Transport:
-    """The target's transport; win32 is imported only on Windows, and refused elsewhere."""
-    kind = emitter.target.transport
-    if kind == "tcp-client":
-        from gateway.sinks.copydata.tcp import TcpClientTransport
-
-        return TcpClientTransport(emitter)
-    if kind == "tcp-server":
-        from gateway.sinks.copydata.tcp import TcpServerTransport
-
-        return TcpServerTransport(emitter)
-    if kind == "udp":
-        from gateway.sinks.copydata.udp import UdpTransport
-
-        return UdpTransport(emitter)
-    if kind == "win32":
-        if sys.platform != "win32":
-            raise SinkError(
-                f"COPYDATA target {emitter.name} uses transport win32 (WM_COPYDATA window messages), which "
-                f"needs Windows, and this is {sys.platform}; run the gateway on the nesting software's PC, "
-                "or use tcp-client, tcp-server or udp here"
-            )
-        from gateway.sinks.copydata.win32 import Win32Transport
-
-        return Win32Transport(emitter)
-    raise SinkError(
-        f"COPYDATA target {emitter.name}: unknown transport {kind!r}"
-    )  # the config makes this unreachable

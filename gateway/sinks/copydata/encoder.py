@@ -78,22 +78,24 @@ class TargetEncoder:
             data = encode_value(enc.variable.type, value, layout)
             header = enc.header if enc.header is not None else layout.header.pack(enc.variable.id, len(data))
         except CopydataError as exc:
-            return self._failed(node, str(exc))
+            self._failed(node, str(exc))
+            return None
         except struct.error:
-            return self._failed(
+            self._failed(
                 node,
                 f"{len(data)} bytes do not fit a {layout.len_width}-byte length field (max {layout.max_length})",
             )
+            return None
         if len(header) + len(data) > layout.max_cbdata:
-            return self._failed(
-                node, f"{len(data)} bytes are more than max_cbdata {layout.max_cbdata} allows"
-            )
+            self._failed(node, f"{len(data)} bytes are more than max_cbdata {layout.max_cbdata} allows")
+            return None
         if node in self.failing:
             self.failing.discard(node)
             log.info("copydata %s: %s is sent again", self.name, node.full_path)
         return header + data
 
     def _failed(self, node: VariableNode, reason: str) -> None:
+        """Count the value as skipped and say so once per variable; the item is left out (None)."""
         self.skipped += 1
         if node not in self.failing:
             self.failing.add(node)

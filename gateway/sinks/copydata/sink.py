@@ -6,17 +6,24 @@ the sink is built, before any sink starts, so that OPC UA and MQTT show them
 from the beginning. A target that cannot work on this system (`win32` outside
 Windows) stops the start with a SinkError naming it; a receiver that is absent
 or slow never does.
+
+`make_transport` picks each target's transport; it lives here, not beside the
+emitter, because the transports depend on the emitter's port (port.py) and
+importing them from the emitter would close a cycle.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 from contextlib import AsyncExitStack
 from typing import Self
 
+from gateway.errors import SinkError
 from gateway.model.tree import VariableTree
 from gateway.sinks.copydata.emitter import Emitter
+from gateway.sinks.copydata.port import Transport, TransportPort
 from gateway.sinks.copydata.status import CopydataStatus
 
 log = logging.getLogger("gateway.sinks.copydata")
@@ -42,7 +49,7 @@ class CopydataSink:
             status = CopydataStatus(machine)
             self.statuses[machine.name] = status
             for target in copydata.targets:
-                self.emitters.append(Emitter(machine, target, status))
+                self.emitters.append(Emitter(machine, target, status, make_transport))
         self._stack = AsyncExitStack()
 
     def emitter(self, machine: str, target: str) -> Emitter:
@@ -73,3 +80,31 @@ class CopydataSink:
         async with asyncio.TaskGroup() as tg:
             for emitter in self.emitters:
                 tg.create_task(emitter.run(), name=f"copydata:{emitter.name}")
+
+
+def make_transport(port: TransportPort) -> Transport:
+    """The target's transport; win32 is imported only on Windows, and refused elsewhere."""
+    kind = port.target.transport
+    if kind == "tcp-client":
+        from gateway.sinks.copydata.tcp import TcpClientTransport
+
+        return TcpClientTransport(port)
+    if kind == "tcp-server":
+        from gateway.sinks.copydata.tcp import TcpServerTransport
+
+        return TcpServerTransport(port)
+    if kind == "udp":
+        from gateway.sinks.copydata.udp import UdpTransport
+
+        return UdpTransport(port)
+    if kind == "win32":
+        if sys.platform != "win32":
+            raise SinkError(
+                f"COPYDATA target {port.name} uses transport win32 (WM_COPYDATA window messages), which "
+                f"needs Windows, and this is {sys.platform}; run the gateway on the nesting software's PC, "
+                "or use tcp-client, tcp-server or udp here"
+            )
+        from gateway.sinks.copydata.win32 import Win32Transport
+
+        return Win32Transport(port)
+    raise SinkError(f"COPYDATA target {port.name}: unknown transport {kind!r}")  # the config makes this unreachable

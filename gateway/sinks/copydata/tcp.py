@@ -18,14 +18,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import os
 import socket
-import time
 
 from gateway.codecs.copydata import TCP_HEADER, CopydataError, FrameDecoder
+from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.copydata.channel import Channel, OutFrame
-from gateway.sinks.copydata.emitter import Emitter
-from gateway.sources.backoff import backoff_delays
+from gateway.sinks.copydata.port import TransportPort
+from gateway.sinks.copydata.socket_errors import os_reason
 
 log = logging.getLogger("gateway.sinks.copydata")
 
@@ -37,16 +36,6 @@ CLOSE_GRACE = 1.0  # s to flush and close politely before the connection is abor
 def pack(frames: list[OutFrame]) -> bytes:
     header = TCP_HEADER.pack
     return b"".join(header(dwdata, len(lpdata)) + lpdata for dwdata, lpdata in frames)
-
-
-def os_reason(exc: BaseException) -> str:
-    """`connection refused`, not `[Errno 111] Connect call failed ('10.0.0.5', 5020)`."""
-    if isinstance(exc, TimeoutError):
-        return "timed out"
-    errno = getattr(exc, "errno", None)
-    if errno:
-        return os.strerror(errno).lower()
-    return getattr(exc, "strerror", None) or str(exc) or exc.__class__.__name__
 
 
 def peer_name(writer: asyncio.StreamWriter) -> str:
@@ -76,7 +65,7 @@ def tune_socket(writer: asyncio.StreamWriter, send_buffer: int | None) -> None:
 
 
 async def serve_connection(
-    emitter: Emitter, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, peer: str
+    emitter: TransportPort, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, peer: str
 ) -> str:
     """Send this connection its frames and read its replies until either side ends; returns why it ended."""
     channel = emitter.open_channel(peer)
@@ -111,7 +100,7 @@ async def _send(channel: Channel, writer: asyncio.StreamWriter) -> str:
         await writer.drain()  # a receiver that does not read stops us here; its channel bounds the rest
 
 
-async def _receive(emitter: Emitter, reader: asyncio.StreamReader, peer: str) -> str:
+async def _receive(emitter: TransportPort, reader: asyncio.StreamReader, peer: str) -> str:
     decoder = FrameDecoder(emitter.layout)
     while True:
         data = await reader.read(READ_CHUNK)
@@ -122,7 +111,7 @@ async def _receive(emitter: Emitter, reader: asyncio.StreamReader, peer: str) ->
             frames = decoder.feed(data)
         except CopydataError as exc:
             for frame in exc.frames:  # complete frames that came before the fault still count
-                await emitter.on_frame(frame, peer)  # type: ignore[arg-type]
+                await emitter.on_frame(frame, peer)
             emitter.throttle.log(
                 f"copydata {emitter.name} malformed", logging.WARNING,
                 "copydata %s: closing the connection from %s: malformed frame (%s): %s",
@@ -148,7 +137,7 @@ async def _close(writer: asyncio.StreamWriter) -> None:
 class TcpClientTransport:
     """The gateway connects to the nesting software, and reconnects with backoff."""
 
-    def __init__(self, emitter: Emitter) -> None:
+    def __init__(self, emitter: TransportPort) -> None:
         self.emitter = emitter
         self.target = emitter.target
         self.connects = 0
@@ -167,8 +156,8 @@ class TcpClientTransport:
     async def run(self) -> None:
         target, emitter = self.target, self.emitter
         assert target.host is not None and target.port is not None
-        backoff = target.backoff
-        delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
+        backoff = Backoff.of(target.backoff, stable_after=STABLE_AFTER)
+        outage = OutageLog(log)
         last_reason = ""
         while True:
             emitter.set_state("connecting" + (f" ({last_reason})" if last_reason else ""))
@@ -178,22 +167,20 @@ class TcpClientTransport:
                 async with asyncio.timeout(target.timeout):
                     reader, writer = await asyncio.open_connection(target.host, target.port)
             except (OSError, TimeoutError) as exc:
-                reason = os_reason(exc)
+                reason = last_reason = os_reason(exc)
                 self.attempts += 1
-                delay = next(delays)
-                level = logging.WARNING if reason != last_reason else logging.DEBUG
-                log.log(level, "copydata %s: cannot connect to %s:%s: %s; retrying in %.1f s",
-                        emitter.name, target.host, target.port, reason, delay)  # fmt: skip
-                last_reason = reason
+                delay = backoff.next()
+                outage.failed(reason, "copydata %s: cannot connect to %s:%s: %s; retrying in %.1f s",
+                              emitter.name, target.host, target.port, reason, delay)  # fmt: skip
                 emitter.set_state(f"connecting ({reason})")
                 await asyncio.sleep(delay)
                 continue
             self.connects += 1
             tune_socket(writer, target.send_buffer)
             peer = peer_name(writer)
-            log.info("copydata %s: connected to %s", emitter.name, peer)
+            outage.recovered("copydata %s: connected to %s", emitter.name, peer)
             emitter.set_state("connected")
-            since = time.monotonic()
+            backoff.connected()
             self._writer = writer
             try:
                 reason = await serve_connection(emitter, reader, writer, peer)
@@ -201,16 +188,15 @@ class TcpClientTransport:
                 self._writer = None
             log.warning("copydata %s: connection to %s ended: %s", emitter.name, peer, reason)
             last_reason = reason
-            if time.monotonic() - since >= STABLE_AFTER:
-                delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
+            backoff.ended()
             emitter.set_state(f"connecting ({reason})")
-            await asyncio.sleep(next(delays))
+            await asyncio.sleep(backoff.next())
 
 
 class TcpServerTransport:
     """The nesting software connects to the gateway; every client gets its own snapshot and queue."""
 
-    def __init__(self, emitter: Emitter) -> None:
+    def __init__(self, emitter: TransportPort) -> None:
         self.emitter = emitter
         self.target = emitter.target
         self.port = self.target.listen_port  # the real one once bound (port 0: any free port)
@@ -229,9 +215,8 @@ class TcpServerTransport:
 
     async def run(self) -> None:
         target, emitter = self.target, self.emitter
-        backoff = target.backoff
-        delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
-        last_reason = ""
+        backoff = Backoff.of(target.backoff)
+        outage = OutageLog(log)
         while True:
             try:
                 server = await asyncio.start_server(
@@ -239,11 +224,10 @@ class TcpServerTransport:
                 )
             except OSError as exc:
                 reason = os_reason(exc)
-                delay = next(delays)
-                level = logging.ERROR if reason != last_reason else logging.DEBUG
-                log.log(level, "copydata %s: cannot listen on %s:%s: %s; trying again in %.1f s",
-                        emitter.name, target.listen_address, target.listen_port, reason, delay)  # fmt: skip
-                last_reason = reason
+                delay = backoff.next()
+                outage.failed(reason, "copydata %s: cannot listen on %s:%s: %s; trying again in %.1f s",
+                              emitter.name, target.listen_address, target.listen_port, reason, delay,
+                              level=logging.ERROR)  # fmt: skip
                 emitter.set_state(f"not listening ({reason})")
                 await asyncio.sleep(delay)
                 continue
@@ -251,7 +235,7 @@ class TcpServerTransport:
                 self.port = server.sockets[0].getsockname()[1]
                 self.listening.set()
                 self._listening()
-                log.info("copydata %s: listening on %s:%s", emitter.name, target.listen_address, self.port)
+                outage.recovered("copydata %s: listening on %s:%s", emitter.name, target.listen_address, self.port)
                 await asyncio.Future()  # serve until cancelled
             finally:
                 self.listening.clear()

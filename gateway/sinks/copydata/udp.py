@@ -16,9 +16,9 @@ import logging
 from typing import Any
 
 from gateway.codecs.copydata import TCP_HEADER, CopydataError, Frame, unpack_datagram
-from gateway.sinks.copydata.emitter import Emitter
-from gateway.sinks.copydata.tcp import os_reason
-from gateway.sources.backoff import backoff_delays
+from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.copydata.port import TransportPort
+from gateway.sinks.copydata.socket_errors import os_reason
 
 log = logging.getLogger("gateway.sinks.copydata")
 
@@ -38,7 +38,7 @@ class _Protocol(asyncio.DatagramProtocol):
 
 
 class UdpTransport:
-    def __init__(self, emitter: Emitter) -> None:
+    def __init__(self, emitter: TransportPort) -> None:
         self.emitter = emitter
         self.target = emitter.target
         self.errors = 0  # e.g. ICMP port unreachable: nothing listens there (yet)
@@ -56,8 +56,8 @@ class UdpTransport:
         target, emitter = self.target, self.emitter
         assert target.host is not None and target.port is not None
         loop = asyncio.get_running_loop()
-        backoff = target.backoff
-        delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
+        backoff = Backoff.of(target.backoff)
+        outage = OutageLog(log)
         while True:
             try:
                 transport, _ = await loop.create_datagram_endpoint(
@@ -65,11 +65,13 @@ class UdpTransport:
                 )
                 break
             except OSError as exc:
-                delay = next(delays)
-                log.warning("copydata %s: cannot open a UDP socket to %s:%s: %s; retrying in %.1f s",
-                            emitter.name, target.host, target.port, os_reason(exc), delay)  # fmt: skip
-                emitter.set_state(f"not sending ({os_reason(exc)})")
+                delay, reason = backoff.next(), os_reason(exc)
+                outage.failed(reason, "copydata %s: cannot open a UDP socket to %s:%s: %s; retrying in %.1f s",
+                              emitter.name, target.host, target.port, reason, delay)  # fmt: skip
+                emitter.set_state(f"not sending ({reason})")
                 await asyncio.sleep(delay)
+        if outage.down:
+            outage.recovered("copydata %s: sending to %s:%s", emitter.name, target.host, target.port)
         self._transport = transport
         channel = emitter.open_channel(f"{target.host}:{target.port}")
         emitter.set_state("sending")
@@ -79,7 +81,7 @@ class UdpTransport:
                 while True:
                     frames = await channel.next_frames()
                     for dwdata, lpdata in frames:
-                        if transport.get_write_buffer_size() > BUFFER_LIMIT:
+                        if transport.get_write_buffer_size() > BUFFER_LIMIT:  # type: ignore[attr-defined]  # not in typeshed
                             self.overflows += 1
                             channel.dropped += 1
                             continue

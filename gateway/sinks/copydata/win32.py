@@ -40,8 +40,9 @@ from typing import Any
 
 from gateway.codecs.copydata import WM_COPYDATA, CopydataError, decode_lpdata
 from gateway.errors import SinkError
+from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.copydata.channel import OutFrame
-from gateway.sinks.copydata.emitter import Emitter
+from gateway.sinks.copydata.port import TransportPort
 from gateway.sinks.copydata.win32_api import (
     COPYDATASTRUCT,
     DWORD_PTR,
@@ -61,7 +62,6 @@ from gateway.sinks.copydata.win32_api import (
     bind,
     hwnd_message,
 )
-from gateway.sources.backoff import backoff_delays
 
 log = logging.getLogger("gateway.sinks.copydata")
 
@@ -77,8 +77,8 @@ def load_api() -> tuple[Any, Any]:
     """user32 and kernel32 with explicit signatures. Windows only."""
     if sys.platform != "win32":
         raise SinkError(f"WM_COPYDATA needs Windows; this is {sys.platform}")
-    user32 = bind(ctypes.WinDLL("user32", use_last_error=True), USER32)  # type: ignore[attr-defined]
-    kernel32 = bind(ctypes.WinDLL("kernel32", use_last_error=True), KERNEL32)  # type: ignore[attr-defined]
+    user32 = bind(ctypes.WinDLL("user32", use_last_error=True), USER32)
+    kernel32 = bind(ctypes.WinDLL("kernel32", use_last_error=True), KERNEL32)
     return user32, kernel32
 
 
@@ -397,7 +397,7 @@ class Win32Transport:
 
     def __init__(
         self,
-        emitter: Emitter,
+        emitter: TransportPort,
         api: tuple[Any, Any] | None = None,
         get_last_error: Callable[[], int] = last_error,
     ) -> None:
@@ -441,23 +441,20 @@ class Win32Transport:
             await asyncio.to_thread(thread.stop)
 
     async def _deliver(self, thread: WindowThread, sender: CopydataSender) -> None:
-        emitter, backoff = self.emitter, self.target.backoff
-        delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
-        announced = False
+        emitter = self.emitter
+        backoff = Backoff.of(self.target.backoff)
+        absent = OutageLog(log)  # the receiver's window: said once while it is missing, and when found
         while True:
             hwnd = await asyncio.wrap_future(thread.submit(sender.find))
             if not hwnd:
                 emitter.set_state("waiting for the window")
-                if not announced:
-                    announced = True
-                    log.warning("copydata %s: no window %s yet; looking again with backoff",
-                                emitter.name, self.target.describe().removeprefix("win32 window "))  # fmt: skip
-                await asyncio.sleep(next(delays))
+                absent.failed("no window", "copydata %s: no window %s yet; looking again with backoff",
+                              emitter.name, self.target.describe().removeprefix("win32 window "))  # fmt: skip
+                await asyncio.sleep(backoff.next())
                 continue
-            announced = False
-            delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
+            backoff.reset()
             self.hwnd = hwnd
-            log.info("copydata %s: sending to window %#x", emitter.name, hwnd)
+            absent.recovered("copydata %s: sending to window %#x", emitter.name, hwnd)
             emitter.set_state(f"sending to window {hwnd:#x}")
             channel = emitter.open_channel(f"window {hwnd:#x}")
             try:
@@ -470,14 +467,14 @@ class Win32Transport:
                     self.refused += outcome.refused
                     failure = outcome.failure
                     if failure is None:
-                        delays = backoff_delays(backoff.initial, backoff.factor, backoff.max)
+                        backoff.reset()
                         continue
                     if failure.window_gone:
                         log.warning("copydata %s: %s; looking for it again", emitter.name, failure)
                         break
                     # A hung receiver fails at once (SMTO_ABORTIFHUNG): wait before trying it again.
                     self.timeouts += 1
-                    delay = next(delays)
+                    delay = backoff.next()
                     emitter.throttle.log(
                         f"copydata {emitter.name} timeouts", logging.WARNING,
                         "copydata %s: %s; trying again in %.1f s, starting from a snapshot", emitter.name, failure, delay,
