@@ -14,7 +14,7 @@ import logging
 import signal
 from collections.abc import Awaitable, Callable, Iterator
 from contextlib import AsyncExitStack
-from typing import Any, Self
+from typing import TYPE_CHECKING, Self, TypeVar, overload
 
 from gateway.audit.store import audit_path
 from gateway.audit.trail import AuditTrail
@@ -24,7 +24,13 @@ from gateway.model.tree import VariableTree
 from gateway.sinks.base import Sink
 from gateway.sources.base import Source, create_source
 
+if TYPE_CHECKING:  # imported where they are built, only when the configuration asks for them
+    from gateway.alarms.service import AlarmService
+    from gateway.jobs.service import JobService
+
 log = logging.getLogger("gateway")
+
+S = TypeVar("S", bound=Sink)
 
 
 YOUNG_THRESHOLD = 50_000  # allocations between young-generation passes (Python's default: 700)
@@ -79,13 +85,19 @@ def configure_access(config: Config, tree: VariableTree) -> None:
                  len(gw.users), " < ".join(gw.roles), access.anonymous)
 
 
-def build_sinks(config: Config, tree: VariableTree) -> list[Sink]:
+def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None = None) -> list[Sink]:
     from gateway.auth.users import UserDirectory
+    from gateway.sinks.opcua.port import ServerExtension
     from gateway.sinks.opcua.server import OpcUaSink
 
     gw = config.gateway
     users = UserDirectory.from_config(gw)
-    sinks: list[Sink] = [OpcUaSink(tree, gw.opcua, config.state_dir, users=users)]
+    extensions: list[ServerExtension] = []
+    if alarms is not None:  # alarm conditions and events in the address space
+        from gateway.sinks.opcua.alarms import OpcUaAlarms
+
+        extensions.append(OpcUaAlarms(alarms))
+    sinks: list[Sink] = [OpcUaSink(tree, gw.opcua, config.state_dir, users=users, extensions=extensions)]
     if config.gateway.mqtt is not None:  # no `mqtt:` in the gateway file: no broker to reach
         from gateway.sinks.mqtt.sink import MqttSink
 
@@ -97,7 +109,7 @@ def build_sinks(config: Config, tree: VariableTree) -> list[Sink]:
     return sinks
 
 
-def build_jobs(config: Config, tree: VariableTree) -> Any:
+def build_jobs(config: Config, tree: VariableTree) -> JobService | None:
     """The FTP job queue, when some machine has a `jobs:` section (None otherwise)."""
     if not any(m.jobs is not None for m in config.machines):
         return None
@@ -106,7 +118,7 @@ def build_jobs(config: Config, tree: VariableTree) -> Any:
     return JobService(config, tree)
 
 
-def build_alarms(config: Config, tree: VariableTree) -> Any:
+def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
     """The alarm managers, when some machine has an `alarms:` section (None otherwise)."""
     if not any(m.alarms is not None for m in config.machines):
         return None
@@ -126,18 +138,25 @@ class Gateway:
         self.audit = AuditTrail(audit_path(config.state_dir), retention_days=retention)
         self.tree.audit_sinks.append(self.audit.record)
         install_commands(self.tree)  # the mapping's commands as Commands/ methods, before the sinks see them
-        self.sinks: list[Sink] = build_sinks(config, self.tree)
+        self.alarms = build_alarms(config, self.tree)
+        self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms)
         self.sources: list[Source] = [create_source(m) for m in self.tree.machines.values()]
         self.jobs = build_jobs(config, self.tree)  # before the sinks start: it adds Jobs/ variables and methods
-        self.alarms = build_alarms(config, self.tree)
-        if self.alarms is not None:
-            self.sink("opcua").alarms = self.alarms  # alarm conditions and events in the address space
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
 
-    def sink(self, name: str) -> Any:
+    @overload
+    def sink(self, name: str) -> Sink: ...
+
+    @overload
+    def sink(self, name: str, kind: type[S]) -> S: ...
+
+    def sink(self, name: str, kind: type[Sink] | None = None) -> Sink:
+        """The sink called `name` (KeyError if none); with `kind`, checked to be that class."""
         for sink in self.sinks:
             if sink.name == name:
+                if kind is not None and not isinstance(sink, kind):
+                    raise TypeError(f"sink {name!r} is a {type(sink).__name__}, not a {kind.__name__}")
                 return sink
         raise KeyError(name)
 

@@ -17,8 +17,10 @@ ConditionType.ConditionRefresh (i=3875, and ConditionRefresh2) sends the calling
 subscription a RefreshStartEvent, the latest event of every retained condition, and
 RefreshEndEvent, so that a client that connects late sees the alarms in force.
 
-This module does not import asyncua's server API: it uses the sink's seams
-(`add_nodes`, `trigger_event`, `link_method`, `caller_context`, `server`).
+This module imports neither the server nor asyncua's server API: it is a
+`ServerExtension` (port.py) that app.py hands to the OPC UA sink, and it sees
+the server through `ServerPort` (`add_nodes`, `delete_nodes`,
+`add_event_notifier`, `trigger_event`, `link_method`, `caller_context` …).
 """
 
 from __future__ import annotations
@@ -28,14 +30,17 @@ import logging
 from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from datetime import datetime
 
 from asyncua import ua
+from asyncua.common.events import Event
 
 from gateway.alarms.manager import AlarmManager, Check
 from gateway.alarms.records import AlarmChange, AlarmRecord
+from gateway.alarms.service import AlarmService
 from gateway.errors import WriteError
 from gateway.model.sample import utcnow
+from gateway.model.tree import WriteContext
 from gateway.sinks.opcua.address_space import HAS_COMPONENT
 from gateway.sinks.opcua.conditions import (
     ACKNOWLEDGE,
@@ -43,7 +48,6 @@ from gateway.sinks.opcua.conditions import (
     CONDITION_REFRESH,
     CONDITION_REFRESH2,
     CONFIRM,
-    HAS_NOTIFIER,
     SERVER,
     ConditionIds,
     condition_event,
@@ -51,11 +55,8 @@ from gateway.sinks.opcua.conditions import (
     new_event_id,
     refresh_event,
 )
+from gateway.sinks.opcua.port import MethodCallback, ServerPort
 from gateway.sinks.opcua.values import status_code
-
-if TYPE_CHECKING:
-    from gateway.alarms.service import AlarmService
-    from gateway.sinks.opcua.server import OpcUaSink
 
 log = logging.getLogger(__name__)
 
@@ -74,16 +75,20 @@ class _Condition:
     occurrence: int
     ids: ConditionIds
     severity: int
-    last: Any = None  # the latest event, as sent (ConditionRefresh sends it again)
+    last: Event | None = None  # the latest event, as sent (ConditionRefresh sends it again)
     event_ids: deque[bytes] = field(default_factory=lambda: deque(maxlen=EVENT_IDS_KEPT))
 
 
-class OpcUaAlarms:
-    """The alarm conditions of every machine the AlarmService manages."""
+Action = Callable[[AlarmManager, int, WriteContext, str, Check], Awaitable[AlarmRecord]]
+"""Acknowledge or Confirm on the manager: (manager, occurrence, caller, comment, EventId check)."""
 
-    def __init__(self, sink: OpcUaSink, service: AlarmService) -> None:
-        self.sink = sink
+
+class OpcUaAlarms:
+    """The alarm conditions of every machine the AlarmService manages (a ServerExtension of the OPC UA sink)."""
+
+    def __init__(self, service: AlarmService) -> None:
         self.service = service
+        self._server: ServerPort | None = None
         self._conditions: dict[ua.NodeId, _Condition] = {}
         self._by_occurrence: dict[int, ua.NodeId] = {}
         self._notifiers: dict[str, ua.NodeId] = {}
@@ -91,46 +96,48 @@ class OpcUaAlarms:
 
     # --- set-up ------------------------------------------------------------------------------
 
-    async def install(self) -> None:
+    @property
+    def server(self) -> ServerPort:
+        if self._server is None:
+            raise RuntimeError("the alarm conditions are not installed in an OPC UA server")
+        return self._server
+
+    async def install(self, server: ServerPort) -> None:
         """Make the machines notifiers, add the conditions still retained, and take the standard methods."""
-        sink = self.sink
-        server = sink.server
-        ns = sink.namespace_index
+        self._server = server
+        ns = server.namespace_index
         for name, manager in self.service.managers.items():
-            machine_id = sink.machine_node_id(name)
+            machine_id = server.machine_node_id(name)
             self._notifiers[name] = machine_id
-            mask = ua.EventNotifier.to_bitfield([ua.EventNotifier.SubscribeToEvents])
-            notifier = ua.DataValue(ua.Variant(mask, ua.VariantType.Byte))
-            await server.write_attribute_value(machine_id, notifier, ua.AttributeIds.EventNotifier)
-            await server.get_node(SERVER).add_reference(machine_id, HAS_NOTIFIER, forward=True, bidirectional=True)
-            await sink.add_nodes([_object_item(ua.NodeId(f"{name}/{OBJECT}", ns), machine_id, OBJECT, ns)])
+            await server.add_event_notifier(machine_id)
+            await server.add_nodes([_object_item(ua.NodeId(f"{name}/{OBJECT}", ns), machine_id, OBJECT, ns)])
             for record in manager.retained():
                 condition = await self._condition(manager, record)
                 condition.last = self._event(condition, record, record.raised_at, True)
             manager.listen(self._on_change(manager))
-        sink.link_method(ACKNOWLEDGE, self._method(self._acknowledge))
-        sink.link_method(CONFIRM, self._method(self._confirm))
-        sink.link_method(CONDITION_REFRESH, self._refresh)
-        sink.link_method(CONDITION_REFRESH2, self._refresh)
+        server.link_method(ACKNOWLEDGE, self._method(self._acknowledge))
+        server.link_method(CONFIRM, self._method(self._confirm))
+        server.link_method(CONDITION_REFRESH, self._refresh)
+        server.link_method(CONDITION_REFRESH2, self._refresh)
 
     async def _condition(self, manager: AlarmManager, record: AlarmRecord) -> _Condition:
         """The condition of an occurrence, its node added on first sight."""
         nodeid = self._by_occurrence.get(record.occurrence)
         if nodeid is not None:
             return self._conditions[nodeid]
-        ns = self.sink.namespace_index
+        ns = self.server.namespace_index
         name = manager.name
         nodeid = ua.NodeId(f"{name}/{OBJECT}/{record.occurrence}", ns)
         parent = ua.NodeId(f"{name}/{OBJECT}", ns)
-        await self.sink.add_nodes([_condition_item(nodeid, parent, record, ns)])
+        await self.server.add_nodes([_condition_item(nodeid, parent, record, ns)])
         ids = ConditionIds(nodeid, self._notifiers[name], name)
         condition = _Condition(manager, record.occurrence, ids, record.severity)
         self._conditions[nodeid] = condition
         self._by_occurrence[record.occurrence] = nodeid
         return condition
 
-    def _event(self, condition: _Condition, record: AlarmRecord, time: Any, retained: bool,
-               comment: str = "", user: str = "") -> Any:
+    def _event(self, condition: _Condition, record: AlarmRecord, time: datetime, retained: bool,
+               comment: str = "", user: str = "") -> Event:
         event_id = new_event_id()
         condition.event_ids.append(event_id)
         event = condition_event(
@@ -154,43 +161,40 @@ class OpcUaAlarms:
 
         return listener
 
-    async def _send(self, event: Any, machine_id: ua.NodeId, subscription: int | None = None,
+    async def _send(self, event: Event, machine_id: ua.NodeId, subscription: int | None = None,
                     item: int | None = None) -> None:
         for notifier in (SERVER, machine_id):
-            await self.sink.trigger_event(emitted_by(event, notifier), subscription, item)
+            await self.server.trigger_event(emitted_by(event, notifier), subscription, item)
 
     async def _forget(self, condition: _Condition) -> None:
         nodeid = condition.ids.condition
         self._conditions.pop(nodeid, None)
         self._by_occurrence.pop(condition.occurrence, None)
-        server = self.sink.server
         try:
-            await server.delete_nodes([server.get_node(nodeid)])
+            await self.server.delete_nodes([nodeid])
         except Exception as exc:  # a node left behind is untidy, not harmful
             log.warning("cannot remove the ended alarm condition %s: %s", nodeid.to_string(), exc)
 
     # --- Acknowledge and Confirm -------------------------------------------------------------
 
-    def _method(
-        self, action: Callable[[AlarmManager, int, Any, str, Check], Awaitable[Any]]
-    ) -> Callable[..., Any]:
+    def _method(self, action: Action) -> MethodCallback:
         async def callback(parent: ua.NodeId, *inputs: ua.Variant) -> ua.CallMethodResult:
             return await self._respond(parent, inputs, action)
 
         return callback
 
     async def _acknowledge(
-        self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str, check: Check
-    ) -> Any:
+        self, manager: AlarmManager, occurrence: int, ctx: WriteContext, comment: str, check: Check
+    ) -> AlarmRecord:
         return await manager.acknowledge(occurrence, ctx, comment, check=check)
 
     async def _confirm(
-        self, manager: AlarmManager, occurrence: int, ctx: Any, comment: str, check: Check
-    ) -> Any:
+        self, manager: AlarmManager, occurrence: int, ctx: WriteContext, comment: str, check: Check
+    ) -> AlarmRecord:
         return await manager.confirm(occurrence, ctx, comment, check=check)
 
     async def _respond(
-        self, parent: ua.NodeId, inputs: Sequence[ua.Variant], action: Callable[..., Awaitable[Any]]
+        self, parent: ua.NodeId, inputs: Sequence[ua.Variant], action: Action
     ) -> ua.CallMethodResult:
         """(EventId: ByteString, Comment: LocalizedText) on a condition node; never raises."""
         if len(inputs) < 2:
@@ -218,7 +222,7 @@ class OpcUaAlarms:
         text = comment.Value.Text if isinstance(comment.Value, ua.LocalizedText) else comment.Value
         try:
             await action(
-                condition.manager, condition.occurrence, self.sink.caller_context(), str(text or ""), check
+                condition.manager, condition.occurrence, self.server.caller_context(), str(text or ""), check
             )
         except WriteError as exc:
             log.info("OPC UA %s of alarm occurrence %d refused (%s): %s",
@@ -240,17 +244,17 @@ class OpcUaAlarms:
             return ua.CallMethodResult(StatusCode=_status("BadTypeMismatch" if len(values) <= 2 else "BadTooManyArguments"))
         subscription = values[0]
         item = values[1] if len(values) == 2 else None
-        if not self.sink.has_subscription(subscription):
+        if not self.server.has_subscription(subscription):
             return ua.CallMethodResult(StatusCode=_status("BadSubscriptionIdInvalid"))
         async with self._lock:
             now = utcnow()
             # The bracket goes to every event item of the subscription, past its filter (Part 9, 4.5);
             # the conditions between must pass the filter, and go through their notifiers as usual.
-            await self.sink.trigger_unfiltered(refresh_event(True, time=now), subscription, item)
+            await self.server.trigger_unfiltered(refresh_event(True, time=now), subscription, item)
             for condition in list(self._conditions.values()):
                 if condition.last is not None:
                     await self._send(condition.last, condition.ids.source, subscription, item)
-            await self.sink.trigger_unfiltered(refresh_event(False, time=now), subscription, item)
+            await self.server.trigger_unfiltered(refresh_event(False, time=now), subscription, item)
         return ua.CallMethodResult(StatusCode=ua.StatusCode())
 
 

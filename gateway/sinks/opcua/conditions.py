@@ -20,6 +20,7 @@ from typing import Any
 
 from asyncua import ua
 from asyncua.common.event_objects import AlarmCondition, RefreshEndEvent, RefreshStartEvent
+from asyncua.common.events import Event
 
 from gateway.alarms.records import AlarmRecord, Quality
 from gateway.model.sample import utcnow
@@ -60,14 +61,14 @@ def new_event_id() -> bytes:
     return uuid.uuid4().bytes
 
 
-def _typed(event: Any) -> Any:
+def _typed(event: Event) -> Event:
     for name, dtype in list(event.data_types.items()):
         if isinstance(dtype, ua.NodeId):
             event.data_types[name] = _BASE_TYPES.get(dtype.Identifier, ua.VariantType.Variant)
     return event
 
 
-def _two_state(event: Any, name: str, value: bool, true: str, false: str, when: datetime | None) -> None:
+def _two_state(event: Event, name: str, value: bool, true: str, false: str, when: datetime | None) -> None:
     setattr(event, name, ua.LocalizedText(true if value else false))
     setattr(event, f"{name}/Id", value)
     setattr(event, f"{name}/TrueState", ua.LocalizedText(true))
@@ -86,52 +87,56 @@ def condition_event(
     last_severity: int | None = None,
     comment: str = "",
     user: str = "",
-) -> Any:
+) -> Event:
     """The event that reports `record`'s state at `time` (emitted by the Server object; see `emitted_by`)."""
-    event = _typed(AlarmCondition(sourcenode=ids.source, message=record.text, severity=record.severity))
-    event.emitting_node = SERVER
-    event.add_property("NodeId", ids.condition, ua.VariantType.NodeId)  # ConditionId (not a component of the type)
-    event.EventId = event_id
-    event.SourceName = ids.source_name
-    event.Time = time
-    event.ReceiveTime = utcnow()
+    event = _typed(AlarmCondition(  # type: ignore[no-untyped-call]
+        sourcenode=ids.source, message=record.text, severity=record.severity
+    ))  # fmt: skip
+    e: Any = event  # asyncua's events take their fields as attributes no type checker knows
+    e.emitting_node = SERVER
+    e.add_property("NodeId", ids.condition, ua.VariantType.NodeId)  # ConditionId (not a component of the type)
+    e.EventId = event_id
+    e.SourceName = ids.source_name
+    e.Time = time
+    e.ReceiveTime = utcnow()
     offset = _time.localtime(time.timestamp())
-    event.LocalTime = ua.TimeZoneDataType(Offset=offset.tm_gmtoff // 60, DaylightSavingInOffset=offset.tm_isdst > 0)
-    event.ConditionClassId = PROCESS_CLASS
-    event.ConditionClassName = ua.LocalizedText("Process")
-    event.ConditionName = record.id
-    event.BranchId = ua.NodeId()
-    event.Retain = retained
-    event.SupportsFilteredRetain = False
+    e.LocalTime = ua.TimeZoneDataType(Offset=offset.tm_gmtoff // 60, DaylightSavingInOffset=offset.tm_isdst > 0)
+    e.ConditionClassId = PROCESS_CLASS
+    e.ConditionClassName = ua.LocalizedText("Process")
+    e.ConditionName = record.id
+    e.BranchId = ua.NodeId()
+    e.Retain = retained
+    e.SupportsFilteredRetain = False
     _two_state(event, "EnabledState", True, "Enabled", "Disabled", None)
-    event.Quality = ua.StatusCode(QUALITY_CODES[record.quality])
-    setattr(event, "Quality/SourceTimestamp", time)
-    event.LastSeverity = record.severity if last_severity is None else last_severity
-    event.Comment = ua.LocalizedText(comment or record.confirm_comment or record.ack_comment)
-    event.ClientUserId = user
+    e.Quality = ua.StatusCode(QUALITY_CODES[record.quality])
+    setattr(e, "Quality/SourceTimestamp", time)
+    e.LastSeverity = record.severity if last_severity is None else last_severity
+    e.Comment = ua.LocalizedText(comment or record.confirm_comment or record.ack_comment)
+    e.ClientUserId = user
     _two_state(event, "ActiveState", record.active, "Active", "Inactive", record.cleared_at or record.raised_at)
-    setattr(event, "ActiveState/EffectiveDisplayName", ua.LocalizedText("Active" if record.active else "Inactive"))
+    setattr(e, "ActiveState/EffectiveDisplayName", ua.LocalizedText("Active" if record.active else "Inactive"))
     _two_state(event, "AckedState", record.acked, "Acknowledged", "Unacknowledged", record.acked_at or record.raised_at)
     _two_state(event, "ConfirmedState", record.confirmed, "Confirmed", "Unconfirmed",
                record.confirmed_at or record.raised_at)
-    event.SuppressedOrShelved = False
-    event.InputNode = ua.NodeId()
+    e.SuppressedOrShelved = False
+    e.InputNode = ua.NodeId()
     return event
 
 
-def refresh_event(start: bool, *, time: datetime | None = None) -> Any:
+def refresh_event(start: bool, *, time: datetime | None = None) -> Event:
     """RefreshStartEvent / RefreshEndEvent, around the conditions ConditionRefresh sends again."""
     event = _typed((RefreshStartEvent if start else RefreshEndEvent)(sourcenode=SERVER, severity=1))
-    event.emitting_node = SERVER
-    event.EventId = new_event_id()
-    event.SourceName = "Server"
-    event.Time = time or utcnow()
-    event.ReceiveTime = utcnow()
-    event.Message = ua.LocalizedText("ConditionRefresh " + ("start" if start else "end"))
+    e: Any = event
+    e.emitting_node = SERVER
+    e.EventId = new_event_id()
+    e.SourceName = "Server"
+    e.Time = time or utcnow()
+    e.ReceiveTime = utcnow()
+    e.Message = ua.LocalizedText("ConditionRefresh " + ("start" if start else "end"))
     return event
 
 
-def emitted_by(event: Any, notifier: ua.NodeId) -> Any:
+def emitted_by(event: Event, notifier: ua.NodeId) -> Event:
     """The same event (same fields, same EventId) reported through another notifier."""
     twin = copy.copy(event)
     twin.emitting_node = notifier

@@ -5,10 +5,12 @@ adds the tree's nodes in batches through the internal session, mirrors every
 change from the hub into the address space, and routes client writes of our
 variables through the tree by replacing the server's attribute service.
 
-Seams for the work that builds on this server (alarms, commands, programs,
-users): `server` (the asyncua Server), `machine_node_id()`, `add_nodes()` for more
-nodes in our namespace, and `user_name`/`user_role`, which turn a session's user
-into the name and role passed to the tree in `WriteContext`.
+Seams for the work that builds on this server: parts such as the alarm
+conditions are `ServerExtension`s given to the constructor, installed once the
+tree's nodes exist, and see the server through `port.ServerPort` (add and delete
+nodes, event notifiers, events, method callbacks, the caller); this module
+imports none of them. `user_name`/`user_role` turn a session's user into the
+name and role passed to the tree in `WriteContext`.
 
 Users and security: logins go to `identity.GatewayUserManager` (the gateway's
 users, anonymous role, lockout per address); each session's UserAccessLevel and
@@ -31,6 +33,7 @@ from typing import Any, Self
 from urllib.parse import urlsplit
 
 from asyncua import Server, ua
+from asyncua.common.events import Event
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
@@ -53,6 +56,7 @@ from gateway.sinks.opcua.identity import (
     user_executable,
 )
 from gateway.sinks.opcua.methods import call_result, plan_methods
+from gateway.sinks.opcua.port import MethodCallback, ServerExtension
 from gateway.sinks.opcua.security import ClientCertificates, Pki, secure_server
 from gateway.sinks.opcua.values import ValueKind, ValueMismatch, value_kind
 from gateway.sinks.opcua.writes import write_node
@@ -65,6 +69,8 @@ YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
 # you allow" is revised to this. asyncua's own cap, 10,000, lets one stalled client (no Publish requests)
 # hold about 270 bytes x 10,000 x every variable it watches (tests/integration/drills/test_slow_consumers.py).
 MAX_QUEUE_PER_ITEM = 100
+SERVER_OBJECT = ua.NodeId(ua.ObjectIds.Server)
+HAS_NOTIFIER = ua.NodeId(ua.ObjectIds.HasNotifier)
 
 # The session user of the Call request being served: asyncua does not pass it to method callbacks.
 _CALLER: ContextVar[Any] = ContextVar("opcua_caller", default=None)
@@ -87,14 +93,16 @@ def _track_callers(iserver: Any, bserver: Callable[[], Any]) -> None:
         async def call_as_user(params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
             token = _CALLER.set(session.user)
             try:
-                return await call(params)
+                results: list[ua.CallMethodResult] = await call(params)
+                return results
             finally:
                 _CALLER.reset(token)
 
         async def read_as_user(params: ua.ReadParameters) -> list[ua.DataValue]:
             token = _READER.set(session)
             try:
-                return await read(params)
+                values: list[ua.DataValue] = await read(params)
+                return values
             finally:
                 _READER.reset(token)
 
@@ -241,13 +249,19 @@ class OpcUaSink:
     name = "opcua"
 
     def __init__(
-        self, tree: VariableTree, config: OpcUaServerConfig, state_dir: Path, users: UserDirectory | None = None
+        self,
+        tree: VariableTree,
+        config: OpcUaServerConfig,
+        state_dir: Path,
+        users: UserDirectory | None = None,
+        extensions: Sequence[ServerExtension] = (),
     ) -> None:
         self.tree = tree
         self.config = config
         self.state_dir = state_dir  # pki/ (own certificate, trusted/, rejected/) lives here
         self.pki = Pki(state_dir / "pki")
         self.users = users  # None: anyone, anonymously (no users configured, access control off)
+        self.extensions = tuple(extensions)  # alarm conditions …: installed with the address space
         self.endpoint: str = config.endpoint
         self.namespace_index: int = -1
         self.application_uri = f"urn:{socket.gethostname()}:cnc-gateway"
@@ -265,7 +279,6 @@ class OpcUaSink:
         self._mismatched: set[VariableNode] = set()  # holding a value their type cannot carry
         self._unplaceable: set[VariableNode] = set()  # late variables the server refused
         self._failing: set[VariableNode] = set()  # whose last value write failed unexpectedly
-        self.alarms: Any = None  # the AlarmService (gateway/alarms/service.py), when machines have alarms
 
     # --- seams for other components ----------------------------------------------------------
 
@@ -306,18 +319,30 @@ class OpcUaSink:
             await asyncio.sleep(0)
         return added
 
-    # --- seams for alarm conditions (gateway/sinks/opcua/alarms.py) ---------------------------
+    # --- the ServerPort of extensions (port.py; alarm conditions: alarms.py) -------------------
+
+    async def delete_nodes(self, nodeids: Sequence[ua.NodeId]) -> None:
+        server = self.server
+        await server.delete_nodes([server.get_node(nodeid) for nodeid in nodeids])
+
+    async def add_event_notifier(self, nodeid: ua.NodeId) -> None:
+        """Events may be subscribed on the object, and the Server object reports them too (HasNotifier)."""
+        server = self.server
+        mask = ua.EventNotifier.to_bitfield([ua.EventNotifier.SubscribeToEvents])
+        notifier = ua.DataValue(ua.Variant(mask, ua.VariantType.Byte))
+        await server.write_attribute_value(nodeid, notifier, ua.AttributeIds.EventNotifier)
+        await server.get_node(SERVER_OBJECT).add_reference(nodeid, HAS_NOTIFIER, forward=True, bidirectional=True)
 
     def caller_context(self) -> WriteContext:
         """Who is calling, inside a method callback (asyncua does not pass the session to callbacks)."""
         caller = _CALLER.get()
         return WriteContext("opcua", self.user_name(caller), self.user_role(caller))
 
-    def link_method(self, nodeid: ua.NodeId, callback: Callable[..., Any]) -> None:
+    def link_method(self, nodeid: ua.NodeId, callback: MethodCallback) -> None:
         """Serve calls of a Method node (also a standard one, such as Acknowledge) with `callback`."""
         self.server.iserver.isession.add_method_callback(nodeid, callback)
 
-    async def trigger_event(self, event: Any, subscription: int | None = None, item: int | None = None) -> None:
+    async def trigger_event(self, event: Event, subscription: int | None = None, item: int | None = None) -> None:
         """Report an event (an asyncua Event object) to its notifier's subscribers: all, or one subscription
         (and one of its monitored items), as ConditionRefresh does."""
         service = self.server.iserver.subscription_service
@@ -332,7 +357,7 @@ class OpcUaSink:
             return  # that item watches another notifier
         await monitored.trigger_event(event, item)
 
-    async def trigger_unfiltered(self, event: Any, subscription: int, item: int | None = None) -> None:
+    async def trigger_unfiltered(self, event: Event, subscription: int, item: int | None = None) -> None:
         """Queue `event` for every event monitored item of one subscription (or only `item`), whatever its
         notifier and WhereClause: how OPC UA Part 9 (4.5) delivers RefreshStart/RefreshEnd events."""
         sub = self.server.iserver.subscription_service.subscriptions.get(subscription)
@@ -475,10 +500,8 @@ class OpcUaSink:
             machine = owners[id(method)]
             self._methods[nodeid] = (machine, method)
             self.server.iserver.isession.add_method_callback(nodeid, self._method_callback(machine, method))
-        if self.alarms is not None:
-            from gateway.sinks.opcua.alarms import OpcUaAlarms
-
-            await OpcUaAlarms(self, self.alarms).install()
+        for extension in self.extensions:
+            await extension.install(self)
         await self._push([(node, node.sample) for node in self._vars])
 
     def _register(self, plan: AddressSpacePlan) -> None:
