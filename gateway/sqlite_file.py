@@ -1,7 +1,8 @@
-"""The gateway's SQLite files (the job queue, the alarm history): one way to open, version and write them.
+"""The gateway's SQLite files (job queue, alarm history, audit table, MQTT backlog): one way to open them.
 
 WAL, so that the CLI reads while the gateway writes; synchronous=FULL, so that
-a committed transition survives a power cut; a schema version in user_version,
+a committed transition survives a power cut (a file whose last commits may go
+with the power says `synchronous = "NORMAL"`); a schema version in user_version,
 so that a file from a newer gateway is refused instead of misread; and write
 transactions taken at once (BEGIN IMMEDIATE), so that two writers never
 deadlock on a lock upgrade. One connection per file, shared by threads under a
@@ -27,6 +28,7 @@ class SqliteFile:
     schema: ClassVar[str]
     schema_version: ClassVar[int]
     error: ClassVar[type[GatewayError]]
+    synchronous: ClassVar[str] = "FULL"  # or "NORMAL": durable across a crash of the process, not of the power
 
     def __init__(self, path: Path, *, busy_timeout: float = 10.0) -> None:
         self.path = Path(path)
@@ -44,7 +46,7 @@ class SqliteFile:
         db.row_factory = sqlite3.Row
         try:
             db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")
+            db.execute(f"PRAGMA synchronous={self.synchronous}")
             db.execute(f"PRAGMA busy_timeout={int(self.busy_timeout * 1000)}")
             version = db.execute("PRAGMA user_version").fetchone()[0]
             if version > self.schema_version:

@@ -1,21 +1,24 @@
 """The audit table: one SQLite file in the state directory, written by the trail, read by the CLI.
 
 Times are stored as ISO-8601 UTC text with microseconds (`2026-05-06T07:08:09.123456Z`),
-which sorts like the times themselves. WAL mode lets `cnc-gateway audit list`
-read while the gateway writes.
+which sorts like the times themselves. Opened through `SqliteFile`: WAL mode lets
+`cnc-gateway audit list` read while the gateway writes; synchronous=NORMAL, since
+the log has every entry as well.
 """
 
 from __future__ import annotations
 
-import sqlite3
 from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 from gateway.audit.entry import AuditEntry
+from gateway.errors import GatewayError
+from gateway.sqlite_file import SqliteFile
 
 FILE_NAME = "audit.sqlite3"
+SCHEMA_VERSION = 1  # files from before the version was kept have 0, and the same table
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS audit (
@@ -62,23 +65,22 @@ class AuditRow:
     entry: AuditEntry
 
 
-class AuditStore:
-    """Blocking SQLite access: the trail uses it from its own thread, the CLI directly."""
+class AuditStoreError(GatewayError):
+    """The audit table cannot be opened or written (a missing one, opened with create=False, too)."""
+
+
+class AuditStore(SqliteFile):
+    """Blocking SQLite access, open once made: the trail uses it from its own thread, the CLI directly."""
+
+    noun = "audit table"
+    schema = SCHEMA
+    schema_version = SCHEMA_VERSION
+    synchronous = "NORMAL"
+    error = AuditStoreError
 
     def __init__(self, path: Path, *, create: bool = True) -> None:
-        self.path = path
-        if create:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        elif not path.exists():
-            raise FileNotFoundError(str(path))
-        self._db = sqlite3.connect(str(path), timeout=10.0, isolation_level=None)
-        if create:
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=NORMAL")
-            self._db.executescript(SCHEMA)
-
-    def close(self) -> None:
-        self._db.close()
+        super().__init__(path)
+        self.open(create=create)
 
     def insert(self, entries: Iterable[AuditEntry]) -> int:
         """One transaction for the whole batch."""
@@ -91,9 +93,8 @@ class AuditStore:
         ]
         if not rows:
             return 0
-        with self._db:
-            self._db.execute("BEGIN")
-            self._db.executemany(f"INSERT INTO audit ({COLUMNS}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", rows)
+        with self._write() as db:
+            db.executemany(f"INSERT INTO audit ({COLUMNS}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", rows)
         return len(rows)
 
     def prune(self, days: int, now: datetime | None = None) -> int:
@@ -101,9 +102,8 @@ class AuditStore:
         if days <= 0:
             return 0
         cutoff = (now or datetime.now(timezone.utc)) - timedelta(days=days)
-        with self._db:
-            self._db.execute("BEGIN")
-            cur = self._db.execute("DELETE FROM audit WHERE ts < ?", (iso(cutoff),))
+        with self._write() as db:
+            cur = db.execute("DELETE FROM audit WHERE ts < ?", (iso(cutoff),))
         return cur.rowcount
 
     def query(
@@ -115,7 +115,8 @@ class AuditStore:
         limit: int = 100,
     ) -> list[AuditRow]:
         """Newest first."""
-        where, params = [], []
+        where: list[str] = []
+        params: list[str | int] = []
         if machine is not None:
             where.append("machine = ?")
             params.append(machine)
@@ -131,7 +132,9 @@ class AuditStore:
         sql += " ORDER BY ts DESC, id DESC LIMIT ?"
         params.append(max(1, limit))
         out = []
-        for row in self._db.execute(sql, params):
+        with self._lock:
+            rows = self.db.execute(sql, params).fetchall()
+        for row in rows:
             (rowid, ts, kind, mach, target, origin, usr, role, old, new, status, reason, ms) = row
             entry = AuditEntry(
                 parse_iso(ts), kind, mach, target, origin, usr, role, old, new, status, reason, ms / 1000.0

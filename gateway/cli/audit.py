@@ -14,7 +14,7 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 from gateway.audit.entry import AuditEntry
-from gateway.audit.store import AuditStore, audit_path, iso
+from gateway.audit.store import AuditStore, AuditStoreError, audit_path, iso
 from gateway.cli.state_dir import resolve_state_dir
 
 _RELATIVE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhd])\s*$")
@@ -65,8 +65,8 @@ def handle_list(args: argparse.Namespace) -> int:
     path = audit_path(state_dir(args))
     try:
         store = AuditStore(path, create=False)
-    except FileNotFoundError:
-        print(f"no audit table at {path} (the gateway creates it when it starts)", file=sys.stderr)
+    except AuditStoreError as exc:
+        print(f"{exc}{'' if path.is_file() else ' (the gateway creates it when it starts)'}", file=sys.stderr)
         return 1
     try:
         rows = store.query(machine=args.machine, user=args.user, since=since, limit=args.limit)

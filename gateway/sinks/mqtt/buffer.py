@@ -12,8 +12,8 @@ Two kinds of messages, two rules:
 
 Delivery (`take`) is oldest first. Messages taken but not acknowledged by the
 broker come back with `put_front` when the connection drops. No asyncio here;
-the optional `Journal` mirrors the every-change backlog into SQLite (standard
-library) so that a restart does not lose it.
+the optional `Journal` mirrors the every-change backlog into SQLite (through
+gateway.sqlite_file) so that a restart does not lose it.
 """
 
 from __future__ import annotations
@@ -22,6 +22,9 @@ import logging
 import sqlite3
 from collections import deque
 from pathlib import Path
+
+from gateway.errors import SinkError
+from gateway.sqlite_file import SqliteFile
 
 log = logging.getLogger(__name__)
 
@@ -203,6 +206,23 @@ def _seq(msg: Message) -> int:
     return msg.seq
 
 
+class BacklogFileError(SinkError):
+    """The MQTT backlog file cannot be opened or used."""
+
+
+class BacklogFile(SqliteFile):
+    """The journal's file: WAL, synchronous=NORMAL (a power cut may cost the last batch, not the file)."""
+
+    noun = "MQTT backlog file"
+    schema = """
+CREATE TABLE IF NOT EXISTS messages (seq INTEGER PRIMARY KEY, topic TEXT NOT NULL, payload BLOB NOT NULL,
+    qos INTEGER NOT NULL, retain INTEGER NOT NULL, machine TEXT, latest_only INTEGER NOT NULL);
+"""
+    schema_version = 1  # files from before the version was kept have 0, and the same table
+    synchronous = "NORMAL"
+    error = BacklogFileError
+
+
 class Journal:
     """A SQLite mirror of the every-change backlog, written once per batch, read back at start-up.
 
@@ -216,10 +236,11 @@ class Journal:
         self._inserts: list[tuple[int, str, bytes, int, int, str | None, int]] = []
         self._set_aside: list[tuple[int]] = []
         self._deletes: list[tuple[int]] = []
+        self._file: BacklogFile | None = None
         self._db: sqlite3.Connection | None = None
         try:
-            self._db = self._open(path)
-        except sqlite3.DatabaseError as exc:
+            self._open(path)
+        except (BacklogFileError, sqlite3.DatabaseError) as exc:
             # A file we cannot read (damaged, not a database): keep it for inspection, start afresh.
             aside = path.with_name(path.name + ".damaged")
             log.error(
@@ -227,25 +248,20 @@ class Journal:
             )
             try:
                 path.replace(aside)
-                self._db = self._open(path)
-            except (OSError, sqlite3.Error) as again:
+                self._open(path)
+            except (OSError, sqlite3.Error, BacklogFileError) as again:
                 self._fail(again)
         except (OSError, sqlite3.Error) as exc:
             self._fail(exc)
 
-    @staticmethod
-    def _open(path: Path) -> sqlite3.Connection:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        db = sqlite3.connect(str(path), isolation_level=None, check_same_thread=False)
-        db.execute("PRAGMA journal_mode=WAL")
-        db.execute("PRAGMA synchronous=NORMAL")
-        db.execute(
-            "CREATE TABLE IF NOT EXISTS messages (seq INTEGER PRIMARY KEY, topic TEXT NOT NULL,"
-            " payload BLOB NOT NULL,"
-            " qos INTEGER NOT NULL, retain INTEGER NOT NULL, machine TEXT, latest_only INTEGER NOT NULL)"
-        )
-        db.execute("SELECT count(*) FROM messages").fetchone()  # fails here on a damaged file
-        return db
+    def _open(self, path: Path) -> None:
+        file = BacklogFile(path).open()
+        try:
+            file.db.execute("SELECT count(*) FROM messages").fetchone()  # fails here on a damaged file
+        except BaseException:
+            file.close()
+            raise
+        self._file, self._db = file, file.db
 
     def _fail(self, exc: BaseException) -> None:
         if not self.broken:
@@ -253,12 +269,15 @@ class Journal:
                 "MQTT backlog file %s cannot be used (%s); keeping the backlog in memory only", self.path, exc
             )
         self.broken = True
-        if self._db is not None:
+        self._close_file()
+
+    def _close_file(self) -> None:
+        file, self._file, self._db = self._file, None, None
+        if file is not None:
             try:
-                self._db.close()
+                file.close()
             except sqlite3.Error:
                 pass
-            self._db = None
 
     def load(self) -> list[Message]:
         if self._db is None:
@@ -326,9 +345,4 @@ class Journal:
 
     def close(self) -> None:
         self.commit()
-        if self._db is not None:
-            try:
-                self._db.close()
-            except sqlite3.Error:
-                pass
-            self._db = None
+        self._close_file()
