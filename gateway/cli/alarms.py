@@ -3,30 +3,28 @@
     cnc-gateway alarms list --machine laser-sim --since 2h
     cnc-gateway alarms list --since 2026-05-06 --active --json
 
-`--since` takes a duration back from now (`90s`, `15m`, `2h`, `7d`), `today`, or an
-ISO-8601 date or time (local time unless it names a zone). Listed: occurrences
-raised since then, and those still active then, newest first.
+`--since` takes a duration back from now (`90s`, `15m`, `2h`, `7d`, `2w`), `today`,
+or an ISO-8601 date or time (local time unless it names a zone); see since.py.
+Listed: occurrences raised since then, and those still active then, newest first.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
-from datetime import datetime, timedelta, timezone
+from datetime import datetime
 from pathlib import Path
 from typing import Any, TextIO
 
 from gateway.alarms.records import AlarmRecord
 from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.cli.since import HELP as SINCE_HELP
+from gateway.cli.since import since_arg
 from gateway.cli.state_dir import resolve_state_dir
 
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhdw])\s*$")
-_UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400, "w": 604800}
 
-
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("alarms", help="the alarm history kept in the state directory")
     alarms = p.add_subparsers(dest="alarms_command", metavar="ACTION", required=True)
     q = alarms.add_parser("list", help="alarm occurrences, newest first")
@@ -34,35 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="gateway or mapping file(s) the gateway runs with (to find its state directory)")
     q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
     q.add_argument("--machine", default=None)
-    q.add_argument("--since", default=None, type=since_arg,
-                   help="90s, 15m, 2h, 7d, today, or an ISO-8601 date/time (default: everything)")
+    q.add_argument("--since", default=None, type=since_arg, metavar="WHEN",
+                   help=f"{SINCE_HELP} (default: everything)")
     q.add_argument("--active", action="store_true", help="only alarms that are still active")
     q.add_argument("--limit", type=int, default=200)
     q.add_argument("--json", action="store_true")
     q.set_defaults(handler=handle_list)
-
-
-def parse_since(text: str, now: datetime | None = None) -> datetime:
-    """A point in time from what a person types; raises ValueError with the accepted forms."""
-    now = now or datetime.now(timezone.utc)
-    m = _DURATION.match(text)
-    if m:
-        return now - timedelta(seconds=float(m.group(1)) * _UNITS[m.group(2)])
-    if text.strip().lower() == "today":
-        local = now.astimezone()
-        return local.replace(hour=0, minute=0, second=0, microsecond=0)
-    try:
-        when = datetime.fromisoformat(text.strip())
-    except ValueError:
-        raise ValueError(f"{text!r}: expected a duration (90s, 15m, 2h, 7d), 'today', or an ISO-8601 date/time") from None
-    return when if when.tzinfo else when.astimezone()  # naive: local time
-
-
-def since_arg(text: str) -> datetime:
-    try:
-        return parse_since(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def state_dir(args: argparse.Namespace) -> Path:

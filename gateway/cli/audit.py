@@ -8,21 +8,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
-from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 from gateway.audit.entry import AuditEntry
 from gateway.audit.store import AuditStore, AuditStoreError, audit_path, iso
+from gateway.cli.since import HELP as SINCE_HELP
+from gateway.cli.since import since_arg
 from gateway.cli.state_dir import resolve_state_dir
 
-_RELATIVE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhd])\s*$")
-_UNITS = {"s": "seconds", "m": "minutes", "h": "hours", "d": "days"}
 KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("audit", help="the audit trail: every write, method call and alarm acknowledge/confirm, who, what, and the result")
     audit = p.add_subparsers(dest="audit_command", metavar="ACTION", required=True)
     q = audit.add_parser("list", help="audit entries, newest first")
@@ -31,25 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
     q.add_argument("--machine", default=None)
     q.add_argument("--user", default=None, help="entries of this user only")
-    q.add_argument("--since", default=None, metavar="WHEN",
-                   help="ISO time (2026-05-06T07:00, UTC unless it says otherwise) or an age: 30m, 2h, 7d")
+    q.add_argument("--since", default=None, type=since_arg, metavar="WHEN", help=SINCE_HELP)
     q.add_argument("--limit", type=int, default=100)
     q.add_argument("--json", action="store_true", help="one JSON object per line")
     q.set_defaults(handler=handle_list)
-
-
-def parse_since(text: str, now: datetime | None = None) -> datetime:
-    """An ISO time, or an age such as 30m, 2h, 7d. ValueError says what is expected."""
-    m = _RELATIVE.match(text)
-    if m:
-        return (now or datetime.now(timezone.utc)) - timedelta(**{_UNITS[m.group(2)]: float(m.group(1))})
-    try:
-        ts = datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
-    except ValueError:
-        raise ValueError(
-            f"--since {text!r}: expected an ISO time such as 2026-05-06T07:00 or an age such as 2h"
-        ) from None
-    return ts if ts.tzinfo else ts.replace(tzinfo=timezone.utc)
 
 
 def state_dir(args: argparse.Namespace) -> Path:
@@ -57,11 +40,6 @@ def state_dir(args: argparse.Namespace) -> Path:
 
 
 def handle_list(args: argparse.Namespace) -> int:
-    try:
-        since = parse_since(args.since) if args.since else None
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     path = audit_path(state_dir(args))
     try:
         store = AuditStore(path, create=False)
@@ -69,7 +47,7 @@ def handle_list(args: argparse.Namespace) -> int:
         print(f"{exc}{'' if path.is_file() else ' (the gateway creates it when it starts)'}", file=sys.stderr)
         return 1
     try:
-        rows = store.query(machine=args.machine, user=args.user, since=since, limit=args.limit)
+        rows = store.query(machine=args.machine, user=args.user, since=args.since, limit=args.limit)
     finally:
         store.close()
     for row in rows:

@@ -6,7 +6,7 @@ from datetime import datetime, timedelta, timezone
 
 import pytest
 
-from gateway.cli.alarms import parse_since
+from gateway.cli.since import parse_since
 
 NOW = datetime(2026, 5, 6, 12, 0, 0, tzinfo=timezone.utc)
 

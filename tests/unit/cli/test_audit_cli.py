@@ -5,7 +5,8 @@ from datetime import datetime, timedelta, timezone
 import pytest
 
 from gateway.audit.entry import AuditEntry
-from gateway.cli.audit import as_json, as_line, parse_since
+from gateway.cli.audit import as_json, as_line
+from gateway.cli.since import parse_since
 
 NOW = datetime(2026, 5, 6, 12, 0, tzinfo=timezone.utc)
 
@@ -13,7 +14,7 @@ NOW = datetime(2026, 5, 6, 12, 0, tzinfo=timezone.utc)
 def test_since_takes_an_age_or_an_iso_time() -> None:
     assert parse_since("30m", NOW) == NOW - timedelta(minutes=30)
     assert parse_since("7d", NOW) == NOW - timedelta(days=7)
-    assert parse_since("2026-05-06T07:00") == datetime(2026, 5, 6, 7, 0, tzinfo=timezone.utc)
+    assert parse_since("2026-05-06T07:00") == datetime(2026, 5, 6, 7, 0).astimezone()  # local, as listed
     assert parse_since("2026-05-06T09:00+02:00") == datetime(2026, 5, 6, 7, 0, tzinfo=timezone.utc)
     with pytest.raises(ValueError, match="expected an ISO time"):
         parse_since("yesterday")
