@@ -12,7 +12,7 @@ import contextlib
 import gc
 import logging
 import signal
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Coroutine, Iterator
 from contextlib import AsyncExitStack
 from typing import TYPE_CHECKING, Self, TypeVar, overload
 
@@ -184,7 +184,7 @@ class Gateway:
         finally:
             gc.unfreeze()  # what this gateway built becomes collectable again (tests run many in one process)
 
-    async def run(self, *extra: tuple[str, Callable[[], Awaitable[None]]]) -> None:
+    async def run(self, *extra: tuple[str, Callable[[], Coroutine[object, object, None]]]) -> None:
         """Run every component until cancelled. `extra` adds named tasks (the demo's driver)."""
         async with asyncio.TaskGroup() as tg:
             for sink in self.sinks:

@@ -56,7 +56,7 @@ from gateway.model.types import TypeSpec, parse_text
 RETRY_EVERY = 1.0  # s between attempts to reach the target
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "frames", help="COPYDATA frames: receive them live, decode captured ones, build test ones"
     )
