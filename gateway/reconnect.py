@@ -120,7 +120,7 @@ class Backoff:
 
 
 class OutageLog:
-    """Says a failure once at its level, then quietly (DEBUG, counted) while it repeats; says the recovery once.
+    """Says a failure once at its level, quietly (DEBUG, counted) while it repeats, and the recovery once.
 
     `failed()` is called for every failed attempt, with a short `reason` that
     tells failures apart (`connection refused`, `timed out`): the first of an

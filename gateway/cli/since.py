@@ -1,4 +1,4 @@
-"""`--since WHEN` of the history commands (`alarms list`, `audit list`): a point in time from what a person types.
+"""`--since WHEN` of `alarms list` and `audit list`: a point in time from what a person types.
 
 Accepted, in any of those commands:
 

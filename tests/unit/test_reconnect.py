@@ -48,7 +48,8 @@ def test_every_delay_lies_under_its_unjittered_base_which_never_shrinks_nor_pass
     initial: float, factor: float, maximum: float, jitter: float, rands: list[float]
 ) -> None:
     draws = iter(rands)
-    delays = list(islice(backoff_delays(initial, factor, maximum, jitter=jitter, rand=lambda: next(draws)), len(rands)))
+    stream = backoff_delays(initial, factor, maximum, jitter=jitter, rand=lambda: next(draws))
+    delays = list(islice(stream, len(rands)))
     base = min(initial, maximum)
     for delay, r in zip(delays, rands):
         assert delay == pytest.approx(base * (1.0 - jitter * r))
@@ -117,7 +118,8 @@ def test_an_outage_is_said_once_then_quietly_and_its_end_once(caplog: pytest.Log
     outage = OutageLog(LOG)
     assert outage.failed("connection refused", "cannot connect to %s: %s", "plc", "connection refused")
     for _ in range(5):
-        assert not outage.failed("connection refused", "cannot connect to %s: %s", "plc", "connection refused")
+        said = outage.failed("connection refused", "cannot connect to %s: %s", "plc", "connection refused")
+        assert not said
     assert outage.down and outage.failures == 6 and outage.quiet == 5
     outage.recovered("connected to %s", "plc")
     assert not outage.down and outage.reason == ""

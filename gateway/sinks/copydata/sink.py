@@ -107,4 +107,4 @@ def make_transport(port: TransportPort) -> Transport:
         from gateway.sinks.copydata.win32 import Win32Transport
 
         return Win32Transport(port)
-    raise SinkError(f"COPYDATA target {port.name}: unknown transport {kind!r}")  # the config makes this unreachable
+    raise SinkError(f"COPYDATA target {port.name}: unknown transport {kind!r}")  # the config rules it out

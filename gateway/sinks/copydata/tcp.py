@@ -235,7 +235,9 @@ class TcpServerTransport:
                 self.port = server.sockets[0].getsockname()[1]
                 self.listening.set()
                 self._listening()
-                outage.recovered("copydata %s: listening on %s:%s", emitter.name, target.listen_address, self.port)
+                outage.recovered(
+                    "copydata %s: listening on %s:%s", emitter.name, target.listen_address, self.port
+                )
                 await asyncio.Future()  # serve until cancelled
             finally:
                 self.listening.clear()

@@ -66,8 +66,10 @@ class UdpTransport:
                 break
             except OSError as exc:
                 delay, reason = backoff.next(), os_reason(exc)
-                outage.failed(reason, "copydata %s: cannot open a UDP socket to %s:%s: %s; retrying in %.1f s",
-                              emitter.name, target.host, target.port, reason, delay)  # fmt: skip
+                outage.failed(
+                    reason, "copydata %s: cannot open a UDP socket to %s:%s: %s; retrying in %.1f s",
+                    emitter.name, target.host, target.port, reason, delay,
+                )  # fmt: skip
                 emitter.set_state(f"not sending ({reason})")
                 await asyncio.sleep(delay)
         if outage.down:
@@ -81,7 +83,9 @@ class UdpTransport:
                 while True:
                     frames = await channel.next_frames()
                     for dwdata, lpdata in frames:
-                        if transport.get_write_buffer_size() > BUFFER_LIMIT:  # type: ignore[attr-defined]  # not in typeshed
+                        # Selector transports have it; typeshed's DatagramTransport does not say so.
+                        buffered = transport.get_write_buffer_size()  # type: ignore[attr-defined]
+                        if buffered > BUFFER_LIMIT:
                             self.overflows += 1
                             channel.dropped += 1
                             continue

@@ -266,7 +266,9 @@ class MqttSink:
                 level=logging.ERROR,
             )  # fmt: skip
         else:
-            self._outage.failed(reason, "MQTT: %s; retrying in %.1f s (%d messages waiting)", reason, delay, waiting)
+            self._outage.failed(
+                reason, "MQTT: %s; retrying in %.1f s (%d messages waiting)", reason, delay, waiting
+            )
 
     def _on_connected(self, info: Connected) -> None:
         assert self._client is not None and self.backlog is not None

@@ -84,7 +84,7 @@ Action = Callable[[AlarmManager, int, WriteContext, str, Check], Awaitable[Alarm
 
 
 class OpcUaAlarms:
-    """The alarm conditions of every machine the AlarmService manages (a ServerExtension of the OPC UA sink)."""
+    """The alarm conditions of every machine the AlarmService manages (an OPC UA ServerExtension)."""
 
     def __init__(self, service: AlarmService) -> None:
         self.service = service

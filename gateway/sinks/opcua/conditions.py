@@ -94,13 +94,15 @@ def condition_event(
     ))  # fmt: skip
     e: Any = event  # asyncua's events take their fields as attributes no type checker knows
     e.emitting_node = SERVER
-    e.add_property("NodeId", ids.condition, ua.VariantType.NodeId)  # ConditionId (not a component of the type)
+    e.add_property("NodeId", ids.condition, ua.VariantType.NodeId)  # ConditionId (not in the type)
     e.EventId = event_id
     e.SourceName = ids.source_name
     e.Time = time
     e.ReceiveTime = utcnow()
     offset = _time.localtime(time.timestamp())
-    e.LocalTime = ua.TimeZoneDataType(Offset=offset.tm_gmtoff // 60, DaylightSavingInOffset=offset.tm_isdst > 0)
+    e.LocalTime = ua.TimeZoneDataType(
+        Offset=offset.tm_gmtoff // 60, DaylightSavingInOffset=offset.tm_isdst > 0
+    )
     e.ConditionClassId = PROCESS_CLASS
     e.ConditionClassName = ua.LocalizedText("Process")
     e.ConditionName = record.id

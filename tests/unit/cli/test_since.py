@@ -74,7 +74,7 @@ def test_every_duration_is_that_long_ago(amount: int, unit: str) -> None:
     assert NOW - parse_since(f"{amount}{unit}", NOW) == timedelta(seconds=amount * seconds)
 
 
-@given(st.datetimes(min_value=datetime(1970, 1, 2), max_value=datetime(9999, 12, 30), timezones=st.just(timezone.utc)))
+@given(st.datetimes(datetime(1970, 1, 2), datetime(9999, 12, 30), timezones=st.just(timezone.utc)))
 def test_an_iso_time_reads_back_as_itself(when: datetime) -> None:
     assert parse_since(when.isoformat(), NOW) == when
     assert parse_since(when.isoformat().replace("+00:00", "Z"), NOW) == when
