@@ -53,7 +53,8 @@ class Entry:
     sample_rate: float | None = None
     reset_triggered: str | None = None
     duration: float | None = None
-    _xml: str | None = field(default=None, repr=False)
+    asset_type: str | None = None  # ASSET_CHANGED / ASSET_REMOVED: the schema requires assetType
+    xml_cache: str | None = field(default=None, repr=False)  # entry_xml's rendering
     json_cache: str | None = field(default=None, repr=False)  # json_documents.entry_json's rendering
 
     @property
@@ -70,10 +71,31 @@ class Entry:
 
     @property
     def xml(self) -> str:
-        text = self._xml
-        if text is None:
-            text = self._xml = _render_xml(self)
+        return self.xml_cache or entry_xml(self)
+
+
+def entry_xml(e: Entry) -> str:
+    """The observation's element, rendered once and kept in `xml_cache`."""
+    cached = e.xml_cache
+    if cached is not None:
+        return cached
+    info = e.info
+    if (
+        not info.is_condition
+        and e.sample_count is None
+        and e.reset_triggered is None
+        and e.duration is None
+        and e.asset_type is None
+    ):
+        value = e.value
+        text = e.xml_cache = (
+            f'{info.prefix}{e.sequence}" timestamp="{e.timestamp}">{xml_text(value)}</{info.element}>'
+            if value
+            else f'{info.prefix}{e.sequence}" timestamp="{e.timestamp}"/>'
+        )
         return text
+    text = e.xml_cache = _render_xml(e)
+    return text
 
 
 def _render_xml(e: Entry) -> str:
@@ -96,8 +118,15 @@ def _render_xml(e: Entry) -> str:
         parts.append(f' resetTriggered="{xml_attr(e.reset_triggered)}"')
     if e.duration is not None:
         parts.append(f' duration="{e.duration!r}"')
-    if e.value:
-        parts.append(f">{xml_text(e.value)}</{element}>")
+    if e.asset_type is not None:
+        parts.append(f' assetType="{xml_attr(e.asset_type)}"')
+    text = e.value
+    if info.time_series and text == UNAVAILABLE:
+        # The 2.4 schema's time series hold a list of floats only: an UNAVAILABLE one is
+        # rendered empty, with sampleCount="0".
+        text = ""
+    if text:
+        parts.append(f">{xml_text(text)}</{element}>")
     else:
         parts.append("/>")
     return "".join(parts)
@@ -271,16 +300,25 @@ class ObservationBuffer:
         sample_rate: float | None = None,
         reset_triggered: str | None = None,
         duration: float | None = None,
+        asset_type: str | None = None,
         dedupe: bool = True,
     ) -> Entry | None:
         """Add a SAMPLE or EVENT observation; returns it, or None if it repeats the latest value.
 
+        ASSET_CHANGED and ASSET_REMOVED need `asset_type` (UNAVAILABLE ones get "UNAVAILABLE").
         Raises KeyError for an unknown data item and ValueRejected for a value its element cannot hold.
         """
         info = self.catalog.items[item_id]
         if info.is_condition:
             raise ValueRejected(f"{item_id} is a CONDITION: use add_condition")
         text = render_value(info.item.category.value, info.item.type, value, time_series=info.time_series)
+        if info.item.type in ("ASSET_CHANGED", "ASSET_REMOVED"):
+            if text == UNAVAILABLE:
+                asset_type = UNAVAILABLE
+            elif not asset_type:
+                raise ValueRejected(f"{item_id} ({info.item.type}) needs the asset's type")
+        else:
+            asset_type = None
         count: int | None = None
         if info.time_series:
             count = 0 if text == UNAVAILABLE else len(text.split())
@@ -293,6 +331,7 @@ class ObservationBuffer:
             sample_rate=sample_rate,
             reset_triggered=reset_triggered,
             duration=duration,
+            asset_type=asset_type,
         )
         return self._append(entry, dedupe)
 

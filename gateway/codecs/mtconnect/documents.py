@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from gateway.codecs.mtconnect.assets import Asset
-from gateway.codecs.mtconnect.buffer import Entry, Window
+from gateway.codecs.mtconnect.buffer import Entry, Window, entry_xml
 from gateway.codecs.mtconnect.errors import RequestError
 from gateway.codecs.mtconnect.model import (
     CATEGORY_ELEMENTS,
@@ -210,37 +210,44 @@ def _streams_header(window: Window, info: DocumentInfo) -> str:
 
 def streams_body(catalog: Catalog, entries: Iterable[Entry]) -> str:
     """The `<Streams>` element alone (also what one chunk of a streamed /sample carries)."""
-    buckets: dict[int, tuple[list[str], list[str], list[str]]] = {}
+    buckets: dict[int, list[str]] = {}
     for entry in entries:
-        info = entry.info
-        key = info.stream.index
+        key = entry.info.bucket
+        fragment = entry.xml_cache or entry_xml(entry)
         bucket = buckets.get(key)
         if bucket is None:
-            bucket = buckets[key] = ([], [], [])
-        bucket[info.category_index].append(entry.xml)
+            buckets[key] = [fragment]
+        else:
+            bucket.append(fragment)
     if not buckets:
         return "<Streams/>"
     out = ["<Streams>"]
     streams = catalog.streams
     tags = catalog.device_open_tags
     device_index = -1
+    stream_index = -1
     for key in sorted(buckets):
-        stream = streams[key]
-        if stream.device_index != device_index:
-            if device_index >= 0:
-                out.append("</DeviceStream>")
-            device_index = stream.device_index
-            out.append(tags[device_index])
-        out.append(stream.open_tag)
-        for category, fragments in enumerate(buckets[key]):
-            if fragments:
-                element = CATEGORY_ELEMENTS[category]
-                out.append(f"<{element}>")
-                out.extend(fragments)
-                out.append(f"</{element}>")
-        out.append("</ComponentStream>")
-    out.append("</DeviceStream></Streams>")
+        index, category = divmod(key, 3)
+        if index != stream_index:
+            if stream_index >= 0:
+                out.append("</ComponentStream>")
+            stream = streams[index]
+            if stream.device_index != device_index:
+                if device_index >= 0:
+                    out.append("</DeviceStream>")
+                device_index = stream.device_index
+                out.append(tags[device_index])
+            out.append(stream.open_tag)
+            stream_index = index
+        out.append(_CATEGORY_OPEN[category])
+        out.extend(buckets[key])
+        out.append(_CATEGORY_CLOSE[category])
+    out.append("</ComponentStream></DeviceStream></Streams>")
     return "".join(out)
+
+
+_CATEGORY_OPEN = tuple(f"<{name}>" for name in CATEGORY_ELEMENTS)
+_CATEGORY_CLOSE = tuple(f"</{name}>" for name in CATEGORY_ELEMENTS)
 
 
 # --- MTConnectAssets --------------------------------------------------------------------------

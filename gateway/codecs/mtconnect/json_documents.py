@@ -211,6 +211,8 @@ def entry_json(entry: Entry) -> str:
             obj["resetTriggered"] = entry.reset_triggered
         if entry.duration is not None:
             obj["duration"] = entry.duration
+        if entry.asset_type is not None:
+            obj["assetType"] = entry.asset_type
         obj["value"] = _json_value(entry)
     text = entry.json_cache = _dumps(obj)
     return text

@@ -124,10 +124,12 @@ class ItemInfo:
     order: int  # position in probe order across all devices
     stream: StreamInfo
     category_index: int  # 0 Samples, 1 Events, 2 Condition
-    element: str  # the observation element; for CONDITION the level decides, see condition_element
+    element: str  # the observation element; "" for a CONDITION, whose level names it
     attrs: str  # ` dataItemId="x" name="Xact" subType="ACTUAL"` (and `type=` for conditions)
     is_condition: bool = field(default=False)
     time_series: bool = field(default=False)
+    bucket: int = 0  # stream.index * 3 + category_index: the documents' grouping key
+    prefix: str = ""  # `<Position dataItemId="x" ... sequence="` (not for conditions)
 
 
 class Catalog:
@@ -199,15 +201,19 @@ def _item_info(item: DataItem, order: int, stream: StreamInfo) -> ItemInfo:
         element = ""
     else:
         element = element_name(item.type) + ("TimeSeries" if time_series else "")
+    category_index = CATEGORY_INDEX[item.category]
+    attr_text = "".join(attrs)
     return ItemInfo(
         item=item,
         order=order,
         stream=stream,
-        category_index=CATEGORY_INDEX[item.category],
+        category_index=category_index,
         element=element,
-        attrs="".join(attrs),
+        attrs=attr_text,
         is_condition=is_condition,
         time_series=time_series,
+        bucket=stream.index * 3 + category_index,
+        prefix="" if is_condition else f'<{element}{attr_text} sequence="',
     )
 
 
