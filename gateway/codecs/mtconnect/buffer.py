@@ -157,9 +157,9 @@ class Checkpoint:
             if entry.level in ("Normal", "Unavailable") and entry.condition_id is None:
                 return len(active) == 1 and active[0].level == entry.level
             return any(_same_condition(a, entry) for a in active)
-        if info.item.discrete or entry.reset_triggered is not None:
-            return False
         last = self.values.get(info.item.id)
+        if info.item.discrete or entry.reset_triggered is not None:
+            return last is not None and last.value == entry.value == UNAVAILABLE
         return last is not None and last.value == entry.value and last.sample_count == entry.sample_count
 
     def apply(self, entry: Entry) -> None:

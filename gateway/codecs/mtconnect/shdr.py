@@ -419,6 +419,7 @@ class ShdrReader:
             i += 1
             if not key:
                 self._junk(events, f"empty key in field {i}", line)
+                i += 1  # its value goes with it
                 continue
             if key.startswith("@"):
                 i = self._asset_command(key, fields, i, ts, line, events)
@@ -606,8 +607,8 @@ class ShdrReader:
 
 
 def _check_key(key: str) -> str:
-    if not key or key != key.strip() or any(c in key for c in "|\r\n") or key[0] in "*@":
-        raise ValueError(f"{key!r} is not an SHDR key (non-empty, no pipe or space around, not * or @ first)")
+    if not key or "|" in key or any(c.isspace() for c in key) or key[0] in "*@":
+        raise ValueError(f"{key!r} is not an SHDR key (non-empty, no pipe or white space, not * or @ first)")
     return key
 
 

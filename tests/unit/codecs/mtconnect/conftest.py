@@ -26,7 +26,9 @@ def schemas() -> dict[str, Any]:
     xmlschema = pytest.importorskip("xmlschema")
     directory = schema_dir()
     if directory is None:
-        pytest.skip(f"the MTConnect schemas are not on this machine (looked in {', '.join(map(str, CANDIDATES))})")
+        pytest.skip(
+            f"the MTConnect schemas are not on this machine (looked in {', '.join(map(str, CANDIDATES))})"
+        )
     return {
         kind: xmlschema.XMLSchema10(str(directory / f"MTConnect{kind}_2.4_1.0.xsd"))
         for kind in ("Devices", "Streams", "Assets", "Error")
