@@ -16,6 +16,7 @@ from urllib.parse import parse_qsl, unquote
 
 from gateway.codecs.mtconnect.errors import ErrorCode, OutOfRange, RequestError
 from gateway.codecs.mtconnect.model import Catalog, Device
+from gateway.codecs.mtconnect.paths import PathIndex, parse_path
 
 MAX_TARGET = 8192
 MAX_PARAMETERS = 16
@@ -176,3 +177,16 @@ def resolve_device(catalog: Catalog, name: str | None) -> Device | None:
     if device is None:
         raise RequestError(ErrorCode.NO_DEVICE, f"no device named {name[:80]!r}")
     return device
+
+
+def select_items(request: Request, catalog: Catalog, index: PathIndex) -> frozenset[str] | None:
+    """The data item ids a /current or /sample covers: its device's, narrowed by its path; None for all.
+
+    Raises NO_DEVICE or INVALID_PATH. (Cache the answer per (device, path): paths repeat.)
+    """
+    device = resolve_device(catalog, request.device)
+    if request.path is not None:
+        return index.select(parse_path(request.path), device)
+    if device is not None:
+        return catalog.device_items(device)
+    return None

@@ -21,7 +21,9 @@ a device prefix (`device:key`), reported as `device`.
 Like the reference agent, the reader never stops on bad input: a line it cannot read
 (not UTF-8, too long, a bad timestamp, a condition with an unknown level, ...) becomes
 a `Junk` event with the reason, is counted in `errors`, and reading goes on with the
-next line. Memory is bounded by `max_line` (and `max_asset` for multi-line assets).
+next line. Memory is bounded by `max_line` (and `max_asset` for multi-line assets: a larger
+one, or one with a line over `max_line`, is dropped with one Junk and its remaining lines are
+skipped up to its terminator).
 
 Where the reference agent is loose and this reader is not: a first field that is
 neither empty nor a timestamp makes the line Junk (cppagent would silently use its clock
@@ -285,6 +287,19 @@ def _opt(text: str) -> str | None:
     return text if text else None
 
 
+@dataclass(slots=True)
+class _PendingAsset:
+    """A multi-line asset being collected; once `dropped`, its lines are skipped up to the terminator."""
+
+    timestamp: datetime
+    asset_id: str
+    asset_type: str
+    tag: str
+    lines: list[str]
+    size: int = 0
+    dropped: bool = False
+
+
 class ShdrReader:
     """Turns SHDR bytes, in any chunking, into events. Never raises on input.
 
@@ -307,7 +322,7 @@ class ShdrReader:
         self.errors = 0  # Junk events produced
         self._buf = bytearray()
         self._discarding = False  # inside a line already refused as too long
-        self._asset: tuple[datetime, str, str, str, list[str], int] | None = None  # multi-line asset
+        self._asset: _PendingAsset | None = None  # a multi-line asset being read
 
     @property
     def buffered(self) -> int:
@@ -343,12 +358,10 @@ class ShdrReader:
 
     def _too_long(self, events: list[Event], raw: bytes) -> None:
         self._junk(events, f"line longer than {self.max_line} bytes", raw[:200].decode("utf-8", "replace"))
-        if self._asset is not None:  # a multi-line asset missing a line is no asset
-            asset_id = self._asset[1]
-            self._asset = None
-            self._junk(
-                events, f"multi-line asset {asset_id} dropped: one of its lines was too long", asset_id
-            )
+        if (
+            self._asset is not None and not self._asset.dropped
+        ):  # a multi-line asset missing a line is no asset
+            self._drop_asset(events, "one of its lines was too long")
 
     def feed_eof(self, received_at: datetime) -> list[Event]:
         """The connection closed: read a last line that had no LF; report an unfinished asset."""
@@ -359,9 +372,13 @@ class ShdrReader:
         self._buf.clear()
         self._discarding = False
         if self._asset is not None:
-            _, asset_id, _, tag, _, _ = self._asset
-            self._asset = None
-            self._junk(events, f"stream ended inside multi-line asset {asset_id} (no {tag})", asset_id)
+            pending, self._asset = self._asset, None
+            if not pending.dropped:
+                self._junk(
+                    events,
+                    f"stream ended inside multi-line asset {pending.asset_id} (no {pending.tag})",
+                    pending.asset_id,
+                )
         return events
 
     def _junk(self, events: list[Event], reason: str, text: str) -> None:
@@ -531,7 +548,7 @@ class ShdrReader:
                 self._junk(events, "@ASSET@ needs an asset id and a type", line)
                 return i + 3
             if body.startswith(MULTILINE):
-                self._asset = (ts, asset_id, asset_type, body, [], 0)
+                self._asset = _PendingAsset(ts, asset_id, asset_type, body, [])
                 return n  # the rest of the line is the terminator tag
             events.append(AssetChanged(ts, asset_id, asset_type, body))
             return i + 3
@@ -556,19 +573,32 @@ class ShdrReader:
         return n
 
     def _asset_line(self, line: str, events: list[Event]) -> None:
-        assert self._asset is not None
-        ts, asset_id, asset_type, tag, body, size = self._asset
-        if line.startswith(tag):
+        pending = self._asset
+        assert pending is not None
+        if line.startswith(pending.tag):
             self._asset = None
-            events.append(AssetChanged(ts, asset_id, asset_type, "\n".join(body)))
+            if not pending.dropped:
+                events.append(
+                    AssetChanged(
+                        pending.timestamp, pending.asset_id, pending.asset_type, "\n".join(pending.lines)
+                    )
+                )
             return
-        size += len(line) + 1
-        if size > self.max_asset:
-            self._asset = None
-            self._junk(events, f"multi-line asset {asset_id} is larger than {self.max_asset} bytes", asset_id)
+        if pending.dropped:
             return
-        body.append(line)
-        self._asset = (ts, asset_id, asset_type, tag, body, size)
+        pending.size += len(line) + 1
+        if pending.size > self.max_asset:
+            self._drop_asset(events, f"it is larger than {self.max_asset} bytes")
+            return
+        pending.lines.append(line)
+
+    def _drop_asset(self, events: list[Event], why: str) -> None:
+        """Refuse the multi-line asset being read; its remaining lines are skipped up to its terminator."""
+        pending = self._asset
+        assert pending is not None
+        pending.dropped = True
+        pending.lines = []
+        self._junk(events, f"multi-line asset {pending.asset_id} dropped: {why}", pending.asset_id)
 
     def _command(self, line: str, events: list[Event]) -> None:
         text = line[1:].strip()

@@ -336,3 +336,22 @@ def test_json_empty_streams_and_probe() -> None:
     assert [a["name"] for a in linear] == ["X", "Y", "Z"]
     assert linear[0]["DataItems"]["DataItem"][0]["Source"] == {"value": "Xact"}
     assert probe["Header"]["assetBufferSize"] == 4
+
+
+@pytest.mark.parametrize("kind", ["Streams", "Devices", "Error"])
+def test_the_validators_do_refuse_a_broken_document(schemas: dict[str, Any], kind: str) -> None:
+    catalog = shop(1)
+    buffer = started(catalog)
+    entries, window = buffer.current()
+    document = {
+        "Streams": lambda: streams_xml(catalog, entries, window, INFO).replace(
+            ">UNAVAILABLE</Position>", ">fast</Position>", 1
+        ),
+        "Devices": lambda: devices_xml(
+            catalog, INFO, instance_id=1, buffer_size=8, asset_buffer_size=1, asset_count=0
+        ).replace('category="SAMPLE"', 'category="SOMETIMES"', 1),
+        "Error": lambda: error_xml(
+            [RequestError(ErrorCode.NO_DEVICE, "x")], INFO, instance_id=1, buffer_size=8
+        ).replace("NO_DEVICE", "NO_SUCH_CODE"),
+    }[kind]()
+    assert list(schemas[kind].iter_errors(document))
