@@ -111,7 +111,6 @@ class StreamInfo:
 
     index: int  # position in probe order across all devices
     device_index: int
-    device: Device
     node: Node
     open_tag: str  # `<ComponentStream component="Linear" componentId="x" name="X">`
 
@@ -121,7 +120,6 @@ class ItemInfo:
     """Where a data item's observations go in a Streams document, and their repeated XML."""
 
     item: DataItem
-    order: int  # position in probe order across all devices
     stream: StreamInfo
     category_index: int  # 0 Samples, 1 Events, 2 Condition
     element: str  # the observation element; "" for a CONDITION, whose level names it
@@ -137,7 +135,7 @@ class Catalog:
 
     def __init__(self, devices: Sequence[Device]) -> None:
         self.devices: tuple[Device, ...] = tuple(devices)
-        self.items: dict[str, ItemInfo] = {}
+        self.items: dict[str, ItemInfo] = {}  # by data item id, in probe order
         self.streams: list[StreamInfo] = []
         self.device_open_tags: list[str] = []
         self._by_name: dict[str, Device] = {}
@@ -151,10 +149,10 @@ class Catalog:
             for node in walk(device):
                 if not node.data_items:
                     continue
-                stream = StreamInfo(len(self.streams), device_index, device, node, _stream_tag(node))
+                stream = StreamInfo(len(self.streams), device_index, node, _stream_tag(node))
                 self.streams.append(stream)
                 for item in node.data_items:
-                    self.items[item.id] = _item_info(item, len(self.items), stream)
+                    self.items[item.id] = _item_info(item, stream)
 
     def device(self, name_or_uuid: str) -> Device | None:
         """The device with this name or uuid (what /<device>/... names), or None."""
@@ -184,7 +182,7 @@ def _stream_tag(node: Node) -> str:
     return "".join(parts)
 
 
-def _item_info(item: DataItem, order: int, stream: StreamInfo) -> ItemInfo:
+def _item_info(item: DataItem, stream: StreamInfo) -> ItemInfo:
     attrs = [f' dataItemId="{xml_attr(item.id)}"']
     if item.name is not None:
         attrs.append(f' name="{xml_attr(item.name)}"')
@@ -205,7 +203,6 @@ def _item_info(item: DataItem, order: int, stream: StreamInfo) -> ItemInfo:
     attr_text = "".join(attrs)
     return ItemInfo(
         item=item,
-        order=order,
         stream=stream,
         category_index=category_index,
         element=element,
