@@ -3,7 +3,7 @@
 Topics, payload bytes and events; no MQTT client, no asyncio. The Sparkplug sink builds on it:
 the gateway is one edge node, every machine one of its devices.
 
-    bd, seq = BdSeq(), Seq()
+    bd, seq, aliases = BdSeq(), Seq(), Aliases()                 # one of each per edge node
     will = encode_ndeath(bdseq=bd.connect())                     # the CONNECT's will, QoS 1
     nbirth = encode_nbirth(node_metrics, bdseq=bd.current, seq=seq, timestamp=now_ms)
     dbirth = encode_dbirth(machine_metrics, seq=seq, timestamp=now_ms)
@@ -16,6 +16,7 @@ the gateway is one edge node, every machine one of its devices.
 The payload schema is sparkplug_b.proto; sparkplug_b_pb2 is generated from it (protoc.py).
 """
 
+from gateway.codecs.sparkplug.aliases import Aliases
 from gateway.codecs.sparkplug.commands import (
     Command,
     Definition,
@@ -101,6 +102,7 @@ __all__ = [
     "REBIRTH",
     "STATE_QOS",
     "STATE_RETAIN",
+    "Aliases",
     "BadBirth",
     "BadCommand",
     "BadId",

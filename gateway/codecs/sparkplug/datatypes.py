@@ -238,9 +238,9 @@ def get_scalar(message: ValueMessage, sp: SparkplugType) -> Scalar:
 def _refuse_field(message: ValueMessage, sp: SparkplugType, present: str | None, expected: str) -> NoReturn:
     if present is None:
         if message.is_null:
-            raise BadValue(f"the value is null; a {sp.name} is needed")
-        raise BadValue(f"no value; a {sp.name} in {expected} is needed")
-    raise WrongDatatype(f"a {sp.name} travels in {expected}, got {present}")
+            raise BadValue(f"the value is null; {_an(sp)} is needed")
+        raise BadValue(f"no value; {_an(sp)} in {expected} is needed")
+    raise WrongDatatype(f"{_an(sp)} travels in {expected}, got {present}")
 
 
 # --- scalars ------------------------------------------------------------------------------------
@@ -252,16 +252,14 @@ def _to_wire(sp: SparkplugType, value: object) -> int | float | bool | str:
         bits = _SIGNED_BITS.get(sp)
         return number & ((1 << bits) - 1) if bits and number < 0 else number
     if sp in (T.Float, T.Double):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise Unencodable(f"a {sp.name} needs a number, got {_kind(value)}")
-        return float(value)
+        return _number(sp, value)
     if sp is T.Boolean:
         if not isinstance(value, bool):
             raise Unencodable(f"a Boolean needs true or false, got {_kind(value)}")
         return value
     if sp in (T.String, T.Text, T.UUID):
         if not isinstance(value, str):
-            raise Unencodable(f"a {sp.name} needs text, got {_kind(value)}")
+            raise Unencodable(f"{_an(sp)} needs text, got {_kind(value)}")
         _check_utf8(value)
         return value
     if sp is T.DateTime:
@@ -288,7 +286,7 @@ def _from_wire(sp: SparkplugType, raw: object) -> Scalar:
     base = _BASE_OF[sp]
     lo, hi = INT_BOUNDS[base]
     if not lo <= number <= hi:
-        raise BadValue(f"{number} does not fit a {sp.name} ({lo}..{hi})")
+        raise BadValue(f"{number} does not fit {_an(sp)} ({lo}..{hi})")
     return number
 
 
@@ -298,11 +296,11 @@ def _signed(raw: int, bits: int) -> int:
 
 def _int(sp: SparkplugType, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise Unencodable(f"a {sp.name} needs an integer, got {_kind(value)}")
+        raise Unencodable(f"{_an(sp)} needs an integer, got {_kind(value)}")
     base = _BASE_OF.get(sp) or _ELEMENT[sp]
     lo, hi = INT_BOUNDS[base]
     if not lo <= value <= hi:
-        raise Unencodable(f"{value} does not fit a {sp.name} ({lo}..{hi})")
+        raise Unencodable(f"{value} does not fit {_an(sp)} ({lo}..{hi})")
     return value
 
 
@@ -329,7 +327,7 @@ def from_millis(ms: int) -> datetime:
 def pack_array(sp: SparkplugType, values: object) -> bytes:
     """The bytes_value of an array of Sparkplug array type `sp`."""
     if not isinstance(values, (list, tuple)):
-        raise Unencodable(f"a {sp.name} needs a list, got {_kind(values)}")
+        raise Unencodable(f"{_an(sp)} needs a list, got {_kind(values)}")
     if sp is T.BooleanArray:
         return _pack_booleans(values)
     if sp is T.StringArray:
@@ -360,7 +358,7 @@ def unpack_array(sp: SparkplugType, data: bytes) -> list[Scalar]:
         raise WrongDatatype(f"{sp.name} is not an array type")
     size = struct.calcsize(letter)
     if len(data) % size:
-        raise BadValue(f"a {sp.name} is {size}-byte values; {len(data)} bytes is not a whole number of them")
+        raise BadValue(f"{_an(sp)} is {size}-byte values; {len(data)} bytes is not a whole number of them")
     numbers = struct.unpack(f"<{len(data) // size}{letter}", data)
     if sp is T.DateTimeArray:
         return [from_millis(ms) for ms in numbers]
@@ -369,8 +367,11 @@ def unpack_array(sp: SparkplugType, data: bytes) -> list[Scalar]:
 
 def _number(sp: SparkplugType, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise Unencodable(f"a {sp.name} element needs a number, got {_kind(value)}")
-    return float(value)
+        raise Unencodable(f"{_an(sp)} needs a number, got {_kind(value)}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise Unencodable(f"{_an(sp)} cannot hold an integer beyond the range of a double") from None
 
 
 def _pack_float32(value: float) -> bytes:
@@ -432,6 +433,10 @@ def _check_utf8(text: str) -> bytes:
         return text.encode("utf-8")
     except UnicodeEncodeError as exc:
         raise Unencodable(f"text with a lone surrogate at {exc.start} cannot be UTF-8") from None
+
+
+def _an(sp: SparkplugType) -> str:
+    return f"an {sp.name}" if sp.name.startswith("I") else f"a {sp.name}"
 
 
 def _kind(value: object) -> str:

@@ -123,7 +123,7 @@ class Metric:
 
 
 def encode_nbirth(metrics: Sequence[Metric], *, bdseq: int, seq: Seq, timestamp: int) -> bytes:
-    """An NBIRTH: bdSeq and Node Control/Rebirth first, then the node's own metrics; seq restarts at 0."""
+    """An NBIRTH: the node's own metrics with bdSeq and Node Control/Rebirth beside them; seq restarts at 0."""
     _check_bdseq(bdseq)
     for metric in metrics:
         if metric.name in _RESERVED_NAMES:
@@ -237,7 +237,7 @@ def _chronological(metrics: Iterable[Metric]) -> list[Metric]:
 def _write_metric(out: Payload.Metric, metric: Metric, *, birth: bool) -> None:
     try:
         if birth or metric.alias is None:
-            out.name = metric.name
+            out.name = _text("a metric name", metric.name)
         if metric.alias is not None:
             if not 0 <= metric.alias < _UINT64:
                 raise Unencodable(f"alias {metric.alias} is not a uint64")
@@ -260,7 +260,7 @@ def _write_metric(out: Payload.Metric, metric: Metric, *, birth: bool) -> None:
 
 def _write_properties(out: Payload.PropertySet, properties: Mapping[str, Property]) -> None:
     for key, prop in properties.items():
-        out.keys.append(key)
+        out.keys.append(_text("a property key", key))
         value = out.values.add()
         value.type = prop.type
         if prop.value is None:
@@ -270,6 +270,16 @@ def _write_properties(out: Payload.PropertySet, properties: Mapping[str, Propert
                 set_scalar(value, prop.type, prop.value)
             except Unencodable as exc:
                 raise Unencodable(f"property {key!r}: {exc.message}") from None
+
+
+def _text(what: str, value: str) -> str:
+    if not isinstance(value, str):
+        raise Unencodable(f"{what} is text, got {type(value).__name__}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise Unencodable(f"{what} with a lone surrogate at {exc.start} cannot be UTF-8") from None
+    return value
 
 
 def _check_timestamp(timestamp: int) -> int:

@@ -9,6 +9,7 @@ mistake in the codec cannot cancel out in a round trip. Datatypes are the specif
 from __future__ import annotations
 
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 from typing import Any
@@ -46,11 +47,11 @@ class HostPayload:
     metrics: list[HostMetric]
 
 
-def read(data: bytes, datatypes: dict[int | str, int] | None = None) -> HostPayload:
+def read(data: bytes, datatypes: Mapping[Any, int] | None = None) -> HostPayload:
     """Decode a payload as a host would: births carry datatypes; DATA metrics are looked up in
     `datatypes` (by alias, else name), which a host fills from the births."""
     payload = Payload.FromString(data)
-    known = datatypes if datatypes is not None else {}
+    known: Mapping[Any, int] = datatypes if datatypes is not None else {}
     metrics = []
     for m in payload.metrics:
         name = m.name if m.HasField("name") else None

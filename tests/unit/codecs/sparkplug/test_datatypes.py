@@ -188,14 +188,14 @@ def test_uint32_is_also_read_from_long_value_where_java_hosts_put_it() -> None:
 @pytest.mark.parametrize(
     ("spec", "metric", "error", "fragment"),
     [
-        ("Int32", Payload.Metric(long_value=5), WrongDatatype, "a Int32 travels in int_value, got long_value"),
+        ("Int32", Payload.Metric(long_value=5), WrongDatatype, "an Int32 travels in int_value, got long_value"),
         ("Double", Payload.Metric(float_value=1.5), WrongDatatype, "got float_value"),
         ("Boolean", Payload.Metric(int_value=1), WrongDatatype, "got int_value"),
         ("String", Payload.Metric(bytes_value=b"x"), WrongDatatype, "got bytes_value"),
         ("Double[]", Payload.Metric(double_value=1.0), WrongDatatype, "travels in bytes_value"),
         ("Int16", Payload.Metric(), BadValue, "no value"),
         ("Int16", Payload.Metric(is_null=True), BadValue, "the value is null"),
-        ("SByte", Payload.Metric(int_value=200), BadValue, "200 does not fit a Int8 (-128..127)"),
+        ("SByte", Payload.Metric(int_value=200), BadValue, "200 does not fit an Int8 (-128..127)"),
         ("Byte", Payload.Metric(int_value=0xFFFFFFFF), BadValue, "does not fit a UInt8"),
         ("UInt16", Payload.Metric(int_value=65536), BadValue, "does not fit a UInt16"),
         ("DateTime", Payload.Metric(long_value=2**62), BadValue, "not a date between years 1 and 9999"),
@@ -232,7 +232,7 @@ def test_text_that_is_not_utf8_is_refused() -> None:
     [
         ("Int32", True, "needs an integer, got bool"),
         ("Int32", 1.0, "needs an integer, got float"),
-        ("Int32", 2**31, "does not fit a Int32"),
+        ("Int32", 2**31, "does not fit an Int32"),
         ("Byte", -1, "does not fit a UInt8"),
         ("UInt64", 2**64, "does not fit a UInt64"),
         ("Double", "1.5", "needs a number, got str"),
@@ -246,7 +246,9 @@ def test_text_that_is_not_utf8_is_refused() -> None:
         ("Boolean[]", [True, 0], "element needs true or false"),
         ("String[]", ["a\x00b"], "cannot contain NUL"),
         ("String[]", [b"x"], "element needs text"),
-        ("Double[]", [None], "element needs a number"),
+        ("Double[]", [None], "a DoubleArray needs a number, got null"),
+        ("Double", 10**400, "a Double cannot hold an integer beyond the range"),
+        ("Float[]", [10**400], "a FloatArray cannot hold an integer beyond"),
         ("DateTime[]", [0], "needs a datetime"),
     ],
 )

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from gateway.codecs.sparkplug import (
     BDSEQ,
     REBIRTH,
+    Aliases,
     BadBirth,
     BdSeq,
     Metric,
@@ -97,8 +98,8 @@ def test_dbirth_announces_every_metric_with_name_alias_datatype_value_and_proper
 
 def test_births_and_data_list_values_in_time_order() -> None:
     seen = host.read(encode_dbirth(LASER, seq=Seq(), timestamp=NOW))
-    stamps = [m.timestamp for m in seen.metrics]
-    assert stamps == sorted(stamps) and len(stamps) == len(LASER)
+    stamps = [m.timestamp or 0 for m in seen.metrics]
+    assert stamps == sorted(stamps) and len(stamps) == len(LASER) and all(m.timestamp for m in seen.metrics)
 
 
 def test_ddata_names_metrics_by_alias_only_without_datatype() -> None:
@@ -250,6 +251,7 @@ def test_every_type_round_trips_through_births_and_data(spec: TypeSpec, data: st
         ts,
     )
     assert same(birth.value, value)
+    assert birth.datatype is not None
     update = host.read(encode_ddata([metric], seq=Seq(), timestamp=NOW), {alias: birth.datatype}).metrics[0]
     assert same(update.value, value) and update.timestamp == ts
 
@@ -288,9 +290,13 @@ def test_nbirth_writes_its_own_reserved_metrics(name: str) -> None:
         (lambda: encode_ddata([Metric("A", T("Int16"), 1, NOW, alias=-1)], seq=Seq(), timestamp=NOW),
          "alias -1 is not a uint64"),
         (lambda: encode_ddata([Metric("Feed", T("Int16"), "5", NOW, alias=1)], seq=Seq(), timestamp=NOW),
-         "Feed: a Int16 needs an integer"),
+         "Feed: an Int16 needs an integer"),
         (lambda: encode_dbirth([Metric("A", T("Int16"), 1, NOW, properties={"k": Property(SparkplugType.Int8, 300)})],
-                               seq=Seq(), timestamp=NOW), "property 'k': 300 does not fit a Int8"),
+                               seq=Seq(), timestamp=NOW), "property 'k': 300 does not fit an Int8"),
+        (lambda: encode_dbirth([Metric("A\ud800", T("Int16"), 1, NOW)], seq=Seq(), timestamp=NOW),
+         "a metric name with a lone surrogate at 1"),
+        (lambda: encode_dbirth([Metric("A", T("Int16"), 1, NOW, properties={"\udc00": Property(SparkplugType.Int8, 1)})],
+                               seq=Seq(), timestamp=NOW), "a property key with a lone surrogate"),
         (lambda: encode_ndeath(bdseq=256), "bdSeq is 0..255"),
         (lambda: encode_nbirth([], bdseq=-1, seq=Seq(), timestamp=NOW), "bdSeq is 0..255"),
         (lambda: encode_ddeath(seq=Seq(), timestamp=True), "uint64, got True"),
@@ -309,3 +315,24 @@ def test_a_datetime_metric_before_1970() -> None:
         encode_dbirth([Metric("T", T("DateTime"), early, NOW, alias=1)], seq=Seq(), timestamp=NOW)
     )
     assert seen.metrics[0].value == early
+
+
+def test_aliases_are_unique_across_the_node_and_stable_across_rebirths() -> None:
+    aliases = Aliases()
+    names = ["Axes/X/Position", "Feed/Override", "Status/State"]
+    first = {
+        (device, name): aliases.alias(device, name) for device in (None, "laser", "press") for name in names
+    }
+    assert len(set(first.values())) == len(first) == len(aliases) == 9  # node and every device together
+    assert min(first.values()) == 1
+    again = {
+        (device, name): aliases.alias(device, name) for device in ("press", None, "laser") for name in names
+    }
+    assert again == first
+    node = [Metric(n, T("Double"), 0.0, NOW, alias=aliases.alias(None, n)) for n in names]
+    laser = [Metric(n, T("Double"), 0.0, NOW, alias=aliases.alias("laser", n)) for n in names]
+    seq = Seq()
+    born = host.read(encode_nbirth(node, bdseq=0, seq=seq, timestamp=NOW)).metrics
+    born += host.read(encode_dbirth(laser, seq=seq, timestamp=NOW)).metrics
+    bound = [m.alias for m in born if m.alias is not None]
+    assert len(bound) == len(set(bound)) == 6
