@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test unit integration install system-deps schema soak bench clean
+.PHONY: demo test unit integration install system-deps schema soak bench clean sparkplug-proto
 
 # setup.py builds gateway/jobs/_plain.c (validation's compiled reader) in place; a change to it reinstalls.
 $(STAMP): pyproject.toml setup.py gateway/jobs/_plain.c
@@ -50,6 +50,12 @@ bench: $(BENCH_STAMP) system-deps
 
 schema: $(STAMP)
 	$(BIN)/cnc-gateway schema > mappings/mapping.schema.json
+
+# Regenerates gateway/codecs/sparkplug/sparkplug_b_pb2.py and .pyi from sparkplug_b.proto with protoc as
+# pinned in pyproject.toml (grpcio-tools, extra `proto`); tests/unit/codecs/sparkplug/test_generated.py
+# fails while the committed modules and the .proto disagree.
+sparkplug-proto: $(STAMP)
+	$(BIN)/python -m gateway.codecs.sparkplug.protoc
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info
