@@ -108,7 +108,8 @@ def judge_13(ctx: Context) -> list[Target]:
         targets.append(Target(
             f"CPU per 1,000 msgs relative to Node-RED at {rate:,} changes/s", 1.0, 0.6, "×",
             higher_is_better=False, value=_ratio(a, b),
-            source=f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if a is not None or b is not None else "no peer step",
+            source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if a is not None or b is not None else "no peer step")
+            + _caveats(gw.get(rate), nr.get(rate)),
         ))  # fmt: skip
 
     # 3. p99 latency at 15,000/s, gateway / Node-RED
@@ -116,15 +117,20 @@ def judge_13(ctx: Context) -> list[Target]:
     b = (nr.get(15000, {}).get("latency") or {}).get("p99")
     targets.append(Target(
         "p99 latency relative to Node-RED at 15,000 changes/s", 1.0, 0.5, "×", higher_is_better=False,
-        value=_ratio(a, b), source=f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr else "no peer step",
+        value=_ratio(a, b),
+        source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr else "no peer step")
+        + _caveats(gw.get(15000), nr.get(15000)),
     ))  # fmt: skip
 
     # 4. peak delivered messages/s over the steps, gateway / Node-RED
-    a = max((st["delivered"] for st in gw.values()), default=None)
-    b = max((st["delivered"] for st in nr.values()), default=None)
+    a_step = max(gw.values(), key=lambda st: st["delivered"], default=None)
+    b_step = max(nr.values(), key=lambda st: st["delivered"], default=None)
+    a = a_step["delivered"] if a_step else None
+    b = b_step["delivered"] if b_step else None
     targets.append(Target(
         "peak delivered msgs/s relative to Node-RED", 1.2, 2.0, "×", value=_ratio(a, b),
-        source=f"gateway {a or 0:,.0f}/s vs Node-RED {b or 0:,.0f}/s" if gw or nr else "no peer step",
+        source=(f"gateway {a or 0:,.0f}/s vs Node-RED {b or 0:,.0f}/s" if gw or nr else "no peer step")
+        + _caveats(a_step, b_step),
     ))  # fmt: skip
 
     # 5. the age of what is delivered when the source outruns the gateway (its flat-out step)
@@ -145,6 +151,13 @@ def judge_13(ctx: Context) -> list[Target]:
     targets.append(Target("10,000 variables over 20 machines: RSS", 180, 120, "MB", higher_is_better=False,
                           value=rss / 1e6 if rss else None, source=tag))
     return targets
+
+
+def _caveats(gateway: dict[str, Any] | None, nodered: dict[str, Any] | None) -> str:
+    """What went wrong in the steps a peer target compares (an expired subscription, a restart)."""
+    parts = [f"{who}: {note}" for who, step in (("gateway", gateway), ("Node-RED", nodered))
+             for note in (step or {}).get("notes", [])]
+    return f" ({'; '.join(parts)})" if parts else ""
 
 
 def _ratio(a: float | None, b: float | None) -> float | None:

@@ -20,7 +20,8 @@ node-red-contrib-opcua creates its subscription with a lifetime of 30 publishing
 intervals (300 ms at 10 ms): when Node-RED falls that far behind, the server
 (asyncua) ends the subscription and the flow delivers nothing more until it is
 redeployed. The scenario counts such expiries from the simulator's log; before a
-step it restarts Node-RED if its subscription expired, and the step's note says so.
+step it restarts Node-RED if its subscription expired, a step in which it expired
+is measured once more after a restart, and the step's note says so.
 """
 
 from __future__ import annotations
@@ -86,7 +87,11 @@ async def run(ctx: Context) -> None:
     ctx.results.details["peer"] = details
     for name, label in PARTIES.items():
         ctx.log(f"{label}:")
-        details["parties"][name] = await run_party(ctx, name)
+        try:
+            details["parties"][name] = await run_party(ctx, name)
+        except Exception as exc:  # noqa: BLE001 - reported; the other party's figures still count
+            ctx.results.errors.append(f"peer {name}: {type(exc).__name__}: {exc}")
+            ctx.log(f"  FAILED: {exc}")
     report(ctx, details)
 
 
@@ -110,24 +115,34 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
         ctx.log(f"  all {N:,} variables at the MQTT subscriber after {out['ready_seconds']:.1f} s")
         seen_expired = _expired(sim)
         for rate in s.peer_rates:
-            notes = []
-            if name == "nodered" and _expired(sim) > seen_expired:
-                notes.append("restarted: its subscription had expired")
-                out["restarts"] += 1
-                await party.stop()
-                meter = Meter(await _start(party, sub))
-            seen_expired = _expired(sim)
-            step = await measure(ctx, sim, sub, meter, party, rate)
-            step.notes += notes
-            if _expired(sim) > seen_expired:
-                step.notes.append("its subscription expired during the step")
+            notes: list[str] = []
+            for attempt in (1, 2):
+                if name == "nodered" and _expired(sim) > seen_expired:
+                    if attempt == 1:
+                        notes.append("restarted before the step (its subscription had expired)")
+                    out["restarts"] += 1
+                    await party.stop()
+                    meter = Meter(await _start(party, sub))
+                seen_expired = _expired(sim)
+                step = await measure(ctx, sim, sub, meter, party, rate)
+                if _expired(sim) == seen_expired:
+                    break
+                if name != "nodered" or attempt == 2:
+                    notes.append("its subscription expired in the step")
+                    break
+                notes.append("its subscription expired in a first try; restarted and measured again")
+                await drain(sim, sub)
+            step.notes = notes
             out["steps"].append(step.as_dict())
             ctx.log(f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  delivered {step.delivered:8,.0f} msg/s  "
                     f"cpu {step.cpu:3.0f}% ({_num(step.cpu_per_1000)} ms/1,000 msgs)  p50/p99 "
                     f"{_num(step.latency.get('p50'))}/{_num(step.latency.get('p99'))} ms  rss {step.rss / 1e6:4.0f} MB"
                     f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else ""))
             await drain(sim, sub)
-        out["final"] = await final_values(sim, sub, party)
+        # Node-RED with an expired subscription will not catch up (the gateway's driver resubscribes by itself)
+        last_expired = seen_expired
+        out["final"] = await final_values(sim, sub, party,
+                                          gave_up=lambda: name == "nodered" and _expired(sim) > last_expired)
         out["expired"] = _expired(sim)
         ctx.log(f"  last values right at MQTT: {out['final']['match']:,} of {N:,} "
                 f"(after {out['final']['settled_after']:.1f} s); subscriptions expired: {out['expired']}")
@@ -235,16 +250,22 @@ async def measure(ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Par
     return step
 
 
-async def final_values(sim: Agent, sub: Agent, party: Party, timeout: float = 30.0) -> dict[str, Any]:
-    """After the last step: does every topic end at the last value the simulator wrote to its variable?"""
+async def final_values(sim: Agent, sub: Agent, party: Party, *, gave_up: Callable[[], bool],
+                       timeout: float = 30.0) -> dict[str, Any]:
+    """After the last step: does every topic end at the last value the simulator wrote to its variable?
+    Polled until it does, or the deadline passes, or the party's subscription has expired (a second later)."""
     written = int((await sim.ask("snap"))["written"])
     expected = expected_last(written, N)
     loop = asyncio.get_running_loop()
     started = loop.time()
+    expired_at: float | None = None
     while True:
         last = (await sub.ask("values"))["last"]
         match = matches([last.get(t) for t in party.topics], expected)
-        if match == N or loop.time() - started > timeout:
+        now = loop.time()
+        if expired_at is None and gave_up():
+            expired_at = now
+        if match == N or now - started > timeout or (expired_at is not None and now - expired_at >= 1.0):
             break
         await asyncio.sleep(0.5)
     return {"written": written, "match": match, "variables": N, "settled_after": round(loop.time() - started, 1)}
@@ -264,25 +285,33 @@ def section(details: dict[str, Any]) -> str:
 def report(ctx: Context, details: dict[str, Any]) -> None:
     r = ctx.results
     sec = section(details)
-    gateway, nodered = details["parties"]["gateway"], details["parties"]["nodered"]
-    peer_steps = {st["rate"]: st for st in nodered["steps"]}
-    for st in gateway["steps"]:
-        other = peer_steps.get(st["rate"], {})
-        rate = math.inf if st["rate"] is None else st["rate"]
+    parties = details["parties"]
+    gateway, nodered = parties.get("gateway", {}), parties.get("nodered", {})
+    peer_steps = {st["rate"]: st for st in nodered.get("steps", [])}
+    rates = [st["rate"] for st in gateway.get("steps", [])] or list(peer_steps)
+    gw_steps = {st["rate"]: st for st in gateway.get("steps", [])}
+    for rate_or_none in rates:
+        st, other = gw_steps.get(rate_or_none, {}), peer_steps.get(rate_or_none, {})
+        rate = math.inf if rate_or_none is None else rate_or_none
         key, what = f"peer.{rate_key(rate)}", f"@{rate_label(rate)}"
-        note = "; ".join(f"Node-RED: {n}" for n in other.get("notes", []))
-        source = f"source wrote {st['offered']:,.0f}/s vs {other.get('offered', 0):,.0f}/s"
-        r.add(f"{key}.delivered", sec, f"{what}: MQTT delivered", st["delivered"], "msgs/s",
-              baseline=other.get("delivered"), baseline_label="Node-RED", note=" ".join(filter(None, [source, note])))
-        r.add(f"{key}.cpu_per_1000", sec, f"{what}: CPU per 1,000 msgs", st["cpu_per_1000"], "ms",
+        notes = [f"source wrote {st.get('offered', 0):,.0f}/s vs {other.get('offered', 0):,.0f}/s"]
+        notes += [f"Node-RED {n}" for n in other.get("notes", [])] + [f"gateway: {n}" for n in st.get("notes", [])]
+        r.add(f"{key}.delivered", sec, f"{what}: MQTT delivered", st.get("delivered"), "msgs/s",
+              baseline=other.get("delivered"), baseline_label="Node-RED", note="; ".join(notes))
+        r.add(f"{key}.cpu_per_1000", sec, f"{what}: CPU per 1,000 msgs", st.get("cpu_per_1000"), "ms",
               baseline=other.get("cpu_per_1000"), baseline_label="Node-RED",
-              note=f"{st['cpu']:.0f} % vs {other.get('cpu', 0):.0f} % of a core")
+              note=f"{st.get('cpu', 0):.0f} % vs {other.get('cpu', 0):.0f} % of a core")
         for q in ("p50", "p99"):
-            r.add(f"{key}.{q}", sec, f"{what}: latency {q}", st["latency"].get(q), "ms",
+            r.add(f"{key}.{q}", sec, f"{what}: latency {q}", (st.get("latency") or {}).get(q), "ms",
                   baseline=(other.get("latency") or {}).get(q), baseline_label="Node-RED")
-        r.add(f"{key}.rss", sec, f"{what}: RSS", st["rss"] / 1e6 if st["rss"] else None, "MB",
+        r.add(f"{key}.rss", sec, f"{what}: RSS", st["rss"] / 1e6 if st.get("rss") else None, "MB",
               baseline=other["rss"] / 1e6 if other.get("rss") else None, baseline_label="Node-RED")
-    r.add("peer.final", sec, "last values right at MQTT after the last step", gateway["final"]["match"], "vars",
-          baseline=nodered["final"]["match"], baseline_label="Node-RED",
-          note=f"of {N:,}; subscriptions expired: gateway {gateway['expired']}, Node-RED {nodered['expired']}"
-               f" (Node-RED restarted {nodered['restarts']}×)")
+    r.add("peer.final", sec, "last values right at MQTT after the last step", _final(gateway), "vars",
+          baseline=_final(nodered), baseline_label="Node-RED",
+          note=f"of {N:,}; subscriptions expired: gateway {gateway.get('expired', '—')}, Node-RED "
+               f"{nodered.get('expired', '—')} (Node-RED restarted {nodered.get('restarts', 0)}×)")
+
+
+def _final(party: dict[str, Any]) -> float | None:
+    final = party.get("final")
+    return None if final is None else float(final["match"])
