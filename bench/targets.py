@@ -99,7 +99,10 @@ def judge_13(ctx: Context) -> list[Target]:
     peer: dict[str, Any] = r.details.get("peer", {})
     parties = peer.get("parties", {})
     gw = {st["rate"]: st for st in parties.get("gateway", {}).get("steps", [])}
-    nr = {st["rate"]: st for st in parties.get("nodered", {}).get("steps", [])}
+    nr_all = {st["rate"]: st for st in parties.get("nodered", {}).get("steps", [])}
+    # A Node-RED step whose subscription expired even when measured again compares the gateway with a dead
+    # flow: it is not a baseline, and a target that needs it has no value (its "From" says why).
+    nr = {rate: st for rate, st in nr_all.items() if _sound(st)}
     targets = []
 
     # 1-2. CPU per 1,000 messages delivered, gateway / Node-RED
@@ -108,8 +111,8 @@ def judge_13(ctx: Context) -> list[Target]:
         targets.append(Target(
             f"CPU per 1,000 msgs relative to Node-RED at {rate:,} changes/s", 1.0, 0.6, "×",
             higher_is_better=False, value=_ratio(a, b),
-            source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if a is not None or b is not None else "no peer step")
-            + _caveats(gw.get(rate), nr.get(rate)),
+            source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr_all else "no peer step")
+            + _caveats(gw.get(rate), nr_all.get(rate)),
         ))  # fmt: skip
 
     # 3. p99 latency at 15,000/s, gateway / Node-RED
@@ -118,19 +121,21 @@ def judge_13(ctx: Context) -> list[Target]:
     targets.append(Target(
         "p99 latency relative to Node-RED at 15,000 changes/s", 1.0, 0.5, "×", higher_is_better=False,
         value=_ratio(a, b),
-        source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr else "no peer step")
-        + _caveats(gw.get(15000), nr.get(15000)),
+        source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr_all else "no peer step")
+        + _caveats(gw.get(15000), nr_all.get(15000)),
     ))  # fmt: skip
 
-    # 4. peak delivered messages/s over the steps, gateway / Node-RED
+    # 4. peak delivered messages/s over the steps, gateway / Node-RED (Node-RED's sound steps only)
     a_step = max(gw.values(), key=lambda st: st["delivered"], default=None)
     b_step = max(nr.values(), key=lambda st: st["delivered"], default=None)
     a = a_step["delivered"] if a_step else None
     b = b_step["delivered"] if b_step else None
+    void = [f"@{_rate(rate)}" for rate, st in nr_all.items() if not _sound(st)]
     targets.append(Target(
         "peak delivered msgs/s relative to Node-RED", 1.2, 2.0, "×", value=_ratio(a, b),
-        source=(f"gateway {a or 0:,.0f}/s vs Node-RED {b or 0:,.0f}/s" if gw or nr else "no peer step")
-        + _caveats(a_step, b_step),
+        source=(f"gateway {a or 0:,.0f}/s vs Node-RED {b or 0:,.0f}/s" if gw or nr_all else "no peer step")
+        + _caveats(a_step, b_step)
+        + (f" (Node-RED's subscription expired in its step {', '.join(void)}: left out)" if void else ""),
     ))  # fmt: skip
 
     # 5. the age of what is delivered when the source outruns the gateway (its flat-out step)
@@ -153,10 +158,15 @@ def judge_13(ctx: Context) -> list[Target]:
     return targets
 
 
+def _sound(step: dict[str, Any]) -> bool:
+    """Whether a step's last measurement ran to its end with the party delivering (peer.py's notes)."""
+    return not any(note.endswith("in the step") for note in step.get("notes", []))
+
+
 def _caveats(gateway: dict[str, Any] | None, nodered: dict[str, Any] | None) -> str:
     """What went wrong in the steps a peer target compares (an expired subscription, a restart)."""
-    parts = [f"{who}: {note}" for who, step in (("gateway", gateway), ("Node-RED", nodered))
-             for note in (step or {}).get("notes", [])]
+    parts = [f"{who}: {'; '.join(step['notes'])}" for who, step in (("gateway", gateway), ("Node-RED", nodered))
+             if step and step.get("notes")]
     return f" ({'; '.join(parts)})" if parts else ""
 
 

@@ -19,9 +19,10 @@ Node-RED's figures are the baseline of the gateway's (ratio = gateway / Node-RED
 node-red-contrib-opcua creates its subscription with a lifetime of 30 publishing
 intervals (300 ms at 10 ms): when Node-RED falls that far behind, the server
 (asyncua) ends the subscription and the flow delivers nothing more until it is
-redeployed. The scenario counts such expiries from the simulator's log; before a
-step it restarts Node-RED if its subscription expired, a step in which it expired
-is measured once more after a restart, and the step's note says so.
+redeployed. The scenario counts such expiries from the simulator's log, starts
+Node-RED again if its subscription does not outlive start-up, restarts it before a
+step if it expired since, measures a step in which it expired once more after a
+restart, and the step's note says so.
 """
 
 from __future__ import annotations
@@ -110,27 +111,31 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
         stack.push_async_callback(sub.stop)
         stack.push_async_callback(party.stop)
         started = time.monotonic()
-        meter = Meter(await _start(party, sub))
+        meter = Meter(await _start(party, sub, sim))
         out["ready_seconds"] = round(time.monotonic() - started, 2)
         ctx.log(f"  all {N:,} variables at the MQTT subscriber after {out['ready_seconds']:.1f} s")
-        seen_expired = _expired(sim)
+        restart = False
         for rate in s.peer_rates:
             notes: list[str] = []
             for attempt in (1, 2):
-                if name == "nodered" and _expired(sim) > seen_expired:
+                if restart:
                     if attempt == 1:
                         notes.append("restarted before the step (its subscription had expired)")
                     out["restarts"] += 1
                     await party.stop()
-                    meter = Meter(await _start(party, sub))
+                    meter = Meter(await _start(party, sub, sim))
                 seen_expired = _expired(sim)
                 step = await measure(ctx, sim, sub, meter, party, rate)
-                if _expired(sim) == seen_expired:
+                expired = _expired(sim) > seen_expired
+                dead = expired or (step.offered > 0 and step.delivered == 0)
+                restart = dead and name == "nodered"  # the gateway's driver resubscribes by itself
+                if not dead:
                     break
-                if name != "nodered" or attempt == 2:
-                    notes.append("its subscription expired in the step")
+                what = "its subscription expired in" if expired else "it delivered nothing in"
+                if not restart or attempt == 2:
+                    notes.append(f"{what} the step")
                     break
-                notes.append("its subscription expired in a first try; restarted and measured again")
+                notes.append(f"{what} a first try; restarted and measured again")
                 await drain(sim, sub)
             step.notes = notes
             out["steps"].append(step.as_dict())
@@ -139,6 +144,7 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
                     f"{_num(step.latency.get('p50'))}/{_num(step.latency.get('p99'))} ms  rss {step.rss / 1e6:4.0f} MB"
                     f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else ""))
             await drain(sim, sub)
+            restart = restart or (name == "nodered" and _expired(sim) > seen_expired)  # in the pause
         # Node-RED with an expired subscription will not catch up (the gateway's driver resubscribes by itself)
         last_expired = seen_expired
         out["final"] = await final_values(sim, sub, party,
@@ -196,7 +202,22 @@ def _nodered(folder: Path, sim: Agent, broker_port: int) -> Party:
     return Party("nodered", prefix, topics, start, stop, alive)
 
 
-async def _start(party: Party, sub: Agent, timeout: float = 120.0) -> int:
+async def _start(party: Party, sub: Agent, sim: Agent, tries: int = 3) -> int:
+    """Start the party and wait until it has published every topic; for Node-RED, also until its
+    subscription has outlived start-up (on a loaded machine it can expire in the first second)."""
+    for _ in range(tries):
+        expired = _expired(sim)
+        pid = await _publishing(party, sub)
+        if party.name != "nodered":
+            return pid
+        await asyncio.sleep(1.0)
+        if _expired(sim) == expired:
+            return pid
+        await party.stop()
+    raise BenchError(f"{PARTIES[party.name]}'s subscription expired during start-up {tries} times")
+
+
+async def _publishing(party: Party, sub: Agent, timeout: float = 120.0) -> int:
     """Start the party; wait until it has published every topic (initial values count) since it started."""
     before = (await sub.ask("snap"))["count"]
     pid = await party.start()
@@ -295,7 +316,8 @@ def report(ctx: Context, details: dict[str, Any]) -> None:
         rate = math.inf if rate_or_none is None else rate_or_none
         key, what = f"peer.{rate_key(rate)}", f"@{rate_label(rate)}"
         notes = [f"source wrote {st.get('offered', 0):,.0f}/s vs {other.get('offered', 0):,.0f}/s"]
-        notes += [f"Node-RED {n}" for n in other.get("notes", [])] + [f"gateway: {n}" for n in st.get("notes", [])]
+        notes += [f"{who}: {'; '.join(step['notes'])}" for who, step in (("gateway", st), ("Node-RED", other))
+                  if step.get("notes")]
         r.add(f"{key}.delivered", sec, f"{what}: MQTT delivered", st.get("delivered"), "msgs/s",
               baseline=other.get("delivered"), baseline_label="Node-RED", note="; ".join(notes))
         r.add(f"{key}.cpu_per_1000", sec, f"{what}: CPU per 1,000 msgs", st.get("cpu_per_1000"), "ms",
