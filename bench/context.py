@@ -26,6 +26,7 @@ class Settings:
     mirror_qos: list[int]
     mirror_sources: list[str]
     naive_rates: list[float]
+    peer_rates: list[float]  # the peer scenario's steps (the gateway and Node-RED, same load)
     scale_machines: int
     scale_per_machine: int
     scale_phase: float  # s per CPU phase (idle, 1 Hz, 10 Hz)
@@ -40,6 +41,7 @@ class Settings:
             quick=False, warmup=2.0, window=6.0, repeats=3,
             mirror_sizes=[1000, 10000], mirror_rates=[1000, 5000, 10000, 15000, 17500, 20000, MAX],
             mirror_qos=[0, 1], mirror_sources=["opcua", "inproc"], naive_rates=[1000, 5000, MAX],
+            peer_rates=[5000, 15000, MAX],
             scale_machines=20, scale_per_machine=500, scale_phase=5.0,
             jobs_small=50, jobs_small_size=100_000, jobs_large_size=50_000_000,
         )  # fmt: skip
@@ -50,6 +52,7 @@ class Settings:
             quick=True, warmup=1.0, window=3.0, repeats=1,
             mirror_sizes=[1000], mirror_rates=[5000, MAX], mirror_qos=[0],
             mirror_sources=["opcua", "inproc"], naive_rates=[MAX],
+            peer_rates=[5000, 15000, MAX],
             scale_machines=20, scale_per_machine=100, scale_phase=2.0,
             jobs_small=10, jobs_small_size=100_000, jobs_large_size=5_000_000,
         )  # fmt: skip

@@ -72,7 +72,8 @@ class Results:
     args: dict[str, Any]
     started: datetime = field(default_factory=lambda: datetime.now(UTC))
     figures: list[Figure] = field(default_factory=list)
-    targets: list[Target] = field(default_factory=list)
+    targets: list[Target] = field(default_factory=list)  # issue 7's table
+    targets_13: list[Target] = field(default_factory=list)  # issue 13's: against the peer (Node-RED), tighter scale
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -102,6 +103,7 @@ class Results:
             },
             "figures": [f.as_dict() for f in self.figures],
             "targets": [t.as_dict() for t in self.targets],
+            "targets_13": [t.as_dict() for t in self.targets_13],
             "details": self.details,
             "errors": self.errors,
         }
@@ -158,18 +160,23 @@ def render(results: Results) -> str:
         baseline = f"{fmt(f.baseline, f.unit)} ({f.baseline_label})" if f.baseline is not None else ""
         rows.append(("  " + f.label, fmt(f.value, f.unit), baseline, ratio, f.note))
     table = _columns(("Figure", "Value", "Baseline (same run)", "Ratio", "Note"), rows)
-    trows = []
-    for t in results.targets:
+    out = [table, "", "Targets (issue 7)", _targets(results.targets)]
+    if results.targets_13:
+        out += ["", "Targets (issue 13)", _targets(results.targets_13)]
+    if results.errors:
+        out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
+    return "\n".join(out)
+
+
+def _targets(targets: list[Target]) -> str:
+    trows: list[tuple[str, ...]] = []
+    for t in targets:
         unit = t.unit
         trows.append((
             t.name, fmt(t.value, unit), f"{fmt(t.must, unit)}", t.verdict(t.must) or "",
             fmt(t.aim, unit) if t.aim is not None else "—", t.verdict(t.aim) or "—", t.source,
         ))  # fmt: skip
-    targets = _columns(("Target", "Value", "Must", "", "Aim", "", "From"), trows)
-    out = [table, "", "Targets (issue 7)", targets]
-    if results.errors:
-        out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
-    return "\n".join(out)
+    return _columns(("Target", "Value", "Must", "", "Aim", "", "From"), trows)
 
 
 def _columns(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:

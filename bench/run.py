@@ -3,6 +3,7 @@
     make bench                          # the full run (about 10-15 minutes on 2 cores)
     make bench BENCH_ARGS=--quick       # a taste in about two minutes
     python -m bench.run --only mirror --quick --profile
+    python -m bench.run --only peer --quick             # the gateway against Node-RED, short windows
 
 Scenarios run one after another, never side by side, each in processes of its
 own; baselines first, because the later figures are judged against them.
@@ -23,7 +24,7 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, jobs, mirror, naive, scale
+from bench.scenarios import baselines, jobs, mirror, naive, peer, scale
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -32,6 +33,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "baselines": baselines.run,
     "mirror": mirror.run,
     "naive": naive.run,
+    "peer": peer.run,
     "scale": scale.run,
     "jobs": jobs.run,
 }
@@ -51,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rates", nargs="+", metavar="R", help="mirror: changes/s per step ('max': flat out)")
     p.add_argument("--qos", type=int, nargs="+", choices=[0, 1], help="mirror: MQTT QoS levels")
     p.add_argument("--sources", nargs="+", choices=["opcua", "inproc"], help="mirror: sources")
+    p.add_argument("--peer-rates", nargs="+", metavar="R", help="peer: changes/s per step ('max': flat out)")
     p.add_argument("--scale", type=int, nargs=2, metavar=("MACHINES", "PER_MACHINE"), help="scale: size")
     return p
 
@@ -62,6 +65,8 @@ def _override(settings: Settings, args: argparse.Namespace) -> None:
         settings.mirror_sizes = args.sizes
     if args.rates:
         settings.mirror_rates = [math.inf if r == "max" else float(r) for r in args.rates]
+    if args.peer_rates:
+        settings.peer_rates = [math.inf if r == "max" else float(r) for r in args.peer_rates]
     if args.qos:
         settings.mirror_qos = args.qos
     if args.sources:

@@ -1,4 +1,8 @@
-"""The targets table of issue 7, judged against this run's figures (PASS/MISS for must and for aim)."""
+"""The targets tables of issues 7 and 13, judged against this run's figures (PASS/MISS for must and for aim).
+
+Issue 13's peer rows are judged like the raw-library ceilings: against Node-RED measured in the same run
+on the same load (bench/scenarios/peer.py), as the ratio gateway / Node-RED.
+"""
 
 from __future__ import annotations
 
@@ -87,6 +91,91 @@ def judge(ctx: Context) -> None:
         source=f"gateway {large or 0:.2f} s vs raw {raw or 0:.2f} s",
     ))  # fmt: skip
     r.targets = targets
+    r.targets_13 = judge_13(ctx)
+
+
+def judge_13(ctx: Context) -> list[Target]:
+    r = ctx.results
+    peer: dict[str, Any] = r.details.get("peer", {})
+    parties = peer.get("parties", {})
+    gw = {st["rate"]: st for st in parties.get("gateway", {}).get("steps", [])}
+    nr_all = {st["rate"]: st for st in parties.get("nodered", {}).get("steps", [])}
+    # A Node-RED step whose subscription expired even when measured again compares the gateway with a dead
+    # flow: it is not a baseline, and a target that needs it has no value (its "From" says why).
+    nr = {rate: st for rate, st in nr_all.items() if _sound(st)}
+    targets = []
+
+    # 1-2. CPU per 1,000 messages delivered, gateway / Node-RED
+    for rate in (5000, 15000):
+        a, b = gw.get(rate, {}).get("cpu_per_1000"), nr.get(rate, {}).get("cpu_per_1000")
+        targets.append(Target(
+            f"CPU per 1,000 msgs relative to Node-RED at {rate:,} changes/s", 1.0, 0.6, "×",
+            higher_is_better=False, value=_ratio(a, b),
+            source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr_all else "no peer step")
+            + _caveats(gw.get(rate), nr_all.get(rate)),
+        ))  # fmt: skip
+
+    # 3. p99 latency at 15,000/s, gateway / Node-RED
+    a = (gw.get(15000, {}).get("latency") or {}).get("p99")
+    b = (nr.get(15000, {}).get("latency") or {}).get("p99")
+    targets.append(Target(
+        "p99 latency relative to Node-RED at 15,000 changes/s", 1.0, 0.5, "×", higher_is_better=False,
+        value=_ratio(a, b),
+        source=(f"gateway {_ms(a)} vs Node-RED {_ms(b)}" if gw or nr_all else "no peer step")
+        + _caveats(gw.get(15000), nr_all.get(15000)),
+    ))  # fmt: skip
+
+    # 4. peak delivered messages/s over the steps, gateway / Node-RED (Node-RED's sound steps only)
+    a_step = max(gw.values(), key=lambda st: st["delivered"], default=None)
+    b_step = max(nr.values(), key=lambda st: st["delivered"], default=None)
+    a = a_step["delivered"] if a_step else None
+    b = b_step["delivered"] if b_step else None
+    void = [f"@{_rate(rate)}" for rate, st in nr_all.items() if not _sound(st)]
+    targets.append(Target(
+        "peak delivered msgs/s relative to Node-RED", 1.2, 2.0, "×", value=_ratio(a, b),
+        source=(f"gateway {a or 0:,.0f}/s vs Node-RED {b or 0:,.0f}/s" if gw or nr_all else "no peer step")
+        + _caveats(a_step, b_step)
+        + (f" (Node-RED's subscription expired in its step {', '.join(void)}: left out)" if void else ""),
+    ))  # fmt: skip
+
+    # 5. the age of what is delivered when the source outruns the gateway (its flat-out step)
+    flat = gw.get(None, {})
+    age = (flat.get("latency") or {}).get("p99")
+    targets.append(Target(
+        "p99 age of delivered values under overload (source flat out)", 250, 50, "ms", higher_is_better=False,
+        value=age, source=(f"gateway flat out: source wrote {flat['offered']:,.0f}/s, {flat['delivered']:,.0f} "
+                           f"msgs/s delivered" if flat else "no flat-out peer step"),
+    ))  # fmt: skip
+
+    # 6-7. scale, tighter than issue 7's
+    scale = r.details.get("scale", {})
+    tag = f"{scale.get('machines', '?')} machines × {scale.get('per_machine', '?')}"
+    targets.append(Target("10,000 variables over 20 machines: start-up to all Good", 4, 2, "s",
+                          higher_is_better=False, value=scale.get("startup"), source=tag))
+    rss = scale.get("rss")
+    targets.append(Target("10,000 variables over 20 machines: RSS", 180, 120, "MB", higher_is_better=False,
+                          value=rss / 1e6 if rss else None, source=tag))
+    return targets
+
+
+def _sound(step: dict[str, Any]) -> bool:
+    """Whether a step's last measurement ran to its end with the party delivering (peer.py's notes)."""
+    return not any(note.endswith("in the step") for note in step.get("notes", []))
+
+
+def _caveats(gateway: dict[str, Any] | None, nodered: dict[str, Any] | None) -> str:
+    """What went wrong in the steps a peer target compares (an expired subscription, a restart)."""
+    parts = [f"{who}: {'; '.join(step['notes'])}" for who, step in (("gateway", gateway), ("Node-RED", nodered))
+             if step and step.get("notes")]
+    return f" ({'; '.join(parts)})" if parts else ""
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return a / b if a is not None and b else None
+
+
+def _ms(value: float | None) -> str:
+    return "—" if value is None else f"{value:,.1f} ms"
 
 
 def _rate(rate: float | None) -> str:

@@ -161,7 +161,7 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
                     f"{sum(step.others_cpu.values()):3.0f}%)  {'backlog GROWS' if step.growing else ''}"
                     + (f"  gc {step.gc['passes']} {step.gc['paused_ms']:.0f} ms" if step.gc else "")
                 )
-                await _drain(driver, mqtt_sub)
+                await drain(driver, mqtt_sub)
             final = await final_values(driver, gw, mqtt_sub, opcua_sub, n, source)
             return steps, final
         finally:
@@ -268,7 +268,7 @@ async def measure(ctx: Context, driver: Agent, gw: Agent, mqtt_sub: Agent, opcua
     return step
 
 
-async def _drain(driver: Agent, mqtt_sub: Agent, timeout: float = 20.0) -> None:
+async def drain(driver: Agent, mqtt_sub: Agent, timeout: float = 20.0) -> None:
     """Pause the source; wait until the MQTT subscriber has seen nothing new for half a second."""
     await driver.ask("rate", rate=0)
     loop = asyncio.get_running_loop()
