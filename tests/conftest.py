@@ -2,6 +2,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+# Property tests check what comes out, never how fast: on a shared 2-core machine (CI, or helpers running
+# suites side by side) a slow draw is load, not a bug, so no per-example deadline and no too-slow check.
+settings.register_profile(
+    "shared-machine", deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
+)
+settings.load_profile("shared-machine")
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`
