@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
-from gateway.audit.entry import AuditEntry
+from gateway.model.audit import AuditEntry
 
 FILE_NAME = "audit.sqlite3"
 

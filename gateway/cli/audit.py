@@ -13,7 +13,7 @@ import sys
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
-from gateway.audit.entry import AuditEntry
+from gateway.model.audit import AuditEntry
 from gateway.audit.store import AuditStore, audit_path, iso
 from gateway.cli.state_dir import resolve_state_dir
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any, Protocol, Self
 
+from gateway.config.mapping import MachineMapping
 from gateway.model.tree import Machine, VariableNode
 
 
@@ -30,11 +31,11 @@ class Source(Protocol):
         ...
 
 
-def create_source(machine: Machine) -> Source:
-    """The driver named by the machine's mapping."""
-    driver = machine.mapping.driver
+def create_source(machine: Machine, mapping: MachineMapping) -> Source:
+    """The driver named by the machine's mapping (its `driver:` section and per-variable settings)."""
+    driver = mapping.driver
     if driver.type == "opcua":
         from gateway.sources.opcua_client import OpcUaSource
 
-        return OpcUaSource(machine)
+        return OpcUaSource(machine, mapping)
     raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable

@@ -37,13 +37,14 @@ from asyncua.ua.uaerrors import (
 )
 from cryptography import x509
 
-from gateway.errors import ControllerRefused, ControllerUnavailable
+from gateway.codecs.opcua_nodeid import OpcUaAddress, parse_address
+from gateway.config.mapping import MachineMapping
+from gateway.errors import AddressError, ControllerRefused, ControllerUnavailable
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
 from gateway.sources.backoff import backoff_delays
-from gateway.sources.opcua_address import AddressError, OpcUaAddress, parse_address
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
 
 log = logging.getLogger(__name__)
@@ -176,9 +177,10 @@ def _no_publish_loop() -> None:
 class OpcUaSource:
     """One machine's OPC UA connection: subscribe, ingest, reconnect, write."""
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
         self.machine = machine
-        self.driver = machine.mapping.driver
+        self.mapping = mapping
+        self.driver = mapping.driver
         self._client: Client | None = None
         self._connected = False
         self._publish_task: asyncio.Task[None] | None = None
@@ -192,11 +194,11 @@ class OpcUaSource:
         self._failed: set[VariableNode] = set()  # variables whose value made ingest fail (logged once)
         for handle, node in enumerate(machine.mapped, start=1):
             try:
-                self._addresses[node] = parse_address(node.spec.source)
+                self._addresses[node] = parse_address(node.definition.source)
             except AddressError as exc:
                 self._address_errors[node] = str(exc)
                 continue
-            raw = node.spec.raw_type
+            raw = node.definition.raw_type
             self._handles[handle] = (node, list if raw.array else _PY_TYPES[raw.base])
 
     def __repr__(self) -> str:
@@ -319,7 +321,7 @@ class OpcUaSource:
             try:
                 index = address.resolve(list(namespaces))
             except AddressError as exc:
-                self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.spec.source}: {exc}")
+                self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.definition.source}: {exc}")
                 problems.append(f"{node.path} (BadNodeIdUnknown)")
                 continue
             self._node_ids[node] = ua.NodeId(address.identifier, index, _NODE_ID_TYPES[address.kind])
@@ -339,7 +341,8 @@ class OpcUaSource:
 
     async def _create_items(self, session: Any, subscription_id: int) -> list[str]:
         """Monitored items in batches; an item the server refuses turns only its variable Bad."""
-        mapping = self.machine.mapping
+        mapping = self.mapping
+        specs = {v.path: v for v in mapping.variables}
         wanted = [(h, node) for h, (node, _) in self._handles.items() if node in self._node_ids]
         refused: list[str] = []
         for start in range(0, len(wanted), BATCH_SIZE):
@@ -352,8 +355,8 @@ class OpcUaSource:
                     MonitoringMode=ua.MonitoringMode.Reporting,
                     RequestedParameters=ua.MonitoringParameters(
                         ClientHandle=handle,
-                        SamplingInterval=mapping.sampling_interval(node.spec),
-                        QueueSize=mapping.queue_size(node.spec),
+                        SamplingInterval=mapping.sampling_interval(specs[node.path]),
+                        QueueSize=mapping.queue_size(specs[node.path]),
                         DiscardOldest=True,
                     ),
                 )
@@ -371,7 +374,7 @@ class OpcUaSource:
                 if code & 0x80000000:
                     name = status_name(code)
                     self.machine.ingest(
-                        node, None, now, name, f"{node.spec.source}: {name} ({status_doc(code)})"
+                        node, None, now, name, f"{node.definition.source}: {name} ({status_doc(code)})"
                     )
                     refused.append(f"{node.path} ({name})")
         return refused
@@ -517,10 +520,10 @@ class OpcUaSource:
         if code & 0x80000000:
             self.machine.ingest(node, None, ts, name, f"controller reports {name} ({status_doc(code)})")
             return
-        converted, problem = _convert(node.spec.raw_type, value)
+        converted, problem = _convert(node.definition.raw_type, value)
         if problem:
             self.machine.ingest(
-                node, None, ts, "BadTypeMismatch", f"{problem}, mapping says {node.spec.raw_type}"
+                node, None, ts, "BadTypeMismatch", f"{problem}, mapping says {node.definition.raw_type}"
             )
         else:
             self.machine.ingest(node, converted, ts, name)
@@ -537,8 +540,10 @@ class OpcUaSource:
         node_id = self._node_ids.get(node)
         if node_id is None:
             bad = node.sample.status if node.sample.status.startswith("Bad") else "BadNodeIdUnknown"
-            raise ControllerRefused(f"{node.spec.source} is not available: {node.sample.reason}", status=bad)
-        raw_type = node.spec.raw_type
+            raise ControllerRefused(
+                f"{node.definition.source} is not available: {node.sample.reason}", status=bad
+            )
+        raw_type = node.definition.raw_type
         try:
             variant = ua.Variant(
                 list(raw) if raw_type.array else raw,

@@ -20,6 +20,7 @@ from typing import Any, Protocol, Self
 
 from gateway.codecs.copydata import Frame, Layout
 from gateway.config.copydata import CopydataTarget
+from gateway.config.mapping import MachineMapping
 from gateway.errors import SinkError
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import Sample
@@ -47,13 +48,15 @@ class Transport(Protocol):
         ...
 
 
-def target_nodes(machine: Machine, target: CopydataTarget) -> list[tuple[VariableNode, int]]:
+def target_nodes(
+    machine: Machine, mapping: MachineMapping, target: CopydataTarget
+) -> list[tuple[VariableNode, int]]:
     """The (node, id) pairs a target sends, in mapping order; the connection flag first if asked for."""
     pairs: list[tuple[VariableNode, int]] = []
     if target.connected_id is not None:
         pairs.append((machine.status.connected_node, target.connected_id))
     wanted = None if target.variables is None else set(target.variables)
-    for spec in machine.mapping.variables:
+    for spec in mapping.variables:
         if spec.copydata is not None and (wanted is None or spec.path in wanted):
             pairs.append((machine.nodes[spec.path], spec.copydata.id))
     return pairs
@@ -69,12 +72,14 @@ def target_layout(target: CopydataTarget) -> Layout:
 class Emitter:
     """Frames for one target of one machine (an async context manager with a long-running `run()`)."""
 
-    def __init__(self, machine: Machine, target: CopydataTarget, status: CopydataStatus) -> None:
+    def __init__(
+        self, machine: Machine, mapping: MachineMapping, target: CopydataTarget, status: CopydataStatus
+    ) -> None:
         self.machine = machine
         self.target = target
         self.name = f"{machine.name}/{target.name}"
         self.layout = target_layout(target)
-        self.encoder = TargetEncoder(self.name, target_nodes(machine, target), self.layout)
+        self.encoder = TargetEncoder(self.name, target_nodes(machine, mapping, target), self.layout)
         self.status = status
         self.throttle = LogThrottle(log)
         self.feedback = Feedback(
@@ -88,7 +93,7 @@ class Emitter:
         self.closed_dropped = 0
         self.transport: Transport | None = None
         self._state = "starting"
-        self._sub: Subscription | None = None
+        self._sub: Subscription[VariableNode] | None = None
         self._pending: dict[VariableNode, Sample] = {}
         status.add_target(self.describe)
 
@@ -121,7 +126,7 @@ class Emitter:
                 tg.create_task(self._snapshots(every), name=f"copydata:{self.name}:snapshots")
 
     @property
-    def subscription(self) -> Subscription:
+    def subscription(self) -> Subscription[VariableNode]:
         if self._sub is None:
             raise RuntimeError("the emitter is not entered")
         return self._sub
@@ -196,7 +201,7 @@ class Emitter:
 
     # --- the emit loop -------------------------------------------------------------------------
 
-    def _merge(self, batch: list[Change]) -> None:
+    def _merge(self, batch: list[Change[VariableNode]]) -> None:
         """Keep the latest sendable sample per variable of this target."""
         pending = self._pending
         wanted = self.encoder.encoders
@@ -207,7 +212,7 @@ class Emitter:
                 else:
                     pending.pop(node, None)
 
-    async def emit(self, sub: Subscription) -> None:
+    async def emit(self, sub: Subscription[VariableNode]) -> None:
         """The emit loop: changes to frames to channels, until cancelled (run() runs it beside the transport)."""
         pending = self._pending
         limiter = self.limiter

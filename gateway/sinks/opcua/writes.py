@@ -17,8 +17,9 @@ import logging
 
 from asyncua import ua
 
-from gateway.errors import WriteError
-from gateway.model.tree import VariableNode, WriteContext
+from gateway.errors import RequestError, WriteError
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableNode
 from gateway.sinks.opcua.address_space import access_level
 from gateway.sinks.opcua.values import ValueKind, status_code
 
@@ -83,7 +84,7 @@ async def write_node(
 
     try:
         await node.machine.write_node(node, value, WriteContext(ORIGIN, user, role), check=check)
-    except WriteError as exc:
+    except RequestError as exc:
         return status_code(exc.status)
     except Exception:
         log.exception("OPC UA write to %s failed unexpectedly", node.full_path)

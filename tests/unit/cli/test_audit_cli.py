@@ -4,7 +4,7 @@ from datetime import datetime, timedelta, timezone
 
 import pytest
 
-from gateway.audit.entry import AuditEntry
+from gateway.model.audit import AuditEntry
 from gateway.cli.audit import as_json, as_line, parse_since
 
 NOW = datetime(2026, 5, 6, 12, 0, tzinfo=timezone.utc)

@@ -8,7 +8,8 @@ import pytest
 
 from gateway.config.loader import load_mapping
 from gateway.errors import ControllerRefused, ControllerUnavailable, NotWritable, OutOfRange, TypeMismatch, UnknownVariable
-from gateway.model.tree import VariableNode, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableNode, VariableTree
 
 MAPPING = """
 machine: m1
@@ -41,7 +42,7 @@ class Recorder:
 def tree(tmp_path: Path) -> VariableTree:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    return VariableTree([load_mapping(path)])
+    return VariableTree([load_mapping(path).definition()])
 
 
 def published(tree: VariableTree) -> list[tuple[str, Any, str]]:
