@@ -6,7 +6,9 @@ pydantic or drivers. Sources push raw controller values in through
 `Machine.ingest`; scaling and deadband are applied here, once, and accepted
 changes go to the change hub. Writes from any sink come back through
 `Machine.write`, which checks access, the caller's role, type and range and
-undoes the scaling before asking the source. Method calls go through `Machine.call_method`, which checks the role. Both are
+undoes the scaling before asking the source; the source's read-back of the
+written variable is in the tree before the write is answered (read-your-writes).
+Method calls go through `Machine.call_method`, which checks the role. Both are
 audited (`VariableTree.audit_sinks`), refusals included. Nothing else talks to a
 controller.
 """
@@ -34,7 +36,7 @@ from gateway.model.definitions import MachineDefinition, VariableDefinition
 from gateway.model.events import EventBus
 from gateway.model.hub import ChangeHub
 from gateway.model.methods import Method
-from gateway.model.sample import Sample, utcnow
+from gateway.model.sample import ReadBack, Sample, utcnow
 from gateway.model.status import MachineStatus
 from gateway.model.types import DataType, TypeSpec, check_int_bounds, coerce
 
@@ -42,9 +44,14 @@ __all__ = ["Machine", "VariableNode", "VariableTree", "WriteContext", "WriteHook
 
 
 class Writer(Protocol):
-    """What the tree needs from a source to carry out a write: the raw value, to the controller."""
+    """What the tree needs from a source to carry out a write: the raw value, to the controller.
 
-    async def write(self, node: VariableNode, raw: Any) -> None: ...
+    It answers with the controller's value read back after the write (a `ReadBack`),
+    or None when it could not read it back; the tree takes the reading in before
+    the write is answered, so that the caller reads what it wrote.
+    """
+
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None: ...
 
 
 # A write hook sees every write before it reaches the source, and may refuse it
@@ -67,6 +74,7 @@ class VariableNode:
         "_deadband",
         "_scaled",
         "_round",
+        "_hold",
     )
 
     def __init__(self, machine: Machine, definition: VariableDefinition, *, internal: bool = False) -> None:
@@ -83,6 +91,8 @@ class VariableNode:
         self._scaled = definition.scaled
         self._deadband = definition.deadband
         self._round = definition.type.is_integer
+        # After a write's read-back: (its source time, until when older notifications are dropped).
+        self._hold: tuple[datetime, float] | None = None
 
     def __repr__(self) -> str:
         return f"<VariableNode {self.machine.name}/{self.path}>"
@@ -203,6 +213,8 @@ class Machine:
         if status.startswith("Bad"):
             self._publish_status(node, status, reason, source_ts)
             return
+        if node._hold is not None and _held_back(node, source_ts):
+            return
         try:
             value = node.to_engineering(raw)
         except TypeError:
@@ -221,6 +233,24 @@ class Machine:
         if now - self._last_change_push >= 1.0:
             self._last_change_push = now
             self.status.changed(source_ts)
+
+    def confirm(self, node: VariableNode, reading: ReadBack) -> None:
+        """The controller's value of `node`, read back right after a write: in the tree at once.
+
+        So the writer (and every sink) sees the written value when the write is
+        answered, not 20-100 ms later when the subscription reports it. For
+        `reading.hold` seconds a notification older than the reading (one already
+        on its way when the write was made) does not replace it. A Bad read-back,
+        or one older than what the tree already holds, changes nothing.
+        """
+        if reading.status.startswith("Bad"):
+            return
+        current = node.sample
+        if current.good and _before(reading.source_ts, current.source_ts):
+            return
+        node._hold = None
+        self.ingest(node, reading.raw, reading.source_ts, reading.status, reading.reason)
+        node._hold = (reading.source_ts, time.monotonic() + reading.hold)
 
     def invalidate(self, status: str, reason: str) -> None:
         """Every mapped variable turns bad at once, e.g. when the controller is unreachable."""
@@ -256,7 +286,8 @@ class Machine:
 
         `check` is the sink's own check of the request (OPC UA's strict Variant
         types, say): it runs after the role check and raises a RequestError to refuse,
-        so that its refusals are audited like any other.
+        so that its refusals are audited like any other. When it returns, the tree
+        holds the value the controller reported back (if the source could read it).
         """
         started = time.monotonic()
         at = utcnow()
@@ -370,7 +401,32 @@ class Machine:
         writer = self.writer
         if writer is None:
             raise ControllerUnavailable(f"{self.name} has no controller connection")
-        await writer.write(node, raw)
+        reading = await writer.write(node, raw)
+        if reading is not None:
+            self.confirm(node, reading)
+
+
+def _before(a: datetime, b: datetime) -> bool:
+    """Whether source time `a` is earlier than `b` (False when the two cannot be compared)."""
+    try:
+        return a < b
+    except TypeError:  # one naive, one aware: a driver's quirk, not a reason to drop a value
+        return False
+
+
+def _held_back(node: VariableNode, source_ts: datetime) -> bool:
+    """After a write's read-back: whether this notification is older than the reading (and dropped).
+
+    The hold ends with the first notification that is not older, or when its time is up,
+    so a controller whose clock steps back cannot freeze the variable.
+    """
+    hold = node._hold
+    assert hold is not None
+    since, until = hold
+    if _before(source_ts, since) and time.monotonic() < until:
+        return True
+    node._hold = None
+    return False
 
 
 class VariableTree:

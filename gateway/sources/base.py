@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any, Protocol, Self
 
 from gateway.config.mapping import MachineMapping
+from gateway.model.sample import ReadBack
 from gateway.model.tree import Machine, VariableNode
 
 
@@ -26,8 +27,12 @@ class Source(Protocol):
         """Connect, subscribe, and reconnect with backoff, until cancelled."""
         ...
 
-    async def write(self, node: VariableNode, raw: Any) -> None:
-        """Write a raw (already checked and unscaled) value. Raises ControllerRefused/ControllerUnavailable."""
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None:
+        """Write a raw (already checked and unscaled) value. Raises ControllerRefused/ControllerUnavailable.
+
+        Answers with the value read back from the controller after the write (None if it
+        could not be read), which the tree takes in before the write is answered.
+        """
         ...
 
 

@@ -15,6 +15,10 @@ option) and the simulator. Design choices, and why:
 * **Errors stop here.** asyncua's exceptions are translated into gateway.errors
   (writes) or into a Bad status plus one readable log line (connection), never
   a traceback for something as ordinary as a controller being switched off.
+* **Writes read back.** After a Good write the variable is read from the controller
+  in the same session and the reading handed to the tree before the write is
+  answered, so a client that reads right after writing sees its value
+  (docs/architecture.md, Writes).
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ from cryptography import x509
 from gateway.codecs.opcua_nodeid import OpcUaAddress, parse_address
 from gateway.config.mapping import MachineMapping
 from gateway.errors import AddressError, ControllerRefused, ControllerUnavailable
-from gateway.model.sample import utcnow
+from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
@@ -192,6 +196,10 @@ class OpcUaSource:
         self._node_ids: dict[VariableNode, ua.NodeId] = {}
         self._handles: dict[int, tuple[VariableNode, type]] = {}
         self._failed: set[VariableNode] = set()  # variables whose value made ingest fail (logged once)
+        # How long after a write's read-back an older notification may still be on its way (ReadBack.hold):
+        # sampled before the write, queued until the next publish, then sent.
+        slowest = max((mapping.sampling_interval(v) for v in mapping.variables), default=0.0)
+        self._hold = 2.0 * (self.driver.publishing_interval + slowest) / 1000.0 + 1.0
         for handle, node in enumerate(machine.mapped, start=1):
             try:
                 self._addresses[node] = parse_address(node.definition.source)
@@ -530,8 +538,9 @@ class OpcUaSource:
 
     # --- writing ---------------------------------------------------------------------------
 
-    async def write(self, node: VariableNode, raw: Any) -> None:
-        """Write one raw value as a Variant of the mapped type, value only (no timestamps, no status)."""
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None:
+        """Write one raw value as a Variant of the mapped type, value only (no timestamps, no status);
+        answer with the value read back from the controller (None if it could not be read)."""
         client = self._client
         if client is None or not self._connected:
             raise ControllerUnavailable(
@@ -586,6 +595,38 @@ class OpcUaSource:
         if code & 0x80000000:
             name = status_name(code)
             raise ControllerRefused(f"controller refused: {name} ({status_doc(code)})", status=name)
+        return await self._read_back(client, node, node_id)
+
+    async def _read_back(self, client: Client, node: VariableNode, node_id: ua.NodeId) -> ReadBack | None:
+        """The written variable as the controller holds it now, for the tree (read-your-writes).
+
+        The write has succeeded whatever happens here: a read that fails or times out
+        only means the value arrives the usual way, by the subscription.
+        """
+        params = ua.ReadParameters(
+            MaxAge=0,
+            TimestampsToReturn=ua.TimestampsToReturn.Both,
+            NodesToRead=[ua.ReadValueId(NodeId=node_id, AttributeId=ua.AttributeIds.Value)],
+        )
+        try:
+            async with asyncio.timeout(self.driver.timeout):
+                results = await client.uaclient.session.read(params)
+        except Exception as exc:  # TimeoutError, a refusal, a lost connection: the write stands
+            log.debug("%s: reading %s back after the write failed: %s", self.machine.name, node.path, exc)
+            return None
+        if not results:
+            return None
+        dv = results[0]
+        code = 0 if dv.StatusCode is None else dv.StatusCode.value
+        if code & 0x80000000:
+            return None
+        variant = dv.Value
+        value, problem = _convert(node.definition.raw_type, None if variant is None else variant.Value)
+        if problem:
+            return None
+        stamp = dv.SourceTimestamp or dv.ServerTimestamp
+        ts = stamp if stamp is not None and stamp.year >= 1971 else utcnow()
+        return ReadBack(value, ts, status_name(code), hold=self._hold)
 
 
 def _convert(spec: TypeSpec, value: Any) -> tuple[Any, str]:

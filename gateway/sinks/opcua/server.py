@@ -572,7 +572,10 @@ class OpcUaSink:
         var = self._by_id.get(wv.NodeId)
         if var is None:  # one of our folders, objects or properties
             return ua.StatusCode(ua.StatusCodes.BadNotWritable)
-        return await write_node(var.node, var.kind, wv, user, role)
+        status = await write_node(var.node, var.kind, wv, user, role)
+        if status.is_good():  # read-your-writes: the controller's read-back is served before the answer
+            await self._push([(var.node, var.node.sample)])
+        return status
 
 
 @contextmanager

@@ -7,8 +7,8 @@ access, range and roles, unscales, and asks the source. The OPC UA checks run
 inside `write_node` (its `check`), after the role check, so that a viewer hears
 BadUserAccessDenied whatever it sent and every refusal is audited. The answer's
 status name becomes the StatusCode returned to the client. An accepted write
-does not change the node: the new value comes back from the controller like any
-other change.
+leaves the controller's read-back of the value in the tree (`Machine.write_node`),
+which the server puts in the address space before it answers (read-your-writes).
 """
 
 from __future__ import annotations
