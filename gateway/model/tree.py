@@ -213,7 +213,8 @@ class Machine:
         if status.startswith("Bad"):
             self._publish_status(node, status, reason, source_ts)
             return
-        if node._hold is not None and _held_back(node, source_ts):
+        hold = node._hold
+        if hold is not None and _held_back(node, hold, source_ts):
             return
         try:
             value = node.to_engineering(raw)
@@ -414,14 +415,12 @@ def _before(a: datetime, b: datetime) -> bool:
         return False
 
 
-def _held_back(node: VariableNode, source_ts: datetime) -> bool:
+def _held_back(node: VariableNode, hold: tuple[datetime, float], source_ts: datetime) -> bool:
     """After a write's read-back: whether this notification is older than the reading (and dropped).
 
     The hold ends with the first notification that is not older, or when its time is up,
     so a controller whose clock steps back cannot freeze the variable.
     """
-    hold = node._hold
-    assert hold is not None
     since, until = hold
     if _before(source_ts, since) and time.monotonic() < until:
         return True
