@@ -86,26 +86,28 @@ def configure_access(config: Config, tree: VariableTree) -> None:
 
 
 def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None = None) -> list[Sink]:
-    from gateway.auth.users import UserDirectory
     from gateway.sinks.opcua.port import ServerExtension
     from gateway.sinks.opcua.server import OpcUaSink
 
     gw = config.gateway
-    users = UserDirectory.from_config(gw)
     extensions: list[ServerExtension] = []
     if alarms is not None:  # alarm conditions and events in the address space
         from gateway.sinks.opcua.alarms import OpcUaAlarms
 
         extensions.append(OpcUaAlarms(alarms))
-    sinks: list[Sink] = [OpcUaSink(tree, gw.opcua, config.state_dir, users=users, extensions=extensions)]
+    sinks: list[Sink] = [
+        OpcUaSink(tree, gw.opcua, config.state_dir, users=gw.user_directory(), extensions=extensions)
+    ]
     if config.gateway.mqtt is not None:  # no `mqtt:` in the gateway file: no broker to reach
         from gateway.sinks.mqtt.sink import MqttSink
 
-        sinks.append(MqttSink(tree, config.gateway.mqtt, config.state_dir, base_dir=config.base_dir))
+        sinks.append(
+            MqttSink(tree, config.gateway.mqtt, config.state_dir, config.mappings, base_dir=config.base_dir)
+        )
     if any(m.copydata is not None for m in config.machines):  # frames for nesting software
         from gateway.sinks.copydata.sink import CopydataSink
 
-        sinks.append(CopydataSink(tree))
+        sinks.append(CopydataSink(tree, config.mappings))
     return sinks
 
 
@@ -124,7 +126,7 @@ def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
         return None
     from gateway.alarms.service import AlarmService
 
-    return AlarmService(tree, config.state_dir)
+    return AlarmService(tree, config.mappings, config.state_dir)
 
 
 class Gateway:
@@ -132,15 +134,17 @@ class Gateway:
 
     def __init__(self, config: Config) -> None:
         self.config = config
-        self.tree = VariableTree(config.machines)
+        # The tree gets the model's definitions; components that read the rest of a mapping get the mappings.
+        self.tree = VariableTree(config.definitions())
         configure_access(config, self.tree)
         retention = config.gateway.access.audit_retention
         self.audit = AuditTrail(audit_path(config.state_dir), retention_days=retention)
         self.tree.audit_sinks.append(self.audit.record)
-        install_commands(self.tree)  # the mapping's commands as Commands/ methods, before the sinks see them
+        mappings = config.mappings
+        install_commands(self.tree, mappings)  # the commands as Commands/ methods, before the sinks see them
         self.alarms = build_alarms(config, self.tree)
         self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms)
-        self.sources: list[Source] = [create_source(m) for m in self.tree.machines.values()]
+        self.sources: list[Source] = [create_source(m, mappings[n]) for n, m in self.tree.machines.items()]
         self.jobs = build_jobs(config, self.tree)  # before the sinks start: it adds Jobs/ variables and methods
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()

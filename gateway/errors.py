@@ -2,8 +2,9 @@
 
 Third-party errors (asyncua, paho, aioftp, pydantic, yaml) are translated into
 these at the adapter boundary, so the rest of the gateway never needs to know
-which library raised what. Write errors carry the OPC UA status code name that
-best describes them; every sink maps that name to its own wire form.
+which library raised what. Refused requests (RequestError: writes, method calls)
+carry the OPC UA status code name that best describes them; every sink maps that
+name to its own wire form.
 """
 
 from __future__ import annotations
@@ -41,11 +42,17 @@ class ConfigError(GatewayError):
         super().__init__("\n".join(str(i) for i in self.issues))
 
 
-# --- writes ----------------------------------------------------------------------------------
+# --- refused requests: writes, method calls ------------------------------------------------------
 
 
-class WriteError(GatewayError):
-    """A write was refused. `status` is the OPC UA StatusCode name for the refusal."""
+class RequestError(GatewayError):
+    """A client's request (a write, a method call, an acknowledgement) was refused.
+
+    `status` is the OPC UA StatusCode name for the refusal, `reason` the text users
+    read; every sink maps the name to its own wire form. Refusals that writes and
+    calls share (a role too low, a value of the wrong type) derive from this class
+    directly; WriteError and CallError hold those of one kind only.
+    """
 
     status = "BadInternalError"
 
@@ -56,6 +63,46 @@ class WriteError(GatewayError):
             self.status = status
 
 
+class AccessDenied(RequestError):
+    status = "BadUserAccessDenied"
+
+
+class TypeMismatch(RequestError):
+    status = "BadTypeMismatch"
+
+
+class OutOfRange(RequestError):
+    status = "BadOutOfRange"
+
+
+class InvalidState(RequestError):
+    """The machine is not in a state that allows this (e.g. start while in Alarm)."""
+
+    status = "BadInvalidState"
+
+
+class MalformedRequest(RequestError):
+    """A request that cannot be read at all: not UTF-8, malformed JSON, too large, no value."""
+
+    status = "BadDecodingError"
+
+
+class ControllerRefused(RequestError):
+    """The controller answered with an error of its own (to a write, or to a program store operation)."""
+
+    status = "BadWriteNotSupported"
+
+
+class ControllerUnavailable(RequestError):
+    """The controller could not be reached to carry out the request."""
+
+    status = "BadNotConnected"
+
+
+class WriteError(RequestError):
+    """A write was refused for a reason only writes have."""
+
+
 class UnknownVariable(WriteError):
     status = "BadNodeIdUnknown"
 
@@ -64,48 +111,34 @@ class NotWritable(WriteError):
     status = "BadNotWritable"
 
 
-class AccessDenied(WriteError):
-    status = "BadUserAccessDenied"
+class CallError(RequestError):
+    """A method call (a command, a Programs method, an alarm acknowledgement) was refused."""
 
 
-class TypeMismatch(WriteError):
-    status = "BadTypeMismatch"
-
-
-class OutOfRange(WriteError):
-    status = "BadOutOfRange"
-
-
-class ArgumentsMissing(WriteError):
+class ArgumentsMissing(CallError):
     status = "BadArgumentsMissing"
 
 
-class TooManyArguments(WriteError):
+class TooManyArguments(CallError):
     status = "BadTooManyArguments"
 
 
-class InvalidState(WriteError):
-    """The machine is not in a state that allows this (e.g. start while in Alarm)."""
+class InvalidArgument(CallError):
+    """An argument names nothing the method can use (a file name the program store refuses)."""
 
-    status = "BadInvalidState"
+    status = "BadInvalidArgument"
 
 
-class Timeout(WriteError):
-    """The controller did not confirm in time."""
+class NotFound(CallError):
+    """What the call names does not exist (a program not in the controller's store)."""
+
+    status = "BadNotFound"
+
+
+class ConfirmTimeout(CallError):
+    """The controller did not confirm in time (a command's completion condition never held)."""
 
     status = "BadTimeout"
-
-
-class ControllerRefused(WriteError):
-    """The controller answered the write with an error of its own."""
-
-    status = "BadWriteNotSupported"
-
-
-class ControllerUnavailable(WriteError):
-    """The controller could not be reached to carry out the write."""
-
-    status = "BadNotConnected"
 
 
 # --- sources and sinks -------------------------------------------------------------------------
@@ -131,13 +164,11 @@ class CodecError(GatewayError, ValueError):
     """Bytes or text that do not follow the format they claim to."""
 
 
+class AddressError(CodecError):
+    """A `source` string that is not a usable OPC UA node id (gateway/codecs/opcua_nodeid.py)."""
+
+
 # --- MQTT --------------------------------------------------------------------------------------
-
-
-class BadWriteRequest(WriteError):
-    """A write request that cannot be read at all: not UTF-8, malformed JSON, too large, no value."""
-
-    status = "BadDecodingError"
 
 
 class BrokerError(SinkError):
@@ -157,6 +188,15 @@ class BrokerRefused(BrokerError):
 
 class JobError(GatewayError):
     """A job operation was refused: unknown job, or a state that does not allow it."""
+
+
+class PathRefused(GatewayError):
+    """A path or file name the job inbox will not serve. `code` is the FTP reply code, `reason` its text."""
+
+    def __init__(self, reason: str, code: str = "550") -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.code = code
 
 
 class DeliveryError(GatewayError):

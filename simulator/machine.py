@@ -4,7 +4,7 @@ Nothing here knows about asyncio, sockets or wall-clock time. `step(dt)` advance
 simulated time by `dt` seconds, so tests run a whole program deterministically
 in milliseconds and the runner decides how fast simulated time flows. Commands
 (`start`, `select_program`, `set_override`, ...) act at once and raise a
-`WriteError` subclass whose `status` is what the controller answers when it
+`RequestError` (gateway.errors) whose `status` is what the controller answers when it
 refuses them.
 """
 

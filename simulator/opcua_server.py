@@ -27,7 +27,7 @@ from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AttributeService
 
-from gateway.errors import WriteError
+from gateway.errors import RequestError
 from simulator.errors import SimulatorError
 from simulator.machine import Machine
 from simulator.variables import GLOBAL_FOLDER, NAMESPACE_URI, PLC_FOLDER, TASKS_FOLDER, Variable
@@ -255,7 +255,7 @@ class PlcServer:
             return ua.StatusCode(ua.StatusCodes.BadTypeMismatch)
         try:
             var.write(self.machine, variant.Value)
-        except WriteError as exc:
+        except RequestError as exc:
             log.info("write %s = %r refused: %s (%s)", var.node_id, variant.Value, exc.reason, exc.status)
             return ua.StatusCode(getattr(ua.StatusCodes, exc.status, ua.StatusCodes.BadInternalError))
         log.info("write %s = %r accepted", var.node_id, variant.Value)

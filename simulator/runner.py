@@ -21,7 +21,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Self
 
-from gateway.errors import WriteError
+from gateway.errors import RequestError
 from simulator.errors import SimulatorError
 from simulator.ftp_store import FtpStore
 from simulator.machine import Machine, MachineState
@@ -136,7 +136,7 @@ class Simulator:
             try:
                 self.machine.select_program(self.loop_program)
                 self.machine.start()
-            except WriteError as exc:
+            except RequestError as exc:
                 raise SimulatorError(f"cannot loop {self.loop_program!r}: {exc.reason}") from None
         task = asyncio.create_task(self._tick_loop(), name="cnc-simulator:tick")
         stack.push_async_callback(_cancel, task)
@@ -186,7 +186,7 @@ class Simulator:
                 if self.machine.program.name != self.loop_program:
                     self.machine.select_program(self.loop_program)
                 self.machine.start()
-            except WriteError as exc:
+            except RequestError as exc:
                 log.warning("cannot restart %s: %s", self.loop_program, exc.reason)
 
 

@@ -27,21 +27,22 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from gateway.alarms.records import AlarmChange, AlarmRecord, Kind, Quality
 from gateway.alarms.sources import Reading, diff, source_for
 from gateway.alarms.store import AlarmStore, AlarmStoreError
-from gateway.audit.entry import as_text
 from gateway.config.alarms import AlarmsConfig
-from gateway.errors import InvalidState, WriteError
+from gateway.errors import CallError, InvalidState, RequestError
+from gateway.model.audit import as_text
+from gateway.model.context import WriteContext
 from gateway.model.events import Event
 from gateway.model.sample import utcnow
 
 if TYPE_CHECKING:
-    from gateway.model.tree import Machine, WriteContext
+    from gateway.model.tree import Machine
 
 log = logging.getLogger("gateway.alarms")
 
 T = TypeVar("T")
 Listener = Callable[[AlarmChange], Awaitable[None]]
 DbCall = Callable[..., Awaitable[Any]]
-Check = Callable[[], None]  # a sink's own check of a request: raises a WriteError to refuse it
+Check = Callable[[], None]  # a sink's own check of a request: raises a RequestError to refuse it
 
 SETTLE = 0.5  # s to wait for the other arrays when one of them has changed length alone
 EVENTS = "alarms/events"
@@ -49,15 +50,15 @@ OBJECT = "Alarms"  # audit targets: Alarms/<alarm id>#<occurrence>
 ACTIVE = "alarms/active"
 
 
-class UnknownAlarm(WriteError):
+class UnknownAlarm(CallError):
     status = "BadNodeIdUnknown"
 
 
-class AlreadyAcknowledged(WriteError):
+class AlreadyAcknowledged(CallError):
     status = "BadConditionBranchAlreadyAcked"
 
 
-class AlreadyConfirmed(WriteError):
+class AlreadyConfirmed(CallError):
     status = "BadConditionBranchAlreadyConfirmed"
 
 
@@ -191,10 +192,10 @@ class AlarmManager:
     async def acknowledge(
         self, occurrence: int, ctx: WriteContext, comment: str = "", *, check: Check | None = None
     ) -> AlarmRecord:
-        """Record that `ctx`'s caller has seen the alarm. Raises a WriteError with the OPC UA status.
+        """Record that `ctx`'s caller has seen the alarm. Raises a RequestError with the OPC UA status.
 
         `check` is the sink's own check of the request (OPC UA: a known EventId): it runs
-        after the role check and raises a WriteError to refuse, so its refusals are audited too.
+        after the role check and raises a RequestError to refuse, so its refusals are audited too.
         """
         return await self._audited("acknowledge", occurrence, ctx, comment, check, self._acknowledge)
 
@@ -218,16 +219,16 @@ class AlarmManager:
         known = self.records.get(occurrence)  # read first: an alarm that ends with this call leaves `records`
         target = f"{OBJECT}/{known.id if known is not None else ''}#{occurrence}"
 
-        def audit(error: WriteError | None) -> None:
+        def audit(error: RequestError | None) -> None:
             self.machine.audit(kind, target, ctx, new=as_text([comment]), error=error, at=at, started=started)
 
         try:
             record = await action(occurrence, ctx, comment, check)
-        except WriteError as exc:
+        except RequestError as exc:
             audit(exc)
             raise
         except Exception as exc:
-            audit(WriteError(f"internal error: {exc}"))
+            audit(CallError(f"internal error: {exc}"))
             raise
         audit(None)
         return record
@@ -282,7 +283,7 @@ class AlarmManager:
         try:
             return bool(await self._db(call, *args))
         except AlarmStoreError as exc:
-            raise WriteError(f"the alarm history cannot record it: {exc}") from None
+            raise CallError(f"the alarm history cannot record it: {exc}") from None
 
     # --- state and telling others ----------------------------------------------------------------
 

@@ -11,13 +11,14 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
 from gateway.alarms.manager import AlarmManager
 from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.config.mapping import MachineMapping
 from gateway.errors import SinkError
 from gateway.model.tree import VariableTree
 
@@ -27,14 +28,14 @@ T = TypeVar("T")
 
 
 class AlarmService:
-    def __init__(self, tree: VariableTree, state_dir: Path) -> None:
+    def __init__(self, tree: VariableTree, mappings: Mapping[str, MachineMapping], state_dir: Path) -> None:
         self.tree = tree
         self.store = AlarmStore(store_path(state_dir))
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="alarms-db")
         self.managers: dict[str, AlarmManager] = {
-            name: AlarmManager(machine, machine.mapping.alarms, self.store, self.db)
-            for name, machine in tree.machines.items()
-            if machine.mapping.alarms is not None
+            name: AlarmManager(tree.machines[name], mapping.alarms, self.store, self.db)
+            for name, mapping in mappings.items()
+            if mapping.alarms is not None
         }
         self._opened = False
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
-from gateway.audit.entry import AuditEntry
 from gateway.errors import GatewayError
+from gateway.model.audit import AuditEntry
 from gateway.sqlite_file import SqliteFile
 
 FILE_NAME = "audit.sqlite3"

@@ -18,7 +18,7 @@ import threading
 from pathlib import Path
 from typing import Self
 
-from gateway.audit.entry import AuditEntry
+from gateway.model.audit import AuditEntry
 from gateway.audit.store import AuditStore
 
 log = logging.getLogger("gateway.audit")

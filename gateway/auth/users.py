@@ -1,7 +1,10 @@
 """The gateway's users: who may log in (OPC UA), with which role, and what happens to wrong passwords.
 
-Built from the gateway file (`users:`, `access:`). Protocol-neutral: the OPC UA
-sink adapts it to asyncua's user manager (gateway/sinks/opcua/identity.py).
+Built from plain values: names with their hashes and roles, the anonymous role,
+a lockout limiter; the configuration builds one from the gateway file (`users:`,
+`access:`; `GatewayConfig.user_directory()`), so that this package needs nothing
+of the configuration. Protocol-neutral: the OPC UA sink adapts it to asyncua's
+user manager (gateway/sinks/opcua/identity.py).
 
 - A known user with the right password gets its role.
 - A wrong password, or an unknown user, is refused; an unknown user costs as
@@ -23,8 +26,6 @@ from functools import cache
 
 from gateway.auth.passwords import hash_password, verify_password
 from gateway.auth.ratelimit import LoginLimiter
-from gateway.config.access import REFUSE
-from gateway.config.gateway import GatewayConfig
 
 log = logging.getLogger("gateway.auth")
 
@@ -55,18 +56,6 @@ class UserDirectory:
         self.anonymous_role = anonymous_role
         self.anonymous_allowed = anonymous_allowed
         self.limiter = limiter or LoginLimiter()
-
-    @classmethod
-    def from_config(cls, config: GatewayConfig) -> UserDirectory:
-        access = config.access
-        lockout = access.lockout
-        refuse = access.anonymous == REFUSE
-        return cls(
-            {u.name: (u.password_hash, u.role) for u in config.users},
-            anonymous_role=None if refuse else access.anonymous,
-            anonymous_allowed=not refuse,
-            limiter=LoginLimiter(lockout.failures, lockout.window, lockout.duration),
-        )
 
     @property
     def has_users(self) -> bool:

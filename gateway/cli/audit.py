@@ -11,10 +11,10 @@ import json
 import sys
 from pathlib import Path
 
-from gateway.audit.entry import AuditEntry
 from gateway.audit.store import AuditStore, AuditStoreError, audit_path, iso
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
+from gateway.model.audit import AuditEntry
 from gateway.cli.state_dir import resolve_state_dir
 
 KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm

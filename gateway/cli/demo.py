@@ -31,9 +31,10 @@ from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
-from gateway.errors import ConfigError, SinkError, WriteError
+from gateway.errors import ConfigError, RequestError, SinkError
 from gateway.logconfig import configure
-from gateway.model.tree import Machine, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine
 
 log = logging.getLogger("gateway.demo")
 
@@ -278,7 +279,7 @@ async def keep_program_running(machine: Machine, busy: Callable[[], bool] = lamb
                     await machine.write("Control/SelectProgram", DEMO_PROGRAM, ctx)
                 await machine.write("Control/Start", True, ctx)
                 log.info("demo: started %s", DEMO_PROGRAM)
-        except WriteError as exc:
+        except RequestError as exc:
             log.info("demo: %s (%s); will retry", exc.reason, exc.status)
 
 

@@ -50,7 +50,7 @@ from gateway.codecs.copydata import (
     pack_tcp,
     unpack_datagram,
 )
-from gateway.errors import ConfigError, WriteError
+from gateway.errors import ConfigError, RequestError
 from gateway.model.types import TypeSpec, parse_text
 
 RETRY_EVERY = 1.0  # s between attempts to reach the target
@@ -161,7 +161,7 @@ def build_frame(settings: Settings, pairs: list[str], dwdata: int | None) -> Fra
         var = _variable(settings, key.strip())
         try:
             value = parse_text(var.type, text)
-        except WriteError as exc:
+        except RequestError as exc:  # TypeMismatch, OutOfRange
             raise UsageError(f"{pair!r}: {exc.reason}") from None
         try:
             items.append(var.encode(value, settings.layout))

@@ -20,18 +20,20 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from gateway.commands.conditions import Check, bind
 from gateway.config.commands import CommandSpec, render
-from gateway.errors import InvalidState, Timeout, WriteError
+from gateway.config.mapping import MachineMapping
+from gateway.errors import CallError, ConfirmTimeout, InvalidState
+from gateway.model.context import WriteContext
 from gateway.model.hub import Subscription
 from gateway.model.methods import Argument, Method
 from gateway.model.types import TypeSpec
 
 if TYPE_CHECKING:
-    from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
+    from gateway.model.tree import Machine, VariableNode, VariableTree
 
 log = logging.getLogger("gateway.commands")
 
@@ -68,7 +70,7 @@ class CommandRunner:
         started = time.monotonic()
         values = {a.name: v for a, v in zip(spec.arguments, args)}
         phase = "checking the guard"
-        sub: Subscription | None = None
+        sub: Subscription[VariableNode] | None = None
         done = bind(spec.done, values) if spec.done is not None else None
         try:
             async with asyncio.timeout(spec.timeout) as deadline:
@@ -91,9 +93,11 @@ class CommandRunner:
                 except TimeoutError:
                     if deadline.expired():
                         raise
-                    raise WriteError(f"{self.name}: the controller did not answer ({phase})", status="BadTimeout") from None
+                    raise CallError(
+                        f"{self.name}: the controller did not answer ({phase})", status="BadTimeout"
+                    ) from None
         except TimeoutError:
-            raise Timeout(self._timeout_reason(phase, done)) from None
+            raise ConfirmTimeout(self._timeout_reason(phase, done)) from None
         finally:
             if sub is not None:
                 sub.close()
@@ -105,7 +109,7 @@ class CommandRunner:
         node = self.machine.nodes[check.path]
         sample = node.sample
         if not sample.good:
-            raise WriteError(
+            raise CallError(
                 f"{self.name}: {check.path} is not known ({sample.reason or sample.status})", status=sample.status
             )
         if not check.holds(sample.value):
@@ -114,7 +118,7 @@ class CommandRunner:
                 f"it needs {check.path} {check.expected()}"
             )
 
-    async def _wait(self, check: Check, node: VariableNode, sub: Subscription) -> str:
+    async def _wait(self, check: Check, node: VariableNode, sub: Subscription[VariableNode]) -> str:
         """Until `check` holds for `node`: now, or in any change that comes (in order)."""
         sample = node.sample
         self._usable(check, sample)
@@ -130,7 +134,7 @@ class CommandRunner:
 
     def _usable(self, check: Check, sample: Any) -> None:
         if not sample.good:
-            raise WriteError(
+            raise CallError(
                 f"{self.name}: lost {check.path} while waiting for it ({sample.reason or sample.status})",
                 status=sample.status,
             )
@@ -143,16 +147,17 @@ class CommandRunner:
         return text
 
 
-def command_methods(machine: Machine) -> list[Method]:
-    commands = machine.mapping.commands or {}
+def command_methods(machine: Machine, mapping: MachineMapping) -> list[Method]:
+    commands = mapping.commands or {}
     return [CommandRunner(machine, name, spec).method() for name, spec in commands.items()]
 
 
-def install_commands(tree: VariableTree) -> int:
+def install_commands(tree: VariableTree, mappings: Mapping[str, MachineMapping]) -> int:
     """Register every machine's commands (before the sinks start, which expose them). Returns how many."""
     count = 0
-    for machine in tree.machines.values():
-        for method in command_methods(machine):
+    for name, mapping in mappings.items():
+        machine = tree.machines[name]
+        for method in command_methods(machine, mapping):
             machine.add_method(method)
             count += 1
     return count

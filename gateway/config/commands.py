@@ -33,22 +33,13 @@ import string
 from collections.abc import Mapping, Sequence
 from typing import Annotated, Any
 
-from pydantic import (
-    AfterValidator,
-    BeforeValidator,
-    Field,
-    PlainSerializer,
-    ValidationError,
-    WithJsonSchema,
-    field_validator,
-    model_validator,
-)
+from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from gateway.config.access import check_role_name
-from gateway.config.base import Strict
-from gateway.errors import WriteError
-from gateway.model.types import TYPE_NAMES, TypeSpec, coerce
+from gateway.config.base import Strict, TypeField
+from gateway.errors import RequestError
+from gateway.model.types import TypeSpec, coerce
 
 NAME_RE = re.compile(r"^[a-z][a-z0-9_\-]{0,62}$")
 ARG_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,62}$")
@@ -58,22 +49,6 @@ MAX_TIMEOUT = 3600.0
 Scalar = bool | int | float | str
 Value = Scalar | list[Scalar]
 Loc = tuple[str | int, ...]
-
-
-def _parse_type(value: Any) -> TypeSpec:
-    if isinstance(value, TypeSpec):
-        return value
-    if not isinstance(value, str):
-        raise ValueError(f"expected a type name such as String or UInt16, got {value!r}")
-    return TypeSpec.parse(value)
-
-
-ArgType = Annotated[
-    TypeSpec,
-    BeforeValidator(_parse_type),
-    PlainSerializer(str, return_type=str),
-    WithJsonSchema({"type": "string", "enum": TYPE_NAMES, "description": "OPC UA built-in type name"}),
-]
 
 
 def _names(value: Any) -> Any:
@@ -133,7 +108,7 @@ class CommandArgument(Strict):
     """A typed input of a command (an OPC UA method argument, a key of an MQTT request)."""
 
     name: str = Field(description="Letters, digits and '_'; referenced as {name}")
-    type: ArgType
+    type: TypeField
     description: str = ""
 
     @field_validator("name")
@@ -296,7 +271,7 @@ def _value_issues(value: Any, var: Any, args: Mapping[str, TypeSpec], *, scalar:
             for v in checked if isinstance(checked, list) else [checked]:
                 if not var.range.min <= v <= var.range.max:
                     return [f"{v} is outside the range {var.range.min:g}..{var.range.max:g} of {var.path}"]
-    except WriteError as exc:
+    except RequestError as exc:  # TypeMismatch, OutOfRange
         return [f"{json.dumps(value, ensure_ascii=False)} does not fit {var.path}: {exc.reason}"]
     return []
 

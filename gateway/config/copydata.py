@@ -24,7 +24,7 @@ import re
 from collections.abc import Sequence
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ModelWrapValidatorHandler, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from gateway.config.base import Backoff, Strict
@@ -176,7 +176,7 @@ class CopydataTarget(Strict):
 
     @model_validator(mode="wrap")
     @classmethod
-    def _transport_keys(cls, data: Any, handler: Any) -> CopydataTarget:
+    def _transport_keys(cls, data: Any, handler: ModelWrapValidatorHandler[CopydataTarget]) -> CopydataTarget:
         """Each transport's own keys: required ones present, other transports' ones absent.
 
         Checked on the raw keys, beside the field checks, so that all problems come out together.

@@ -6,8 +6,11 @@ from typing import Literal
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
+from gateway.auth.ratelimit import LoginLimiter
+from gateway.auth.users import UserDirectory
 from gateway.config.access import (
     DEFAULT_ROLES,
+    REFUSE,
     AccessConfig,
     UserConfig,
     check_access,
@@ -94,3 +97,15 @@ class GatewayConfig(Strict):
     def _access(cls, access: AccessConfig, info: ValidationInfo) -> AccessConfig:
         roles, users = info.data.get("roles"), info.data.get("users")
         return access if roles is None or users is None else check_access(access, roles, users)
+
+    def user_directory(self) -> UserDirectory:
+        """The users, the anonymous role and the lockout, as gateway/auth/users.py checks logins."""
+        access = self.access
+        lockout = access.lockout
+        refuse = access.anonymous == REFUSE
+        return UserDirectory(
+            {u.name: (u.password_hash, u.role) for u in self.users},
+            anonymous_role=None if refuse else access.anonymous,
+            anonymous_allowed=not refuse,
+            limiter=LoginLimiter(lockout.failures, lockout.window, lockout.duration),
+        )

@@ -20,10 +20,12 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.gateway import GatewayConfig
 from gateway.config.mapping import MachineMapping, tree_conflicts
-from gateway.errors import ConfigError, ConfigIssue
+from gateway.errors import AddressError, ConfigError, ConfigIssue
+from gateway.model.definitions import MachineDefinition
 
 Loc = tuple[str | int, ...]
 M = TypeVar("M", bound=BaseModel)
@@ -209,6 +211,15 @@ class Config:
     def state_dir(self) -> Path:
         return (self.base_dir / self.gateway.state_dir).resolve()
 
+    @property
+    def mappings(self) -> dict[str, MachineMapping]:
+        """Each machine's mapping by machine name: what the components read beside the tree."""
+        return {m.machine: m for m in self.machines}
+
+    def definitions(self) -> list[MachineDefinition]:
+        """The machines as the variable tree knows them (`VariableTree(config.definitions())`)."""
+        return [m.definition() for m in self.machines]
+
 
 def load_mapping(
     path: Path, environ: Mapping[str, str] | None = None, roles: Sequence[str] | None = None
@@ -288,8 +299,6 @@ def _structure_issues(located: Located) -> list[ConfigIssue]:
 
 def _address_issues(located: Located, variables: Sequence[Any]) -> list[ConfigIssue]:
     """Catch a typo in a node id at load time, not as a Bad variable at run time."""
-    from gateway.sources.opcua_address import AddressError, parse_address
-
     issues = []
     for index, var in enumerate(variables):
         source = var.get("source") if isinstance(var, dict) else None

@@ -3,6 +3,11 @@
 These pydantic models are the single definition of the format. They validate a
 file once, at start-up, and also produce the JSON Schema that editors use
 (`cnc-gateway schema`). Unknown keys are errors, not silently ignored.
+
+The variable tree does not see these models: `MachineMapping.definition()` turns a
+mapping into the model's own frozen definitions (gateway/model/definitions.py).
+The components that read the other sections (driver, mqtt, copydata, alarms,
+commands) are given the mappings by gateway/app.py.
 """
 
 from __future__ import annotations
@@ -11,45 +16,21 @@ import re
 from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
-from pydantic import (
-    BeforeValidator,
-    Field,
-    PlainSerializer,
-    SecretStr,
-    WithJsonSchema,
-    field_validator,
-    ValidationInfo,
-    model_validator,
-)
+from pydantic import Field, SecretStr, ValidationInfo, field_validator, model_validator
 
 from gateway.config.access import check_role_name
 from gateway.config.alarms import AlarmsConfig, alarms_issues
-from gateway.config.base import Backoff, Strict
+from gateway.config.base import Backoff, Strict, TypeField
 from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.config.jobs import JobsConfig
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
-from gateway.model.types import TYPE_NAMES, TypeSpec
+from gateway.model.definitions import MachineDefinition, Range, VariableDefinition
+from gateway.model.types import TypeSpec
 
 RESERVED_SEGMENTS = frozenset({"Status", "Jobs", "Commands", "Programs", "Alarms"})
 SEGMENT_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 MACHINE_RE = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,62}$")
-
-
-def _parse_type(value: Any) -> TypeSpec:
-    if isinstance(value, TypeSpec):
-        return value
-    if not isinstance(value, str):
-        raise ValueError(f"expected a type name such as Double or Int32[], got {value!r}")
-    return TypeSpec.parse(value)
-
-
-TypeField = Annotated[
-    TypeSpec,
-    BeforeValidator(_parse_type),
-    PlainSerializer(str, return_type=str),
-    WithJsonSchema({"type": "string", "enum": TYPE_NAMES, "description": "OPC UA built-in type name"}),
-]
 
 
 def check_path(path: str) -> str:
@@ -204,6 +185,24 @@ class VariableSpec(Strict):
             return float(self.deadband.rstrip("%").strip()) / 100.0 * (self.range.max - self.range.min)
         return float(self.deadband)
 
+    def definition(self) -> VariableDefinition:
+        """What the variable tree knows of this variable (the MQTT and COPYDATA settings stay here)."""
+        scale, rng = self.scale, self.range
+        return VariableDefinition(
+            path=self.path,
+            type=self.type,
+            source=self.source,
+            source_type=self.source_type,
+            unit=self.unit,
+            description=self.description,
+            writable=self.writable,
+            role=self.role,
+            gain=scale.gain if scale is not None else 1.0,
+            offset=scale.offset if scale is not None else 0.0,
+            deadband=self.deadband_abs,
+            range=Range(rng.min, rng.max) if rng is not None else None,
+        )
+
 
 def check_endpoint(url: str, scheme: str = "opc.tcp") -> str:
     parts = urlsplit(url)
@@ -295,7 +294,10 @@ class MachineMapping(Strict):
             return jobs
         by_path = {v.path: v for v in variables}
         auto = jobs.auto
-        wanted = [("select", auto.select, "String", True), ("start", auto.start, "Boolean", True)]
+        wanted: list[tuple[str, str | None, str | None, bool]] = [
+            ("select", auto.select, "String", True),
+            ("start", auto.start, "Boolean", True),
+        ]
         if auto.ready is not None:
             wanted.append(("ready.path", auto.ready.path, None, False))
         for key, path, type_name, writable in wanted:
@@ -335,6 +337,16 @@ class MachineMapping(Strict):
         """Ids unique per machine, targets naming variables with ids, ids that fit the id width."""
         copydata_issues(self.variables, self.copydata)
         return self
+
+    def definition(self) -> MachineDefinition:
+        """What the variable tree knows of this machine (gateway/model/definitions.py)."""
+        return MachineDefinition(
+            name=self.machine,
+            variables=tuple(v.definition() for v in self.variables),
+            description=self.description,
+            write_role=self.defaults.write_role,
+            endpoint=self.driver.endpoint,
+        )
 
     def sampling_interval(self, var: VariableSpec) -> float:
         return self.defaults.sampling_interval if var.sampling_interval is None else var.sampling_interval

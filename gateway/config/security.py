@@ -12,6 +12,7 @@ as clients such as UaExpert show them. A profile is a shorthand for a list:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 SecurityName = Literal[
@@ -40,14 +41,14 @@ PROFILES: dict[str, tuple[str, ...]] = {
 }
 
 
-def endpoints_for(security: list[str] | None, profile: str | None) -> tuple[str, ...]:
+def endpoints_for(security: Sequence[str] | None, profile: str | None) -> tuple[str, ...]:
     """The endpoints to offer: the explicit list, else the profile's (default: standard)."""
     if security is not None:
         return tuple(security)
     return PROFILES[profile or "standard"]
 
 
-def check_security(security: list[str] | None, profile: str | None) -> None:
+def check_security(security: Sequence[str] | None, profile: str | None) -> None:
     if security is not None and profile is not None:
         raise ValueError("give either opcua.profile or opcua.security, not both")
     if security is not None:

@@ -18,9 +18,10 @@ import time
 from typing import Any
 
 from gateway.config.jobs import AutoStart
-from gateway.errors import WriteError
+from gateway.errors import RequestError
 from gateway.jobs.queue import Job
-from gateway.model.tree import Machine, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine
 
 log = logging.getLogger("gateway.jobs.autostart")
 
@@ -78,7 +79,7 @@ class AutoStarter:
                         await self.machine.write(auto.select, self.select_value(job, name), ctx)
                     if auto.start is not None:
                         await self.machine.write(auto.start, True, ctx)
-                except WriteError as exc:
+                except RequestError as exc:
                     if attempt == SELECT_TRIES:
                         return f"not started: {exc.reason} ({exc.status})"
                     log.info("%s: auto-start of %s refused (%s); waiting for the machine again", self.machine.name,

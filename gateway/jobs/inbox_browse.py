@@ -20,9 +20,10 @@ from typing import TYPE_CHECKING, Any
 import aioftp
 from aioftp.server import Connection, ConnectionConditions
 
+from gateway.errors import PathRefused
 from gateway.jobs.accounts import Account
 from gateway.jobs.listing import FEATURES, Entry, list_line, mdtm, mlsx_facts, split_list_argument
-from gateway.jobs.paths import TMP, InboxPath, PathRefused
+from gateway.jobs.paths import TMP, InboxPath
 
 if TYPE_CHECKING:
     from gateway.config.jobs import InboxConfig

@@ -26,9 +26,10 @@ import aioftp
 from aioftp.server import AbstractUserManager, Connection, ConnectionConditions
 
 from gateway.config.jobs import InboxConfig
+from gateway.errors import PathRefused
 from gateway.jobs.accounts import Accounts
 from gateway.jobs.inbox_browse import BrowseCommands, Session, login_required, refusals, session_of
-from gateway.jobs.paths import InboxPath, PathRefused, resolve
+from gateway.jobs.paths import InboxPath, resolve
 from gateway.jobs.upload_check import UploadCheck
 
 log = logging.getLogger("gateway.jobs.inbox")

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from pathlib import PurePosixPath
 from typing import Literal
 
+from gateway.errors import PathRefused
+
 TMP = "tmp"
 MAX_NAME_BYTES = 255
 # Characters no controller or file system we deliver to accepts in a name.
@@ -30,15 +32,6 @@ WINDOWS_DEVICES = frozenset(
 )
 
 Kind = Literal["root", "machine", "tmp", "file"]
-
-
-class PathRefused(Exception):
-    """A path the inbox will not serve. `code` is the FTP reply code, `reason` its text."""
-
-    def __init__(self, reason: str, code: str = "550") -> None:
-        super().__init__(reason)
-        self.reason = reason
-        self.code = code
 
 
 @dataclass(frozen=True, slots=True)

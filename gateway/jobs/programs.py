@@ -16,16 +16,19 @@ from gateway.errors import (
     ControllerRefused,
     ControllerUnavailable,
     DeliveryError,
+    InvalidArgument,
+    NotFound,
+    PathRefused,
     ProgramNotFound,
-    WriteError,
+    RequestError,
 )
-from gateway.jobs.paths import PathRefused, check_file_name
+from gateway.jobs.paths import check_file_name
 from gateway.model.methods import Argument, Method
 from gateway.model.types import TypeSpec
 
 if TYPE_CHECKING:
     from gateway.jobs.service import JobService
-    from gateway.model.tree import WriteContext
+    from gateway.model.context import WriteContext
 
 OBJECT = "Programs"
 GET_LIMIT = 16 * 1024 * 1024  # bytes a Get may return through OPC UA
@@ -34,15 +37,7 @@ STRING = TypeSpec.parse("String")
 NAME = Argument("Name", STRING, "Program file name in the controller's program folder")
 
 
-class InvalidArgument(WriteError):
-    status = "BadInvalidArgument"
-
-
-class NotFound(WriteError):
-    status = "BadNotFound"
-
-
-def as_write_error(exc: DeliveryError) -> WriteError:
+def as_write_error(exc: DeliveryError) -> RequestError:
     """A program store error, as the status code a method call answers with."""
     if isinstance(exc, ProgramNotFound):
         return NotFound(exc.reason)

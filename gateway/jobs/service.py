@@ -32,7 +32,7 @@ from typing import Any, Self, TypeVar
 
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import Config
-from gateway.errors import ConfigError, JobError, SinkError
+from gateway.errors import ConfigError, JobError, PathRefused, SinkError
 from gateway.jobs import compiled
 from gateway.jobs.accounts import Accounts
 from gateway.jobs.autostart import AutoStarter
@@ -40,7 +40,7 @@ from gateway.jobs.controller_ftp import ProgramStore
 from gateway.jobs.delivery import DeliveryWorker
 from gateway.jobs.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
 from gateway.jobs.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
-from gateway.jobs.paths import PathRefused, check_file_name
+from gateway.jobs.paths import check_file_name
 from gateway.jobs.programs import program_methods
 from gateway.jobs.publish import JobPublisher
 from gateway.jobs.queue import Job, JobQueue, JobState

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 from gateway.errors import AccessDenied
+from gateway.model.context import WriteContext
 
 DEFAULT_ROLES: tuple[str, ...] = ("viewer", "operator", "engineer", "admin")
 
@@ -53,7 +53,7 @@ class AccessPolicy:
         self.mqtt_roles = dict(mqtt_roles or {})
         self.__post_init__()
 
-    def role_of(self, ctx: Any) -> str | None:
+    def role_of(self, ctx: WriteContext) -> str | None:
         """The role a caller acts with: its own, else its origin's (see the module docstring)."""
         role = ctx.role
         return role if role is not None else self.origin_roles.get(ctx.origin)

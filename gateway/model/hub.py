@@ -7,37 +7,43 @@ sample per variable is kept; in `every_change` mode (for sinks that promise
 ordered delivery, such as MQTT at QoS 1) changes are kept in order up to a limit,
 beyond which the backlog collapses to the latest sample per variable and the
 collapsed count is recorded.
+
+Generic in the variable type (the tree's `VariableNode`), so that this module
+needs nothing from the tree: `ChangeHub[VariableNode]`, `Subscription[VariableNode]`.
 """
 
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING
+from collections.abc import Hashable
+from typing import Generic, TypeVar
 
-if TYPE_CHECKING:
-    from gateway.model.sample import Sample
-    from gateway.model.tree import VariableNode
+from gateway.model.sample import Sample
 
-Change = tuple["VariableNode", "Sample"]
+N = TypeVar("N", bound=Hashable)
+
+Change = tuple[N, Sample]
 
 
-class Subscription:
+class Subscription(Generic[N]):
     """One sink's view of the change stream."""
 
     __slots__ = ("name", "every_change", "limit", "coalesced", "delivered", "_latest", "_ordered", "_event", "_hub")
 
-    def __init__(self, hub: ChangeHub, name: str, *, every_change: bool = False, limit: int = 100_000) -> None:
+    def __init__(
+        self, hub: ChangeHub[N], name: str, *, every_change: bool = False, limit: int = 100_000
+    ) -> None:
         self.name = name
         self.every_change = every_change
         self.limit = limit
         self.coalesced = 0  # changes replaced by a newer sample before this sink took them
         self.delivered = 0
-        self._latest: dict[VariableNode, Sample] = {}
-        self._ordered: list[Change] = []
+        self._latest: dict[N, Sample] = {}
+        self._ordered: list[Change[N]] = []
         self._event = asyncio.Event()
         self._hub = hub
 
-    def push(self, node: VariableNode, sample: Sample) -> None:
+    def push(self, node: N, sample: Sample) -> None:
         if self.every_change:
             ordered = self._ordered
             ordered.append((node, sample))
@@ -60,8 +66,9 @@ class Subscription:
     def backlog(self) -> int:
         return len(self._ordered) if self.every_change else len(self._latest)
 
-    def take(self) -> list[Change]:
+    def take(self) -> list[Change[N]]:
         """Everything pending, oldest first, without waiting (may be empty)."""
+        batch: list[Change[N]]
         if self.every_change:
             batch, self._ordered = self._ordered, []
         else:
@@ -71,7 +78,7 @@ class Subscription:
         self.delivered += len(batch)
         return batch
 
-    async def next_batch(self) -> list[Change]:
+    async def next_batch(self) -> list[Change[N]]:
         """Wait until something is pending, then take all of it."""
         while not self.backlog:
             self._event.clear()
@@ -82,22 +89,22 @@ class Subscription:
         self._hub.unsubscribe(self)
 
 
-class ChangeHub:
+class ChangeHub(Generic[N]):
     def __init__(self) -> None:
-        self._subs: tuple[Subscription, ...] = ()
+        self._subs: tuple[Subscription[N], ...] = ()
 
-    def subscribe(self, name: str, *, every_change: bool = False, limit: int = 100_000) -> Subscription:
+    def subscribe(self, name: str, *, every_change: bool = False, limit: int = 100_000) -> Subscription[N]:
         sub = Subscription(self, name, every_change=every_change, limit=limit)
         self._subs = (*self._subs, sub)
         return sub
 
-    def unsubscribe(self, sub: Subscription) -> None:
+    def unsubscribe(self, sub: Subscription[N]) -> None:
         self._subs = tuple(s for s in self._subs if s is not sub)
 
     @property
-    def subscriptions(self) -> tuple[Subscription, ...]:
+    def subscriptions(self) -> tuple[Subscription[N], ...]:
         return self._subs
 
-    def publish(self, node: VariableNode, sample: Sample) -> None:
+    def publish(self, node: N, sample: Sample) -> None:
         for sub in self._subs:
             sub.push(node, sample)

@@ -5,23 +5,22 @@ machine under an object name ("Programs", "Commands"). Sinks expose them in
 their own way: the OPC UA sink as Method nodes with typed arguments on the
 machine's object of that name; MQTT as request topics. The handler receives
 checked, typed arguments and the caller's context, and answers with a tuple of
-outputs or raises a WriteError subclass whose `.status` names the OPC UA code
-(BadInvalidState, BadTimeout, BadUserAccessDenied, ...).
+outputs or raises a RequestError (a CallError, or a refusal calls share with
+writes) whose `.status` names the OPC UA code (BadInvalidState, BadTimeout,
+BadUserAccessDenied, ...).
 """
 
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from gateway.errors import ArgumentsMissing, TooManyArguments, TypeMismatch, WriteError
+from gateway.errors import ArgumentsMissing, RequestError, TooManyArguments, TypeMismatch
+from gateway.model.context import WriteContext
 from gateway.model.types import TypeSpec, coerce
 
-if TYPE_CHECKING:
-    from gateway.model.tree import WriteContext
-
-Handler = Callable[["WriteContext", Sequence[Any]], Awaitable[Sequence[Any]]]
+Handler = Callable[[WriteContext, Sequence[Any]], Awaitable[Sequence[Any]]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,7 +51,7 @@ class Method:
         for arg, value in zip(self.inputs, args):
             try:
                 out.append(coerce(arg.type, value))
-            except WriteError as exc:
+            except RequestError as exc:  # TypeMismatch or OutOfRange: both a wrong argument here
                 raise TypeMismatch(f"{self.name}: argument {arg.name}: {exc.reason}") from None
         return out
 

@@ -49,3 +49,19 @@ class Sample:
     @property
     def good(self) -> bool:
         return self.status.startswith("Good")
+
+
+@dataclass(frozen=True, slots=True)
+class ReadBack:
+    """A variable's value as its source read it back from the controller right after a write.
+
+    `raw` is the controller's value (before scaling), `source_ts` its timestamp.
+    For `hold` seconds the tree takes a notification older than this reading for
+    one that was already on its way when the write was made, and drops it.
+    """
+
+    raw: Any
+    source_ts: datetime
+    status: str = "Good"
+    reason: str = ""
+    hold: float = 2.0

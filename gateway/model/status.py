@@ -8,18 +8,35 @@ MQTT as topics.
 from __future__ import annotations
 
 from datetime import datetime, timezone
-from typing import TYPE_CHECKING
+from typing import Any, Generic, Protocol, TypeVar
 
-if TYPE_CHECKING:
-    from gateway.model.tree import Machine
+from gateway.model.sample import Sample
 
 
-class MachineStatus:
+class _Holder(Protocol):
+    """A variable, as far as the status needs one: its latest sample."""
+
+    @property
+    def sample(self) -> Sample: ...
+
+
+N = TypeVar("N", bound=_Holder)
+
+
+class StatusOwner(Protocol[N]):
+    """What the status needs from its machine (gateway/model/tree.py `Machine`): its own variables."""
+
+    def add_internal(self, path: str, type_name: str, description: str, value: Any) -> N: ...
+
+    def set_internal(self, node: N, value: Any) -> None: ...
+
+
+class MachineStatus(Generic[N]):
     CONNECTED = "connected"
     CONNECTING = "connecting"
     DISCONNECTED = "disconnected"
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: StatusOwner[N], endpoint: str) -> None:
         self.machine = machine
         add = machine.add_internal
         self.connected_node = add("Status/Connected", "Boolean", "True while the controller connection is up", False)
@@ -35,7 +52,7 @@ class MachineStatus:
             datetime(1601, 1, 1, tzinfo=timezone.utc),
         )
         self.endpoint_node = add(
-            "Status/Endpoint", "String", "The controller address", machine.mapping.driver.endpoint
+            "Status/Endpoint", "String", "The controller address", endpoint
         )
         self._ever_connected = False
 

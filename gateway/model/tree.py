@@ -1,53 +1,62 @@
 """The variable tree: one node per mapped variable, holding its latest Sample.
 
-Sources push raw controller values in through `Machine.ingest`; scaling and
-deadband are applied here, once, and accepted changes go to the change hub.
-Writes from any sink come back through `Machine.write`, which checks access,
-the caller's role, type and range and undoes the scaling before asking the
-source; method calls go through `Machine.call_method`, which checks the role.
-Both are audited (`VariableTree.audit_sinks`), refusals included. Nothing else
-talks to a controller.
+The tree is built from the model's own definitions (gateway/model/definitions.py),
+which the configuration makes from the mapping files; it knows nothing of YAML,
+pydantic or drivers. Sources push raw controller values in through
+`Machine.ingest`; scaling and deadband are applied here, once, and accepted
+changes go to the change hub. Writes from any sink come back through
+`Machine.write`, which checks access, the caller's role, type and range and
+undoes the scaling before asking the source; the source's read-back of the
+written variable is in the tree before the write is answered (read-your-writes).
+Method calls go through `Machine.call_method`, which checks the role. Both are
+audited (`VariableTree.audit_sinks`), refusals included. Nothing else talks to a
+controller.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Awaitable, Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Iterable, Iterator, Sequence
 from datetime import datetime
 from typing import Any, Protocol
 
-from gateway.audit.entry import AuditEntry, as_text
-from gateway.config.mapping import MachineMapping, VariableSpec
-from gateway.errors import ControllerUnavailable, NotWritable, OutOfRange, UnknownVariable, WriteError
+from gateway.errors import (
+    CallError,
+    ControllerUnavailable,
+    NotWritable,
+    OutOfRange,
+    RequestError,
+    UnknownVariable,
+    WriteError,
+)
 from gateway.model.access import AccessPolicy
+from gateway.model.audit import AuditEntry, as_text
+from gateway.model.context import WriteContext
+from gateway.model.definitions import MachineDefinition, VariableDefinition
 from gateway.model.events import EventBus
 from gateway.model.hub import ChangeHub
 from gateway.model.methods import Method
-from gateway.model.sample import Sample, utcnow
+from gateway.model.sample import ReadBack, Sample, utcnow
 from gateway.model.status import MachineStatus
 from gateway.model.types import DataType, TypeSpec, check_int_bounds, coerce
 
+__all__ = ["Machine", "VariableNode", "VariableTree", "WriteContext", "WriteHook", "Writer"]
+
 
 class Writer(Protocol):
-    """What the tree needs from a source to carry out a write: the raw value, to the controller."""
+    """What the tree needs from a source to carry out a write: the raw value, to the controller.
 
-    async def write(self, node: VariableNode, raw: Any) -> None: ...
+    It answers with the controller's value read back after the write (a `ReadBack`),
+    or None when it could not read it back; the tree takes the reading in before
+    the write is answered, so that the caller reads what it wrote.
+    """
+
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None: ...
 
 
 # A write hook sees every write before it reaches the source, and may refuse it
 # (role checks, audit). It receives the node, the engineering value and the caller.
-WriteHook = Callable[["VariableNode", Any, "WriteContext"], Awaitable[None]]
-
-
-class WriteContext:
-    """Who is writing, through which sink, with which role (see gateway/model/access.py)."""
-
-    __slots__ = ("origin", "user", "role")
-
-    def __init__(self, origin: str, user: str | None = None, role: str | None = None) -> None:
-        self.origin = origin
-        self.user = user
-        self.role = role
+WriteHook = Callable[["VariableNode", Any, WriteContext], Awaitable[None]]
 
 
 class VariableNode:
@@ -55,7 +64,7 @@ class VariableNode:
 
     __slots__ = (
         "machine",
-        "spec",
+        "definition",
         "path",
         "internal",
         "sample",
@@ -65,28 +74,32 @@ class VariableNode:
         "_deadband",
         "_scaled",
         "_round",
+        "_hold",
     )
 
-    def __init__(self, machine: Machine, spec: VariableSpec, *, internal: bool = False) -> None:
+    def __init__(self, machine: Machine, definition: VariableDefinition, *, internal: bool = False) -> None:
         self.machine = machine
-        self.spec = spec
-        self.path = spec.path
+        self.definition = definition
+        self.path = definition.path
         self.internal = internal
-        self.sample: Sample = Sample(spec.type.default(), utcnow(), "BadWaitingForInitialData", "no value yet")
+        self.sample: Sample = Sample(
+            definition.type.default(), utcnow(), "BadWaitingForInitialData", "no value yet"
+        )
         self._published: Any = None
-        scale = spec.scale
-        self._gain = scale.gain if scale else 1.0
-        self._offset = scale.offset if scale else 0.0
-        self._scaled = scale is not None and (self._gain != 1.0 or self._offset != 0.0)
-        self._deadband = spec.deadband_abs
-        self._round = spec.type.is_integer
+        self._gain = definition.gain
+        self._offset = definition.offset
+        self._scaled = definition.scaled
+        self._deadband = definition.deadband
+        self._round = definition.type.is_integer
+        # After a write's read-back: (its source time, until when older notifications are dropped).
+        self._hold: tuple[datetime, float] | None = None
 
     def __repr__(self) -> str:
         return f"<VariableNode {self.machine.name}/{self.path}>"
 
     @property
     def type(self) -> TypeSpec:
-        return self.spec.type
+        return self.definition.type
 
     @property
     def full_path(self) -> str:
@@ -106,7 +119,7 @@ class VariableNode:
 
     def to_raw(self, value: Any) -> Any:
         """Engineering value to the controller's value and type (the inverse of scaling)."""
-        raw_type = self.spec.raw_type
+        raw_type = self.definition.raw_type
         if self._scaled:
             gain, offset = self._gain, self._offset
             if isinstance(value, list):
@@ -128,16 +141,16 @@ class VariableNode:
     def _changed(self, value: Any) -> bool:
         last = self._published
         if self._deadband <= 0.0 or last is None:
-            return value != last
+            return bool(value != last)
         if isinstance(value, list):
             if not isinstance(last, list) or len(value) != len(last):
                 return True
             db = self._deadband
             return any(abs(a - b) > db for a, b in zip(value, last))
-        return abs(value - last) > self._deadband
+        return bool(abs(value - last) > self._deadband)
 
     def check_range(self, value: Any) -> None:
-        rng = self.spec.range
+        rng = self.definition.range
         if rng is None:
             return
         for v in value if isinstance(value, list) else (value,):
@@ -148,18 +161,20 @@ class VariableNode:
 class Machine:
     """One machine's part of the tree: its variables, its status, and the way back to its controller."""
 
-    def __init__(self, tree: VariableTree, mapping: MachineMapping) -> None:
+    def __init__(self, tree: VariableTree, definition: MachineDefinition) -> None:
         self.tree = tree
-        self.name = mapping.machine
-        self.mapping = mapping
+        self.name = definition.name
+        self.definition = definition
         self.nodes: dict[str, VariableNode] = {}
         self.writer: Writer | None = None
         self.methods: dict[tuple[str, str], Method] = {}
         self._hub = tree.hub
         self._last_change_push = 0.0
-        for spec in mapping.variables:
-            self.nodes[spec.path] = VariableNode(self, spec)
-        self.status = MachineStatus(self)
+        for variable in definition.variables:
+            if variable.path in self.nodes:
+                raise ValueError(f"{self.name}: variable {variable.path!r} defined twice")
+            self.nodes[variable.path] = VariableNode(self, variable)
+        self.status: MachineStatus[VariableNode] = MachineStatus(self, definition.endpoint)
 
     def __repr__(self) -> str:
         return f"<Machine {self.name}>"
@@ -170,21 +185,8 @@ class Machine:
 
     def add_internal(self, path: str, type_name: str, description: str, value: Any) -> VariableNode:
         """A variable the gateway itself owns (status, jobs), published like any other."""
-        spec = VariableSpec.model_construct(
-            path=path,
-            source="gateway",
-            type=TypeSpec.parse(type_name),
-            source_type=None,
-            unit="",
-            access="read",
-            scale=None,
-            range=None,
-            deadband=None,
-            description=description,
-            sampling_interval=None,
-            queue_size=None,
-        )
-        node = VariableNode(self, spec, internal=True)
+        definition = VariableDefinition(path, TypeSpec.parse(type_name), description=description)
+        node = VariableNode(self, definition, internal=True)
         self.nodes[path] = node
         self.set_internal(node, value)
         return node
@@ -211,6 +213,9 @@ class Machine:
         if status.startswith("Bad"):
             self._publish_status(node, status, reason, source_ts)
             return
+        hold = node._hold
+        if hold is not None and _held_back(node, hold, source_ts):
+            return
         try:
             value = node.to_engineering(raw)
         except TypeError:
@@ -230,6 +235,24 @@ class Machine:
             self._last_change_push = now
             self.status.changed(source_ts)
 
+    def confirm(self, node: VariableNode, reading: ReadBack) -> None:
+        """The controller's value of `node`, read back right after a write: in the tree at once.
+
+        So the writer (and every sink) sees the written value when the write is
+        answered, not 20-100 ms later when the subscription reports it. For
+        `reading.hold` seconds a notification older than the reading (one already
+        on its way when the write was made) does not replace it. A Bad read-back,
+        or one older than what the tree already holds, changes nothing.
+        """
+        if reading.status.startswith("Bad"):
+            return
+        current = node.sample
+        if current.good and _before(reading.source_ts, current.source_ts):
+            return
+        node._hold = None
+        self.ingest(node, reading.raw, reading.source_ts, reading.status, reading.reason)
+        node._hold = (reading.source_ts, time.monotonic() + reading.hold)
+
     def invalidate(self, status: str, reason: str) -> None:
         """Every mapped variable turns bad at once, e.g. when the controller is unreachable."""
         now = utcnow()
@@ -247,7 +270,7 @@ class Machine:
     # --- from a sink -----------------------------------------------------------------------
 
     async def write(self, path: str, value: Any, ctx: WriteContext) -> None:
-        """Check and carry out a write. Raises a WriteError subclass with the reason if refused."""
+        """Check and carry out a write. Raises a RequestError with the reason if refused."""
         node = self.nodes.get(path)
         if node is None:
             raise UnknownVariable(f"{self.name} has no variable {path!r}")
@@ -255,23 +278,24 @@ class Machine:
 
     def write_role(self, node: VariableNode) -> str | None:
         """The lowest role that may write `node`: its own, else the machine's default, else the gateway's."""
-        return node.spec.role or self.mapping.defaults.write_role or self.tree.access.default_write_role
+        return node.definition.role or self.definition.write_role or self.tree.access.default_write_role
 
     async def write_node(
         self, node: VariableNode, value: Any, ctx: WriteContext, *, check: Callable[[], None] | None = None
     ) -> None:
-        """Check, authorise, carry out and audit one write; raises a WriteError subclass if refused.
+        """Check, authorise, carry out and audit one write; raises a RequestError if refused.
 
         `check` is the sink's own check of the request (OPC UA's strict Variant
-        types, say): it runs after the role check and raises a WriteError to refuse,
-        so that its refusals are audited like any other.
+        types, say): it runs after the role check and raises a RequestError to refuse,
+        so that its refusals are audited like any other. When it returns, the tree
+        holds the value the controller reported back (if the source could read it).
         """
         started = time.monotonic()
         at = utcnow()
         old = node.sample.value
         try:
             await self._write_node(node, value, ctx, check)
-        except WriteError as exc:
+        except RequestError as exc:
             self.audit_write(node, old, value, ctx, exc, at, started)
             raise
         except Exception as exc:
@@ -285,7 +309,7 @@ class Machine:
         old: Any,
         value: Any,
         ctx: WriteContext,
-        error: WriteError | None,
+        error: RequestError | None,
         at: datetime | None = None,
         started: float | None = None,
     ) -> None:
@@ -302,7 +326,7 @@ class Machine:
         *,
         old: str | None = None,
         new: str | None = None,
-        error: WriteError | None = None,
+        error: RequestError | None = None,
         at: datetime | None = None,
         started: float | None = None,
     ) -> None:
@@ -329,7 +353,7 @@ class Machine:
         """Authorise (Method.role), run and audit one call; every sink calls methods through here.
 
         Raises AccessDenied (BadUserAccessDenied) for a role below the method's, the
-        method's own WriteError otherwise. `check` is as for `write_node`.
+        method's own RequestError otherwise. `check` is as for `write_node`.
         """
         started = time.monotonic()
         at = utcnow()
@@ -340,11 +364,11 @@ class Machine:
             if check is not None:
                 check()
             outputs = await method.call(ctx, args)
-        except WriteError as exc:
+        except RequestError as exc:
             self.audit_call(method, args, ctx, exc, at, started)
             raise
         except Exception as exc:
-            self.audit_call(method, args, ctx, WriteError(f"internal error: {exc}"), at, started)
+            self.audit_call(method, args, ctx, CallError(f"internal error: {exc}"), at, started)
             raise
         self.audit_call(method, args, ctx, None, at, started)
         return outputs
@@ -354,7 +378,7 @@ class Machine:
         method: Method,
         args: Sequence[Any],
         ctx: WriteContext,
-        error: WriteError | None,
+        error: RequestError | None,
         at: datetime | None = None,
         started: float | None = None,
     ) -> None:
@@ -364,7 +388,7 @@ class Machine:
     async def _write_node(
         self, node: VariableNode, value: Any, ctx: WriteContext, check: Callable[[], None] | None
     ) -> None:
-        if node.internal or not node.spec.writable:
+        if node.internal or not node.definition.writable:
             raise NotWritable(f"{node.full_path} is read-only")
         access = self.tree.access
         access.require(access.role_of(ctx), self.write_role(node), f"write {node.full_path}")
@@ -378,32 +402,55 @@ class Machine:
         writer = self.writer
         if writer is None:
             raise ControllerUnavailable(f"{self.name} has no controller connection")
-        await writer.write(node, raw)
+        reading = await writer.write(node, raw)
+        if reading is not None:
+            self.confirm(node, reading)
+
+
+def _before(a: datetime, b: datetime) -> bool:
+    """Whether source time `a` is earlier than `b` (False when the two cannot be compared)."""
+    try:
+        return a < b
+    except TypeError:  # one naive, one aware: a driver's quirk, not a reason to drop a value
+        return False
+
+
+def _held_back(node: VariableNode, hold: tuple[datetime, float], source_ts: datetime) -> bool:
+    """After a write's read-back: whether this notification is older than the reading (and dropped).
+
+    The hold ends with the first notification that is not older, or when its time is up,
+    so a controller whose clock steps back cannot freeze the variable.
+    """
+    since, until = hold
+    if _before(source_ts, since) and time.monotonic() < until:
+        return True
+    node._hold = None
+    return False
 
 
 class VariableTree:
     """All machines, and the hub their changes go through."""
 
-    def __init__(self, mappings: list[MachineMapping] | tuple[MachineMapping, ...] = ()) -> None:
-        self.hub = ChangeHub()
+    def __init__(self, machines: Iterable[MachineDefinition] = ()) -> None:
+        self.hub: ChangeHub[VariableNode] = ChangeHub()
         self.events = EventBus()
         self.machines: dict[str, Machine] = {}
         self.write_hooks: list[WriteHook] = []
         self.access = AccessPolicy()
         # Every write and call ends up here (gateway/audit/trail.py logs and stores them); never blocks.
         self.audit_sinks: list[Callable[[AuditEntry], None]] = []
-        for mapping in mappings:
-            self.add_machine(mapping)
+        for definition in machines:
+            self.add_machine(definition)
 
     def audit(self, entry: AuditEntry) -> None:
         for sink in self.audit_sinks:
             sink(entry)
 
-    def add_machine(self, mapping: MachineMapping) -> Machine:
-        if mapping.machine in self.machines:
-            raise ValueError(f"machine {mapping.machine!r} defined twice")
-        machine = Machine(self, mapping)
-        self.machines[mapping.machine] = machine
+    def add_machine(self, definition: MachineDefinition) -> Machine:
+        if definition.name in self.machines:
+            raise ValueError(f"machine {definition.name!r} defined twice")
+        machine = Machine(self, definition)
+        self.machines[definition.name] = machine
         return machine
 
     def nodes(self) -> Iterator[VariableNode]:

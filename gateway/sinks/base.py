@@ -2,7 +2,7 @@
 
 A sink is an async context manager with a long-running `run()`. It subscribes to
 the tree's change hub, drains its own subscription at its own pace, and sends
-writes back through `Machine.write`, which answers with a reasoned WriteError.
+writes back through `Machine.write`, which answers with a reasoned RequestError.
 """
 
 from __future__ import annotations

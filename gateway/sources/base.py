@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import Any, Protocol, Self
 
+from gateway.config.mapping import MachineMapping
+from gateway.model.sample import ReadBack
 from gateway.model.tree import Machine, VariableNode
 
 
@@ -25,16 +27,20 @@ class Source(Protocol):
         """Connect, subscribe, and reconnect with backoff, until cancelled."""
         ...
 
-    async def write(self, node: VariableNode, raw: Any) -> None:
-        """Write a raw (already checked and unscaled) value. Raises ControllerRefused/ControllerUnavailable."""
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None:
+        """Write a raw (already checked and unscaled) value. Raises ControllerRefused/ControllerUnavailable.
+
+        Answers with the value read back from the controller after the write (None if it
+        could not be read), which the tree takes in before the write is answered.
+        """
         ...
 
 
-def create_source(machine: Machine) -> Source:
-    """The driver named by the machine's mapping."""
-    driver = machine.mapping.driver
+def create_source(machine: Machine, mapping: MachineMapping) -> Source:
+    """The driver named by the machine's mapping (its `driver:` section and per-variable settings)."""
+    driver = mapping.driver
     if driver.type == "opcua":
         from gateway.sources.opcua_client import OpcUaSource
 
-        return OpcUaSource(machine)
+        return OpcUaSource(machine, mapping)
     raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable

@@ -15,6 +15,10 @@ option) and the simulator. Design choices, and why:
 * **Errors stop here.** asyncua's exceptions are translated into gateway.errors
   (writes) or into a Bad status plus one readable log line (connection), never
   a traceback for something as ordinary as a controller being switched off.
+* **Writes read back.** After a Good write the variable is read from the controller
+  in the same session and the reading handed to the tree before the write is
+  answered, so a client that reads right after writing sees its value
+  (docs/architecture.md, Writes).
 """
 
 from __future__ import annotations
@@ -37,13 +41,14 @@ from asyncua.ua.uaerrors import (
 )
 from cryptography import x509
 
-from gateway.errors import ControllerRefused, ControllerUnavailable
-from gateway.model.sample import utcnow
+from gateway.codecs.opcua_nodeid import OpcUaAddress, parse_address
+from gateway.config.mapping import MachineMapping
+from gateway.errors import AddressError, ControllerRefused, ControllerUnavailable
+from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 from gateway.reconnect import Backoff, OutageLog
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
-from gateway.sources.opcua_address import AddressError, OpcUaAddress, parse_address
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
 
 log = logging.getLogger(__name__)
@@ -176,9 +181,10 @@ def _no_publish_loop() -> None:
 class OpcUaSource:
     """One machine's OPC UA connection: subscribe, ingest, reconnect, write."""
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
         self.machine = machine
-        self.driver = machine.mapping.driver
+        self.mapping = mapping
+        self.driver = mapping.driver
         self._client: Client | None = None
         self._connected = False
         self._publish_task: asyncio.Task[None] | None = None
@@ -190,13 +196,17 @@ class OpcUaSource:
         self._node_ids: dict[VariableNode, ua.NodeId] = {}
         self._handles: dict[int, tuple[VariableNode, type]] = {}
         self._failed: set[VariableNode] = set()  # variables whose value made ingest fail (logged once)
+        # How long after a write's read-back an older notification may still be on its way (ReadBack.hold):
+        # sampled before the write, queued until the next publish, then sent.
+        slowest = max((mapping.sampling_interval(v) for v in mapping.variables), default=0.0)
+        self._hold = 2.0 * (self.driver.publishing_interval + slowest) / 1000.0 + 1.0
         for handle, node in enumerate(machine.mapped, start=1):
             try:
-                self._addresses[node] = parse_address(node.spec.source)
+                self._addresses[node] = parse_address(node.definition.source)
             except AddressError as exc:
                 self._address_errors[node] = str(exc)
                 continue
-            raw = node.spec.raw_type
+            raw = node.definition.raw_type
             self._handles[handle] = (node, list if raw.array else _PY_TYPES[raw.base])
 
     def __repr__(self) -> str:
@@ -314,7 +324,7 @@ class OpcUaSource:
             try:
                 index = address.resolve(list(namespaces))
             except AddressError as exc:
-                self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.spec.source}: {exc}")
+                self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.definition.source}: {exc}")
                 problems.append(f"{node.path} (BadNodeIdUnknown)")
                 continue
             self._node_ids[node] = ua.NodeId(address.identifier, index, _NODE_ID_TYPES[address.kind])
@@ -334,7 +344,8 @@ class OpcUaSource:
 
     async def _create_items(self, session: Any, subscription_id: int) -> list[str]:
         """Monitored items in batches; an item the server refuses turns only its variable Bad."""
-        mapping = self.machine.mapping
+        mapping = self.mapping
+        specs = {v.path: v for v in mapping.variables}
         wanted = [(h, node) for h, (node, _) in self._handles.items() if node in self._node_ids]
         refused: list[str] = []
         for start in range(0, len(wanted), BATCH_SIZE):
@@ -347,8 +358,8 @@ class OpcUaSource:
                     MonitoringMode=ua.MonitoringMode.Reporting,
                     RequestedParameters=ua.MonitoringParameters(
                         ClientHandle=handle,
-                        SamplingInterval=mapping.sampling_interval(node.spec),
-                        QueueSize=mapping.queue_size(node.spec),
+                        SamplingInterval=mapping.sampling_interval(specs[node.path]),
+                        QueueSize=mapping.queue_size(specs[node.path]),
                         DiscardOldest=True,
                     ),
                 )
@@ -366,7 +377,7 @@ class OpcUaSource:
                 if code & 0x80000000:
                     name = status_name(code)
                     self.machine.ingest(
-                        node, None, now, name, f"{node.spec.source}: {name} ({status_doc(code)})"
+                        node, None, now, name, f"{node.definition.source}: {name} ({status_doc(code)})"
                     )
                     refused.append(f"{node.path} ({name})")
         return refused
@@ -509,18 +520,19 @@ class OpcUaSource:
         if code & 0x80000000:
             self.machine.ingest(node, None, ts, name, f"controller reports {name} ({status_doc(code)})")
             return
-        converted, problem = _convert(node.spec.raw_type, value)
+        converted, problem = _convert(node.definition.raw_type, value)
         if problem:
             self.machine.ingest(
-                node, None, ts, "BadTypeMismatch", f"{problem}, mapping says {node.spec.raw_type}"
+                node, None, ts, "BadTypeMismatch", f"{problem}, mapping says {node.definition.raw_type}"
             )
         else:
             self.machine.ingest(node, converted, ts, name)
 
     # --- writing ---------------------------------------------------------------------------
 
-    async def write(self, node: VariableNode, raw: Any) -> None:
-        """Write one raw value as a Variant of the mapped type, value only (no timestamps, no status)."""
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None:
+        """Write one raw value as a Variant of the mapped type, value only (no timestamps, no status);
+        answer with the value read back from the controller (None if it could not be read)."""
         client = self._client
         if client is None or not self._connected:
             raise ControllerUnavailable(
@@ -529,8 +541,10 @@ class OpcUaSource:
         node_id = self._node_ids.get(node)
         if node_id is None:
             bad = node.sample.status if node.sample.status.startswith("Bad") else "BadNodeIdUnknown"
-            raise ControllerRefused(f"{node.spec.source} is not available: {node.sample.reason}", status=bad)
-        raw_type = node.spec.raw_type
+            raise ControllerRefused(
+                f"{node.definition.source} is not available: {node.sample.reason}", status=bad
+            )
+        raw_type = node.definition.raw_type
         try:
             variant = ua.Variant(
                 list(raw) if raw_type.array else raw,
@@ -573,6 +587,38 @@ class OpcUaSource:
         if code & 0x80000000:
             name = status_name(code)
             raise ControllerRefused(f"controller refused: {name} ({status_doc(code)})", status=name)
+        return await self._read_back(client, node, node_id)
+
+    async def _read_back(self, client: Client, node: VariableNode, node_id: ua.NodeId) -> ReadBack | None:
+        """The written variable as the controller holds it now, for the tree (read-your-writes).
+
+        The write has succeeded whatever happens here: a read that fails or times out
+        only means the value arrives the usual way, by the subscription.
+        """
+        params = ua.ReadParameters(
+            MaxAge=0,
+            TimestampsToReturn=ua.TimestampsToReturn.Both,
+            NodesToRead=[ua.ReadValueId(NodeId=node_id, AttributeId=ua.AttributeIds.Value)],
+        )
+        try:
+            async with asyncio.timeout(self.driver.timeout):
+                results = await client.uaclient.session.read(params)
+        except Exception as exc:  # TimeoutError, a refusal, a lost connection: the write stands
+            log.debug("%s: reading %s back after the write failed: %s", self.machine.name, node.path, exc)
+            return None
+        if not results:
+            return None
+        dv = results[0]
+        code = 0 if dv.StatusCode is None else dv.StatusCode.value
+        if code & 0x80000000:
+            return None
+        variant = dv.Value
+        value, problem = _convert(node.definition.raw_type, None if variant is None else variant.Value)
+        if problem:
+            return None
+        stamp = dv.SourceTimestamp or dv.ServerTimestamp
+        ts = stamp if stamp is not None and stamp.year >= 1971 else utcnow()
+        return ReadBack(value, ts, status_name(code), hold=self._hold)
 
 
 def _convert(spec: TypeSpec, value: Any) -> tuple[Any, str]:

@@ -21,10 +21,10 @@ import yaml
 from asyncua import Client, ua
 from asyncua.ua.uaerrors import UaError
 
+from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.mapping import MACHINE_RE, check_endpoint
-from gateway.errors import SourceError
+from gateway.errors import AddressError, SourceError
 from gateway.sources.browse_paths import Key, assign_paths
-from gateway.sources.opcua_address import AddressError, parse_address
 from gateway.sources.opcua_client import close_client, open_client
 from gateway.sources.opcua_status import describe_error
 

@@ -147,6 +147,19 @@ async def test_feed_override_write_reaches_the_simulator(rig: Rig) -> None:
     await wait_until(mirrored, timeout=5, message="gateway shows the new override")
 
 
+async def test_a_client_reads_back_what_it_just_wrote(rig: Rig) -> None:
+    """Read-your-writes: an HMI that checks a write by reading the variable at once sees the new value,
+    not the old one for the 20-100 ms until the controller's own notification would bring it."""
+    await wait_until(lambda: good(rig, "Feed/Override"), timeout=10, message="override Good")
+    before = (await rig.read("Feed/Override")).Value.Value
+    values = [v for v in (50, 75, 120, 10, 150, 0, 99, 100, 33, 66, 140, 5) if v != before]
+    for value in values:
+        await rig.node("Feed/Override").write_value(ua.Variant(value, ua.VariantType.UInt16))
+        dv = await rig.read("Feed/Override")
+        assert (dv.Value.Value, dv.StatusCode.is_good()) == (value, True)
+    assert rig.sim is not None and rig.sim.machine.override == values[-1]
+
+
 @pytest.mark.parametrize(
     ("path", "variant", "code"),
     [

@@ -20,6 +20,7 @@ from typing import Any, Self
 
 from gateway.codecs.copydata import Frame, Layout
 from gateway.config.copydata import CopydataTarget
+from gateway.config.mapping import MachineMapping
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import Sample
 from gateway.model.tree import Machine, VariableNode
@@ -38,13 +39,15 @@ TransportFactory = Callable[[TransportPort], Transport]
 """Builds a target's transport when its emitter is entered (sink.make_transport)."""
 
 
-def target_nodes(machine: Machine, target: CopydataTarget) -> list[tuple[VariableNode, int]]:
+def target_nodes(
+    machine: Machine, mapping: MachineMapping, target: CopydataTarget
+) -> list[tuple[VariableNode, int]]:
     """The (node, id) pairs a target sends, in mapping order; the connection flag first if asked for."""
     pairs: list[tuple[VariableNode, int]] = []
     if target.connected_id is not None:
         pairs.append((machine.status.connected_node, target.connected_id))
     wanted = None if target.variables is None else set(target.variables)
-    for spec in machine.mapping.variables:
+    for spec in mapping.variables:
         if spec.copydata is not None and (wanted is None or spec.path in wanted):
             pairs.append((machine.nodes[spec.path], spec.copydata.id))
     return pairs
@@ -67,6 +70,7 @@ class Emitter:
     def __init__(
         self,
         machine: Machine,
+        mapping: MachineMapping,
         target: CopydataTarget,
         status: CopydataStatus,
         make_transport: TransportFactory,
@@ -75,7 +79,7 @@ class Emitter:
         self.target = target
         self.name = f"{machine.name}/{target.name}"
         self.layout = target_layout(target)
-        self.encoder = TargetEncoder(self.name, target_nodes(machine, target), self.layout)
+        self.encoder = TargetEncoder(self.name, target_nodes(machine, mapping, target), self.layout)
         self.status = status
         self.throttle = LogThrottle(log)
         self.feedback = Feedback(
@@ -90,7 +94,7 @@ class Emitter:
         self.transport: Transport | None = None
         self._make_transport = make_transport
         self._state = "starting"
-        self._sub: Subscription | None = None
+        self._sub: Subscription[VariableNode] | None = None
         self._pending: dict[VariableNode, Sample] = {}
         status.add_target(self.describe)
 
@@ -123,7 +127,7 @@ class Emitter:
                 tg.create_task(self._snapshots(every), name=f"copydata:{self.name}:snapshots")
 
     @property
-    def subscription(self) -> Subscription:
+    def subscription(self) -> Subscription[VariableNode]:
         if self._sub is None:
             raise RuntimeError("the emitter is not entered")
         return self._sub
@@ -198,7 +202,7 @@ class Emitter:
 
     # --- the emit loop -------------------------------------------------------------------------
 
-    def _merge(self, batch: list[Change]) -> None:
+    def _merge(self, batch: list[Change[VariableNode]]) -> None:
         """Keep the latest sendable sample per variable of this target."""
         pending = self._pending
         wanted = self.encoder.encoders
@@ -209,7 +213,7 @@ class Emitter:
                 else:
                     pending.pop(node, None)
 
-    async def emit(self, sub: Subscription) -> None:
+    async def emit(self, sub: Subscription[VariableNode]) -> None:
         """The emit loop: changes to frames to channels, until cancelled (run() runs it beside the transport)."""
         pending = self._pending
         limiter = self.limiter

@@ -24,9 +24,10 @@ from datetime import datetime
 from typing import Any
 
 from gateway.codecs.copydata import CopydataError, Frame, Layout, VariableTable
-from gateway.errors import WriteError
+from gateway.errors import RequestError
 from gateway.model.events import Event
-from gateway.model.tree import Machine, VariableNode, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableNode
 from gateway.sinks.copydata.status import CopydataStatus
 from gateway.sinks.copydata.throttle import LogThrottle
 
@@ -123,7 +124,7 @@ class Feedback:
         value = entry["_value"]
         try:
             await self.machine.write_node(node, value, WriteContext(ORIGIN, user=None))
-        except WriteError as exc:
+        except RequestError as exc:
             self.refused += 1
             entry["write"] = {"ok": False, "error": exc.reason, "status": exc.status}
             self._log_refusal(peer, node.full_path, exc.reason, exc.status)

@@ -17,9 +17,11 @@ from __future__ import annotations
 import asyncio
 import logging
 import sys
+from collections.abc import Mapping
 from contextlib import AsyncExitStack
 from typing import Self
 
+from gateway.config.mapping import MachineMapping
 from gateway.errors import SinkError
 from gateway.model.tree import VariableTree
 from gateway.sinks.copydata.emitter import Emitter
@@ -29,8 +31,8 @@ from gateway.sinks.copydata.status import CopydataStatus
 log = logging.getLogger("gateway.sinks.copydata")
 
 
-def has_targets(tree: VariableTree) -> bool:
-    return any(m.mapping.copydata is not None for m in tree.machines.values())
+def has_targets(mappings: Mapping[str, MachineMapping]) -> bool:
+    return any(m.copydata is not None for m in mappings.values())
 
 
 class CopydataSink:
@@ -38,18 +40,19 @@ class CopydataSink:
 
     name = "copydata"
 
-    def __init__(self, tree: VariableTree) -> None:
+    def __init__(self, tree: VariableTree, mappings: Mapping[str, MachineMapping]) -> None:
         self.tree = tree
         self.statuses: dict[str, CopydataStatus] = {}
         self.emitters: list[Emitter] = []
         for machine in tree.machines.values():
-            copydata = machine.mapping.copydata
-            if copydata is None:
+            mapping = mappings.get(machine.name)
+            copydata = mapping.copydata if mapping is not None else None
+            if mapping is None or copydata is None:
                 continue
             status = CopydataStatus(machine)
             self.statuses[machine.name] = status
             for target in copydata.targets:
-                self.emitters.append(Emitter(machine, target, status, make_transport))
+                self.emitters.append(Emitter(machine, mapping, target, status, make_transport))
         self._stack = AsyncExitStack()
 
     def emitter(self, machine: str, target: str) -> Emitter:

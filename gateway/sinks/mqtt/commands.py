@@ -27,10 +27,19 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
-from gateway.errors import AccessDenied, ArgumentsMissing, BadWriteRequest, TooManyArguments, WriteError
+from gateway.errors import (
+    AccessDenied,
+    ArgumentsMissing,
+    CallError,
+    MalformedRequest,
+    RequestError,
+    TooManyArguments,
+)
 from gateway.model.methods import Method
-from gateway.model.tree import Machine, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.payloads import plain
 from gateway.sinks.mqtt.topics import clean_segment, valid_publish_topic
@@ -48,11 +57,11 @@ Answer = Callable[[str, bytes, "bytes | None"], None]
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":"), allow_nan=False).encode
 
 
-class UnknownCommand(WriteError):
+class UnknownCommand(CallError):
     status = "BadMethodInvalid"
 
 
-class UnknownMachine(WriteError):
+class UnknownMachine(CallError):
     status = "BadNodeIdUnknown"
 
 
@@ -75,22 +84,22 @@ def command_target(topic: str, prefix: str) -> tuple[str, str] | None:
 
 
 def read_body(payload: bytes) -> dict[str, Any]:
-    """The request's JSON object (an empty body is `{}`). Raises BadWriteRequest with the reason."""
+    """The request's JSON object (an empty body is `{}`). Raises MalformedRequest with the reason."""
     try:
         text = bytes(payload).decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise BadWriteRequest(f"the body is not UTF-8 text (byte {exc.start})") from None
+        raise MalformedRequest(f"the body is not UTF-8 text (byte {exc.start})") from None
     if not text.strip():
         return {}
     try:
         body = json.loads(text)
     except RecursionError:
-        raise BadWriteRequest("malformed JSON: nested too deeply") from None
+        raise MalformedRequest("malformed JSON: nested too deeply") from None
     except ValueError as exc:
         where = f" at character {exc.pos}" if isinstance(getattr(exc, "pos", None), int) else ""
-        raise BadWriteRequest(f"malformed JSON: {getattr(exc, 'msg', exc)}{where}") from None
+        raise MalformedRequest(f"malformed JSON: {getattr(exc, 'msg', exc)}{where}") from None
     if not isinstance(body, dict):
-        raise BadWriteRequest('expected a JSON object with the arguments by name, e.g. {"name": "part.nc"}')
+        raise MalformedRequest('expected a JSON object with the arguments by name, e.g. {"name": "part.nc"}')
     return body
 
 
@@ -98,7 +107,7 @@ def correlation_of(body: Mapping[str, Any]) -> str | int | None:
     value = body.get(CORRELATION)
     if value is None or (isinstance(value, (str, int)) and not isinstance(value, bool)):
         return value
-    raise BadWriteRequest(f"{CORRELATION} must be text or a number")
+    raise MalformedRequest(f"{CORRELATION} must be text or a number")
 
 
 def arguments(method: Method, body: Mapping[str, Any]) -> list[Any]:
@@ -120,7 +129,7 @@ def encode_reply(
     duration_ms: float,
     correlation: str | int | None = None,
     result: str | None = None,
-    error: WriteError | None = None,
+    error: RequestError | None = None,
 ) -> bytes:
     doc: dict[str, Any] = {"ok": error is None, "command": command}
     if error is None:
@@ -155,9 +164,12 @@ class _Request:
 class CommandRequests:
     """Turns command messages into machine method calls and answers every one of them."""
 
-    def __init__(self, tree: VariableTree, cfg: MqttConfig, answer: Answer) -> None:
+    def __init__(
+        self, tree: VariableTree, cfg: MqttConfig, mappings: Mapping[str, MachineMapping], answer: Answer
+    ) -> None:
         self.tree = tree
         self.cfg = cfg
+        self.mappings = mappings
         self.answer = answer
         self.prefix = cfg.prefix
         self.machines: dict[str, Machine] = {
@@ -193,20 +205,23 @@ class CommandRequests:
         method = machine.methods.get((OBJECT, name)) if machine is not None else None
         try:
             if msg.retain:
-                raise BadWriteRequest("retained command requests are ignored: publish them without the retain flag")
+                raise MalformedRequest(
+                    "retained command requests are ignored: publish them without the retain flag"
+                )
             if machine is None:
                 raise UnknownMachine(f"no machine {segment!r} has commands")
             if method is None:
                 known = ", ".join(n for obj, n in machine.methods if obj == OBJECT)
                 raise UnknownCommand(f"{machine.name} has no command {name!r} (it has {known})")
             if len(msg.payload) > self.cfg.max_set_payload:
-                raise BadWriteRequest(
+                raise MalformedRequest(
                     f"the body has {len(msg.payload)} bytes, more than the {self.cfg.max_set_payload} allowed",
                     status="BadRequestTooLarge",
                 )
             body = read_body(msg.payload)
             correlation = correlation_of(body)
-            mqtt = machine.mapping.mqtt
+            mapping = self.mappings.get(machine.name)
+            mqtt = mapping.mqtt if mapping is not None else None
             if mqtt is None or not mqtt.commands:
                 raise AccessDenied(
                     f"commands over MQTT are not enabled for {machine.name} (mapping: mqtt: {{commands: true}})"
@@ -220,7 +235,7 @@ class CommandRequests:
                 raise TooManyWrites(
                     f"{self.cfg.max_pending_writes} commands for {machine.name} are already waiting; try again"
                 ) from None
-        except WriteError as exc:
+        except RequestError as exc:
             if machine is not None and method is not None:  # known commands only: junk is not worth an entry
                 machine.audit_call(method, [], self._context(machine), exc)
             self._refuse(name, reply, msg.correlation_data, correlation, exc, started)
@@ -238,7 +253,7 @@ class CommandRequests:
 
     def _refuse(
         self, name: str, reply: str, data: bytes | None, correlation: str | int | None,
-        exc: WriteError, started: float,
+        exc: RequestError, started: float,
     ) -> None:
         self.refused += 1
         if self._quota.allow():
@@ -264,12 +279,12 @@ class CommandRequests:
         name = req.method.name
         try:
             outputs: Sequence[Any] = await req.machine.call_method(req.method, req.args, self._context(req.machine))
-        except WriteError as exc:
+        except RequestError as exc:
             self._refuse(name, req.reply, req.data, req.correlation, exc, req.received)
             return
         except Exception as exc:  # a bug below must not end the commands of this machine
             log.exception("MQTT command %s/%s failed unexpectedly", req.machine.name, name)
-            self._refuse(name, req.reply, req.data, req.correlation, WriteError(f"internal error: {exc}"),
+            self._refuse(name, req.reply, req.data, req.correlation, CallError(f"internal error: {exc}"),
                          req.received)
             return
         finally:

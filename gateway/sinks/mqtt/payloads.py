@@ -20,7 +20,7 @@ from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Any
 
-from gateway.errors import BadWriteRequest
+from gateway.errors import MalformedRequest
 from gateway.model.events import Event
 from gateway.model.sample import Sample
 from gateway.model.types import TypeSpec, parse_text
@@ -142,41 +142,41 @@ def decode_set(payload: bytes, spec: TypeSpec) -> Any:
     A payload that starts with `{` is a JSON request, whatever the variable's
     type (write `{"value": "{…}"}` to set a text that starts with a brace).
     Plain text is read by the variable's type, as the CLI does. Raises a
-    WriteError (BadWriteRequest, TypeMismatch, OutOfRange) with a precise
+    RequestError (MalformedRequest, TypeMismatch, OutOfRange) with a precise
     reason for anything else; never any other exception.
     """
     try:
         text = bytes(payload).decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise BadWriteRequest(f"the payload is not UTF-8 text (byte {exc.start})") from None
+        raise MalformedRequest(f"the payload is not UTF-8 text (byte {exc.start})") from None
     stripped = text.strip()
     if not stripped:
-        raise BadWriteRequest('the payload is empty; send {"value": …} or the value as text')
+        raise MalformedRequest('the payload is empty; send {"value": …} or the value as text')
     if stripped.startswith("{"):
         return _json_request(stripped)
     try:
         return parse_text(spec, text)
-    except (ValueError, RecursionError):  # not ours (those are WriteErrors): deep nesting, digit limits
-        raise BadWriteRequest(f"cannot read {stripped[:40]!r} as {spec}") from None
+    except (ValueError, RecursionError):  # not ours (those are RequestErrors): deep nesting, digit limits
+        raise MalformedRequest(f"cannot read {stripped[:40]!r} as {spec}") from None
 
 
 def _json_request(text: str) -> Any:
     try:
         request = json.loads(text)
     except RecursionError:
-        raise BadWriteRequest("malformed JSON: nested too deeply") from None
+        raise MalformedRequest("malformed JSON: nested too deeply") from None
     except ValueError as exc:
         msg = getattr(exc, "msg", None) or str(exc)
         pos = getattr(exc, "pos", None)
         where = f" at character {pos}" if isinstance(pos, int) else ""
-        raise BadWriteRequest(f"malformed JSON: {msg}{where}") from None
+        raise MalformedRequest(f"malformed JSON: {msg}{where}") from None
     if not isinstance(request, dict):
-        raise BadWriteRequest('expected a JSON object {"value": …}')
+        raise MalformedRequest('expected a JSON object {"value": …}')
     if "value" not in request:
-        raise BadWriteRequest('a JSON request needs a "value" key: {"value": …}')
+        raise MalformedRequest('a JSON request needs a "value" key: {"value": …}')
     extra = sorted(k for k in request if k != "value")
     if extra:
-        raise BadWriteRequest(
+        raise MalformedRequest(
             f'unknown key{"s" if len(extra) > 1 else ""} {", ".join(map(repr, extra))}; send {{"value": …}}'
         )
     return request["value"]

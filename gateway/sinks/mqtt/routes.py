@@ -9,9 +9,10 @@ one by one: they make up the machine's status document (`status.py`).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
-from gateway.config.mqtt import MqttConfig
+from gateway.config.mapping import MachineMapping, VariableSpec
+from gateway.config.mqtt import MachineMqtt, MqttConfig, VariableMqtt
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.mqtt.payloads import unit_suffix
 from gateway.sinks.mqtt.topics import (
@@ -38,7 +39,7 @@ class Route:
         self.qos = qos
         self.retain = retain
         self.raw = raw
-        self.suffix = unit_suffix(node.spec.unit)
+        self.suffix = unit_suffix(node.definition.unit)
         self.machine = node.machine.name
         self.writable = writable
         # Retained state at QoS 0 promises no history: keep only the newest while the broker is away.
@@ -52,11 +53,13 @@ def is_status_node(node: VariableNode) -> bool:
     return node.internal and node.path.startswith(STATUS_PREFIX)
 
 
-def route_for(node: VariableNode, cfg: MqttConfig) -> Route | None:
-    """The node's route, or None when the mapping keeps it out of MQTT."""
-    spec = node.spec
-    var = getattr(spec, "mqtt", None)
-    machine = node.machine.mapping.mqtt
+def route_for(
+    node: VariableNode, cfg: MqttConfig, machine: MachineMqtt | None = None, var: VariableMqtt | None = None
+) -> Route | None:
+    """The node's route, or None when the mapping keeps it out of MQTT.
+
+    `machine` and `var` are the machine's and the variable's `mqtt:` sections (None: not given)."""
+    spec = node.definition
     if var is not None and not var.publish:
         return None
 
@@ -83,8 +86,12 @@ def route_for(node: VariableNode, cfg: MqttConfig) -> Route | None:
 class Routes:
     """Every variable's route, indexed both ways, checked for topics claimed twice."""
 
-    def __init__(self, tree: VariableTree, cfg: MqttConfig) -> None:
+    def __init__(self, tree: VariableTree, cfg: MqttConfig, mappings: Mapping[str, MachineMapping]) -> None:
         self.cfg = cfg
+        self.mappings = mappings
+        self._specs: dict[tuple[str, str], VariableSpec] = {
+            (name, v.path): v for name, mapping in mappings.items() for v in mapping.variables
+        }
         self.by_node: dict[VariableNode, Route] = {}
         self.by_topic: dict[str, Route] = {}
         self.unrouted: set[VariableNode] = set()
@@ -111,7 +118,10 @@ class Routes:
         if is_status_node(node):
             self.unrouted.add(node)
             return None
-        route = route_for(node, self.cfg)
+        mapping = self.mappings.get(node.machine.name)
+        spec = None if node.internal else self._specs.get((node.machine.name, node.path))
+        machine_mqtt = mapping.mqtt if mapping is not None else None
+        route = route_for(node, self.cfg, machine_mqtt, spec.mqtt if spec is not None else None)
         if route is None:
             self.unrouted.add(node)
             return None

@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Self
 
 from gateway import __version__
+from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
 from gateway.errors import BrokerError, BrokerRefused, SinkError
 from gateway.model.events import EventSubscription
@@ -64,7 +66,13 @@ class MqttSink:
     name = "mqtt"
 
     def __init__(
-        self, tree: VariableTree, config: MqttConfig, state_dir: Path, *, base_dir: Path | None = None
+        self,
+        tree: VariableTree,
+        config: MqttConfig,
+        state_dir: Path,
+        mappings: Mapping[str, MachineMapping],
+        *,
+        base_dir: Path | None = None,
     ) -> None:
         self.tree = tree
         self.config = config
@@ -76,7 +84,7 @@ class MqttSink:
         for machine in tree.machines.values():
             self._add_status_variables(machine)
         try:
-            self.routes = Routes(tree, config)
+            self.routes = Routes(tree, config, mappings)
         except TopicClash as exc:
             raise SinkError(f"MQTT topics: {exc}") from None
         self._status_nodes = {name: status_nodes(m) for name, m in tree.machines.items()}
@@ -100,7 +108,8 @@ class MqttSink:
             ),
         )
         self.writes = WriteBack(tree, self.routes, config, self._answer)
-        self.commands = CommandRequests(tree, config, self._answer)  # <prefix>/<machine>/commands/<name>
+        # <prefix>/<machine>/commands/<name>
+        self.commands = CommandRequests(tree, config, mappings, self._answer)
         self.backlog: Backlog | None = None
         self.state = STATE_CONNECTING
         self.last_error = ""
@@ -109,7 +118,7 @@ class MqttSink:
         self.last_delay = 0.0  # the backoff before the latest retry
         self.discarded = 0  # QoS 0 changes not sent because the broker was away (QoS 0 promises no more)
         self._client: MqttClient | None = None
-        self._sub: Subscription | None = None
+        self._sub: Subscription[VariableNode] | None = None
         self._events: EventSubscription | None = None
         self._inflight: dict[int, Message] = {}
         self._window = config.max_inflight
@@ -325,7 +334,7 @@ class MqttSink:
 
     # --- publishing ------------------------------------------------------------------------------
 
-    async def _drain(self, sub: Subscription) -> None:
+    async def _drain(self, sub: Subscription[VariableNode]) -> None:
         while True:
             batch = await sub.next_batch()
             await self._encode(batch)
@@ -345,7 +354,7 @@ class MqttSink:
                 self._emit(topic, encode_event(event), 1, event.retain, event.machine, event.retain)
             self._commit()
 
-    async def _encode(self, batch: list[Change]) -> None:
+    async def _encode(self, batch: list[Change[VariableNode]]) -> None:
         by_node = self.routes.by_node
         emit = self._emit
         count = 0

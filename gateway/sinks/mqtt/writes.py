@@ -24,12 +24,14 @@ from collections.abc import Callable
 from gateway.config.mqtt import MqttConfig
 from gateway.errors import (
     AccessDenied,
-    BadWriteRequest,
+    MalformedRequest,
     NotWritable,
+    RequestError,
     UnknownVariable,
     WriteError,
 )
-from gateway.model.tree import VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.payloads import decode_set, encode_result
 from gateway.sinks.mqtt.routes import Route, Routes
@@ -41,7 +43,7 @@ log = logging.getLogger(__name__)
 Answer = Callable[[str, bytes, "bytes | None"], None]
 
 
-class TooManyWrites(WriteError):
+class TooManyWrites(RequestError):
     status = "BadTooManyOperations"
 
 
@@ -112,19 +114,19 @@ class WriteBack:
         value: object = msg.payload[:256].decode("utf-8", "replace")  # what was asked, until it is decoded
         try:
             if msg.retain:
-                raise BadWriteRequest(
+                raise MalformedRequest(
                     "retained write requests are ignored: publish /set without the retain flag"
                 )
             if route is None:
                 raise UnknownVariable(f"no variable is published at {target!r}")
             if len(msg.payload) > self.cfg.max_set_payload:
-                raise BadWriteRequest(
+                raise MalformedRequest(
                     f"the payload has {len(msg.payload)} bytes, "
                     f"more than the {self.cfg.max_set_payload} allowed",
                     status="BadRequestTooLarge",
                 )
             node = route.node
-            if node.internal or not node.spec.writable:
+            if node.internal or not node.definition.writable:
                 raise NotWritable(f"{node.full_path} is read-only")
             if not route.writable:
                 raise AccessDenied(
@@ -146,7 +148,7 @@ class WriteBack:
                 raise TooManyWrites(
                     f"{self.cfg.max_pending_writes} writes to {route.machine} are already waiting; try again"
                 ) from None
-        except WriteError as exc:
+        except RequestError as exc:
             if route is not None:  # known variables only: junk topics are not worth a table row each
                 machine = route.node.machine
                 ctx = self._context(route.machine)
@@ -167,7 +169,7 @@ class WriteBack:
                 return requested
         return result_topic(target)
 
-    def _refuse(self, target: str, reply: str, corr: bytes | None, exc: WriteError) -> None:
+    def _refuse(self, target: str, reply: str, corr: bytes | None, exc: RequestError) -> None:
         self.refused += 1
         if self._quota.allow():
             log.info("MQTT write to %s refused: %s (%s)", target[:200], exc.reason[:300], exc.status)
@@ -185,7 +187,7 @@ class WriteBack:
             node = req.route.node
             try:
                 await machine.write_node(node, req.value, ctx)
-            except WriteError as exc:
+            except RequestError as exc:
                 self._refuse(req.route.topic, req.reply, req.correlation, exc)
                 continue
             except Exception as exc:  # a bug below must not end write-back for this machine

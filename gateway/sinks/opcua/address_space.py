@@ -57,11 +57,11 @@ READ_WRITE = ua.AccessLevel.CurrentRead.mask | ua.AccessLevel.CurrentWrite.mask
 
 
 def access_level(node: VariableNode) -> int:
-    return READ_WRITE if node.spec.writable and not node.internal else READ
+    return READ_WRITE if node.definition.writable and not node.internal else READ
 
 
 def is_analog(node: VariableNode) -> bool:
-    spec = node.spec
+    spec = node.definition
     return spec.type.is_numeric and bool(spec.unit or spec.range)
 
 
@@ -112,7 +112,8 @@ class AddressSpacePlan:
         if MACHINES not in self._containers:
             self._container(MACHINES, OBJECTS_FOLDER, True, MACHINES, "Machines served by this gateway", folder=True)
         if machine.name not in self._containers:
-            self._container(machine.name, self.machines_id, True, machine.name, machine.mapping.description, folder=False)
+            description = machine.definition.description
+            self._container(machine.name, self.machines_id, True, machine.name, description, folder=False)
 
     def add_object(self, machine: Machine, name: str) -> ua.NodeId:
         """An Object directly under the machine (Programs, Commands) that methods hang on."""
@@ -152,9 +153,10 @@ class AddressSpacePlan:
         self.owned.add(nodeid)
         self.variables[node] = nodeid
         if is_analog(node):
-            if node.spec.unit:
-                self._property(nodeid, "EngineeringUnits", eu_information(node.spec.unit), EU_INFORMATION_TYPE)
-            rng = node.spec.range
+            if node.definition.unit:
+                units = eu_information(node.definition.unit)
+                self._property(nodeid, "EngineeringUnits", units, EU_INFORMATION_TYPE)
+            rng = node.definition.range
             if rng is not None:
                 self._property(nodeid, "EURange", ua.Range(Low=rng.min, High=rng.max), RANGE_TYPE)
         return nodeid
@@ -222,7 +224,7 @@ def variable_item(
 ) -> ua.AddNodesItem:
     """The AddNodesItem of one tree variable. Its value starts as the type's neutral value;
     the sink writes the node's real Sample (with its status) right after adding it."""
-    spec = node.spec
+    spec = node.definition
     type_spec = spec.type
     level = access_level(node)
     attrs = ua.VariableAttributes(

@@ -38,9 +38,9 @@ from asyncua.common.events import Event
 from gateway.alarms.manager import AlarmManager, Check
 from gateway.alarms.records import AlarmChange, AlarmRecord
 from gateway.alarms.service import AlarmService
-from gateway.errors import WriteError
+from gateway.errors import CallError, RequestError
 from gateway.model.sample import utcnow
-from gateway.model.tree import WriteContext
+from gateway.model.context import WriteContext
 from gateway.sinks.opcua.address_space import HAS_COMPONENT
 from gateway.sinks.opcua.conditions import (
     ACKNOWLEDGE,
@@ -217,14 +217,14 @@ class OpcUaAlarms:
 
         def check() -> None:  # after the role check, in the manager, so that the refusal is audited
             if not known:
-                raise WriteError("the EventId is not one this condition reported", status="BadEventIdUnknown")
+                raise CallError("the EventId is not one this condition reported", status="BadEventIdUnknown")
 
         text = comment.Value.Text if isinstance(comment.Value, ua.LocalizedText) else comment.Value
         try:
             await action(
                 condition.manager, condition.occurrence, self.server.caller_context(), str(text or ""), check
             )
-        except WriteError as exc:
+        except RequestError as exc:
             log.info("OPC UA %s of alarm occurrence %d refused (%s): %s",
                      getattr(action, "__name__", "call").strip("_"), condition.occurrence, exc.status, exc.reason)
             return ua.CallMethodResult(StatusCode=status_code(exc.status), InputArgumentResults=results)

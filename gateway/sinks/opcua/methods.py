@@ -13,7 +13,7 @@ against `Method.role` (BadUserAccessDenied) and audits the call. Inside it, the
 arguments are checked the OPC UA way before the handler sees them: too few
 arguments -> BadArgumentsMissing, too many -> BadTooManyArguments, a Variant of
 the wrong type -> BadTypeMismatch (with the offending argument marked in
-InputArgumentResults). A refusal from the handler (a WriteError) becomes its
+InputArgumentResults). A refusal from the handler (a RequestError) becomes its
 status code; the outputs are encoded with the declared types.
 """
 
@@ -25,9 +25,10 @@ from typing import Any
 
 from asyncua import ua
 
-from gateway.errors import WriteError
+from gateway.errors import CallError, RequestError
 from gateway.model.methods import Argument, Method
-from gateway.model.tree import Machine, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine
 from gateway.sinks.opcua.address_space import HAS_COMPONENT, HAS_PROPERTY, PROPERTY_TYPE, AddressSpacePlan
 from gateway.sinks.opcua.values import (
     ValueMismatch,
@@ -151,7 +152,7 @@ def encode_outputs(method: Method, outputs: Sequence[Any]) -> list[ua.Variant]:
     return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs)]
 
 
-class ArgumentsRefused(WriteError):
+class ArgumentsRefused(CallError):
     """The OPC UA argument check's refusal, carrying the CallMethodResult to answer with."""
 
     def __init__(self, result: ua.CallMethodResult) -> None:
@@ -179,7 +180,7 @@ async def call_result(
         variants = encode_outputs(method, outputs)
     except ArgumentsRefused as exc:
         return exc.result
-    except WriteError as exc:
+    except RequestError as exc:
         return ua.CallMethodResult(StatusCode=status_code(exc.status), InputArgumentResults=ok)
     except ValueMismatch as exc:
         log.error("OPC UA call %s.%s: %s", method.object, method.name, exc)

@@ -16,7 +16,7 @@ from typing import Protocol
 from asyncua import ua
 from asyncua.common.events import Event
 
-from gateway.model.tree import WriteContext
+from gateway.model.context import WriteContext
 
 MethodCallback = Callable[..., Awaitable[ua.CallMethodResult]]
 """Serves a Method node: called with the object's NodeId and the input Variants."""

@@ -44,7 +44,8 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import utcnow
 from gateway.auth.users import UserDirectory
-from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes, keep_written_values
 from gateway.sinks.opcua.identity import (
@@ -272,7 +273,7 @@ class OpcUaSink:
         self._server: Server | None = None
         self._shared: SharedAttributes | None = None
         self._plan: AddressSpacePlan | None = None
-        self._sub: Subscription | None = None
+        self._sub: Subscription[VariableNode] | None = None
         self._vars: dict[VariableNode, _Variable] = {}
         self._by_id: dict[ua.NodeId, _Variable] = {}
         self._owned: set[ua.NodeId] = set()
@@ -529,7 +530,7 @@ class OpcUaSink:
 
     # --- values ------------------------------------------------------------------------------
 
-    async def _push(self, batch: list[Change]) -> None:
+    async def _push(self, batch: list[Change[VariableNode]]) -> None:
         write = self.server.write_attribute_value
         variables = self._vars
         mismatched = self._mismatched
@@ -594,7 +595,10 @@ class OpcUaSink:
         var = self._by_id.get(wv.NodeId)
         if var is None:  # one of our folders, objects or properties
             return ua.StatusCode(ua.StatusCodes.BadNotWritable)
-        return await write_node(var.node, var.kind, wv, user, role)
+        status = await write_node(var.node, var.kind, wv, user, role)
+        if status.is_good():  # read-your-writes: the controller's read-back is served before the answer
+            await self._push([(var.node, var.node.sample)])
+        return status
 
 
 @contextmanager

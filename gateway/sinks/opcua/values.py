@@ -71,7 +71,7 @@ _STATUS_CACHE: dict[str, ua.StatusCode] = {}
 def status_code(name: str) -> ua.StatusCode:
     """The StatusCode for a status name ("Good", "BadNotConnected"...); unknown names are BadInternalError.
 
-    Sample.status and WriteError.status both carry names, and a typo in a driver must
+    Sample.status and RequestError.status both carry names, and a typo in a driver must
     never crash the sink, so anything that is not a real code maps to BadInternalError.
     """
     code = _STATUS_CACHE.get(name)

@@ -7,8 +7,8 @@ access, range and roles, unscales, and asks the source. The OPC UA checks run
 inside `write_node` (its `check`), after the role check, so that a viewer hears
 BadUserAccessDenied whatever it sent and every refusal is audited. The answer's
 status name becomes the StatusCode returned to the client. An accepted write
-does not change the node: the new value comes back from the controller like any
-other change.
+leaves the controller's read-back of the value in the tree (`Machine.write_node`),
+which the server puts in the address space before it answers (read-your-writes).
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import logging
 
 from asyncua import ua
 
-from gateway.errors import WriteError
-from gateway.model.tree import VariableNode, WriteContext
+from gateway.errors import RequestError, WriteError
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableNode
 from gateway.sinks.opcua.address_space import access_level
 from gateway.sinks.opcua.values import ValueKind, status_code
 
@@ -83,7 +84,7 @@ async def write_node(
 
     try:
         await node.machine.write_node(node, value, WriteContext(ORIGIN, user, role), check=check)
-    except WriteError as exc:
+    except RequestError as exc:
         return status_code(exc.status)
     except Exception:
         log.exception("OPC UA write to %s failed unexpectedly", node.full_path)

@@ -13,7 +13,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from gateway.errors import InvalidState
-from gateway.model.tree import WriteContext
+from gateway.model.context import WriteContext
 from simulator.machine import MachineState
 from tests.integration.laser_rig import MACHINE, laser_rig, text
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber

@@ -22,7 +22,8 @@ from gateway.config.copydata import MachineCopydata
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mqtt import MqttConfig
-from gateway.model.tree import Machine, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.sink import CopydataSink
 from gateway.sinks.copydata.tcp import TcpServerTransport

@@ -8,10 +8,10 @@ import socket
 
 import pytest
 
-from gateway.model.tree import VariableTree
 from gateway.sinks.copydata.sink import CopydataSink
 from gateway.sinks.copydata.tcp import TcpServerTransport
 from tests.unit.sinks.copydata.helpers import mapping
+from tests.trees import MappedTree
 from tests.waiting import free_port, wait_until
 
 
@@ -21,9 +21,9 @@ async def test_the_target_waits_for_its_port_and_reports_why(caplog: pytest.LogC
     squatter = socket.socket()
     squatter.bind(("127.0.0.1", port))
     squatter.listen()
-    tree = VariableTree([mapping({"name": "nest", "transport": "tcp-server", "bind": "127.0.0.1", "port": port,
-                                  "backoff": {"initial": 0.05, "max": 0.1}})])  # fmt: skip
-    sink = CopydataSink(tree)
+    tree = MappedTree([mapping({"name": "nest", "transport": "tcp-server", "bind": "127.0.0.1", "port": port,
+                                "backoff": {"initial": 0.05, "max": 0.1}})])  # fmt: skip
+    sink = CopydataSink(tree, tree.mappings)
     status = tree.machines["m1"].nodes["Status/CopydataTargets"]
     async with sink:
         task = asyncio.create_task(sink.run())
@@ -49,10 +49,8 @@ async def test_the_target_waits_for_its_port_and_reports_why(caplog: pytest.LogC
 async def test_stopping_with_clients_connected_is_quiet(caplog: pytest.LogCaptureFixture) -> None:
     """Shutdown cancels the client handlers; asyncio must not log a traceback for any of them."""
     caplog.set_level(logging.INFO)
-    tree = VariableTree(
-        [mapping({"name": "nest", "transport": "tcp-server", "bind": "127.0.0.1", "port": 0})]
-    )
-    sink = CopydataSink(tree)
+    tree = MappedTree([mapping({"name": "nest", "transport": "tcp-server", "bind": "127.0.0.1", "port": 0})])
+    sink = CopydataSink(tree, tree.mappings)
     clients = []
     async with sink:
         task = asyncio.create_task(sink.run())

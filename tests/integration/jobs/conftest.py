@@ -26,9 +26,9 @@ from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.jobs.queue import Job, JobState
 from gateway.jobs.service import JobService
-from gateway.model.tree import VariableTree
 from simulator.ftp_store import FtpStore
 from simulator.store import DirectoryStore
+from tests.trees import MappedTree
 from tests.waiting import free_port, wait_until
 
 T = TypeVar("T")
@@ -100,7 +100,7 @@ async def store(tmp_path: Path) -> AsyncIterator[Store]:
 class Harness:
     """A running JobService with its tree, state directory and inbox port."""
 
-    def __init__(self, service: JobService, tree: VariableTree, state: Path) -> None:
+    def __init__(self, service: JobService, tree: MappedTree, state: Path) -> None:
         self.service = service
         self.tree = tree
         self.state = state
@@ -171,7 +171,7 @@ async def harness(tmp_path: Path) -> AsyncIterator[Build]:
             accounts = [{"user": USER, "password_hash": PASSWORD_HASH}]
         inbox_config = InboxConfig.model_validate({"host": "127.0.0.1", "port": 0, "accounts": accounts, **inbox})
         config = Config(GatewayConfig(state_dir=str(state), inbox=inbox_config), tuple(files), tmp_path)
-        tree = VariableTree(config.machines)
+        tree = MappedTree(config.machines)
         service = JobService(config, tree, environ=environ or {})
         async with service:
             task = asyncio.create_task(service.run(), name="test:jobs")

@@ -57,7 +57,7 @@ async def env(store: Store, tmp_path: Path) -> AsyncIterator[Env]:
         inbox=InboxConfig(enabled=False),
     )
     config = Config(gateway, tuple(files), tmp_path)
-    tree = VariableTree(config.machines)
+    tree = VariableTree(config.definitions())
     service = JobService(config, tree)  # before the sink starts: it adds Jobs/ and Programs
     sink = OpcUaSink(tree, config.gateway.opcua, state)
     async with sink, service:

@@ -30,7 +30,7 @@ async def test_only_the_newest_ended_jobs_stay_retained(
     live = subscriber(recorders, mosquitto.port, topics=[JOBS])
     extra = "  mqtt_retained_jobs: 2"
     async with harness([mapping_text("laser", store.port, extra=extra)]) as h:
-        sink = MqttSink(h.tree, mqtt_config(mosquitto.port), tmp_path / "mqtt")
+        sink = MqttSink(h.tree, mqtt_config(mosquitto.port), tmp_path / "mqtt", h.tree.mappings)
         async with sink:
             task = asyncio.create_task(sink.run(), name="test:mqtt")
             try:
@@ -73,7 +73,7 @@ async def test_a_restart_clears_records_an_earlier_run_left_retained(
 ) -> None:
     live = subscriber(recorders, mosquitto.port, topics=[JOBS])
     async with harness([mapping_text("laser", store.port, extra="  mqtt_retained_jobs: 100")]) as h:
-        sink = MqttSink(h.tree, mqtt_config(mosquitto.port), tmp_path / "mqtt")
+        sink = MqttSink(h.tree, mqtt_config(mosquitto.port), tmp_path / "mqtt", h.tree.mappings)
         async with sink:
             task = asyncio.create_task(sink.run(), name="test:mqtt")
             try:
@@ -96,8 +96,8 @@ async def test_a_restart_clears_records_an_earlier_run_left_retained(
     path.write_text(mapping_text("laser", store.port, extra="  mqtt_retained_jobs: 1"))
     inbox = InboxConfig.model_validate({"host": "127.0.0.1", "port": 0, "accounts": []})
     config = Config(GatewayConfig(state_dir=str(h.state), inbox=inbox), (load_mapping(path, environ={}),), tmp_path)
-    tree = VariableTree(config.machines)
-    sink = MqttSink(tree, mqtt_config(mosquitto.port), tmp_path / "mqtt")
+    tree = VariableTree(config.definitions())
+    sink = MqttSink(tree, mqtt_config(mosquitto.port), tmp_path / "mqtt", config.mappings)
     async with sink:
         task = asyncio.create_task(sink.run(), name="test:mqtt")
         try:

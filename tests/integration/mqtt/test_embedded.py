@@ -11,10 +11,10 @@ from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
-from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.embedded import broker_reachable
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
 from tests.integration.mqtt.test_sink import MAPPING, ingest, running
+from tests.trees import MappedTree
 from tests.waiting import free_port, wait_until
 
 
@@ -31,7 +31,7 @@ async def test_the_demo_starts_an_embedded_broker_only_when_none_answers(
         assert await _ensure_broker(demo_config(port), stack) == "embedded amqtt, started by the demo"
         assert await asyncio.to_thread(broker_reachable, "127.0.0.1", port)
         rec = await asyncio.to_thread(subscriber, recorders, port)
-        tree = VariableTree([MachineMapping.model_validate(MAPPING)])
+        tree = MappedTree([MachineMapping.model_validate(MAPPING)])
         async with running(tree, mqtt_config(port), tmp_path) as sink:
             await wait_until(lambda: sink.online)
             ingest(tree.machines["m1"], "Axes/X/Position", 3.25)

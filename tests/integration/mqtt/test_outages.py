@@ -11,9 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from gateway.config.mapping import MachineMapping
-from gateway.model.tree import VariableTree
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, env_without_proxy, mqtt_config, subscriber
 from tests.integration.mqtt.test_sink import running
+from tests.trees import MappedTree
 from tests.waiting import free_port, wait_until, wait_until_sync
 
 MAPPING = {
@@ -40,7 +40,7 @@ def first_occurrences(values: list[Any]) -> list[Any]:
 async def test_broker_restart_mid_stream_loses_nothing_at_qos1(
     mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path
 ) -> None:
-    tree = VariableTree([MachineMapping.model_validate(MAPPING)])
+    tree = MappedTree([MachineMapping.model_validate(MAPPING)])
     m = tree.machines["m1"]
     nodes = [m.nodes["Axes/X/Position"], m.nodes["Axes/Y/Position"]]
     capture = tree.hub.subscribe("test-capture", every_change=True)

@@ -21,9 +21,10 @@ from paho.mqtt.properties import Properties
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
 from gateway.errors import SinkError
-from gateway.model.tree import Machine, VariableTree
+from gateway.model.tree import Machine
 from gateway.sinks.mqtt.sink import MqttSink
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
+from tests.trees import MappedTree
 from tests.waiting import free_port, wait_until
 
 MAPPING = {
@@ -53,13 +54,13 @@ MAPPING = {
 NOW = datetime(2026, 5, 6, 7, 8, 9, tzinfo=UTC)
 
 
-def make_tree(**machine: Any) -> VariableTree:
-    return VariableTree([MachineMapping.model_validate({**MAPPING, **machine})])
+def make_tree(**machine: Any) -> MappedTree:
+    return MappedTree([MachineMapping.model_validate({**MAPPING, **machine})])
 
 
 @asynccontextmanager
-async def running(tree: VariableTree, cfg: MqttConfig, state_dir: Path) -> AsyncIterator[MqttSink]:
-    sink = MqttSink(tree, cfg, state_dir)
+async def running(tree: MappedTree, cfg: MqttConfig, state_dir: Path) -> AsyncIterator[MqttSink]:
+    sink = MqttSink(tree, cfg, state_dir, tree.mappings)
     async with sink:
         task = asyncio.create_task(sink.run(), name="test:mqtt")
         try:
@@ -382,4 +383,4 @@ def test_two_variables_on_one_topic_do_not_start(tmp_path: Path) -> None:
         ]
     )
     with pytest.raises(SinkError, match="both publish to 'cnc/m1/axes/x'"):
-        MqttSink(tree, MqttConfig(), tmp_path)
+        MqttSink(tree, MqttConfig(), tmp_path, tree.mappings)

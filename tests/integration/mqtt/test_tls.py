@@ -12,9 +12,9 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
 from gateway.config.mapping import MachineMapping
-from gateway.model.tree import VariableTree
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
 from tests.integration.mqtt.test_sink import MAPPING, ingest, running
+from tests.trees import MappedTree
 from tests.waiting import free_port, wait_until
 
 
@@ -95,7 +95,7 @@ async def test_tls_with_a_client_certificate_and_a_verified_server(
     broker.start()
     try:
         rec = subscriber(recorders, broker.port, tls=(ca_file, client_crt, client_key))
-        tree = VariableTree([MachineMapping.model_validate(MAPPING)])
+        tree = MappedTree([MachineMapping.model_validate(MAPPING)])
         tls = {"ca": str(ca_file), "cert": str(client_crt), "key": str(client_key)}
         async with running(tree, mqtt_config(broker.port, tls=tls), tmp_path / "state") as sink:
             await wait_until(lambda: sink.online, message="a TLS connection")
@@ -105,7 +105,7 @@ async def test_tls_with_a_client_certificate_and_a_verified_server(
 
         # A broker whose certificate our CA did not sign is refused, with a reason a person can act on.
         wrong = {"ca": str(stranger_ca), "cert": str(client_crt), "key": str(client_key)}
-        other = VariableTree([MachineMapping.model_validate(MAPPING)])
+        other = MappedTree([MachineMapping.model_validate(MAPPING)])
         async with running(other, mqtt_config(broker.port, tls=wrong), tmp_path / "state2") as sink:
             await wait_until(lambda: "not trusted" in sink.last_error, message="the certificate refusal")
             assert not sink.online
@@ -120,6 +120,6 @@ def test_missing_tls_files_stop_the_start_with_a_clear_error(tmp_path: Path) -> 
     from gateway.errors import SinkError
     from gateway.sinks.mqtt.sink import MqttSink
 
-    tree = VariableTree([MachineMapping.model_validate(MAPPING)])
+    tree = MappedTree([MachineMapping.model_validate(MAPPING)])
     with pytest.raises(SinkError, match="mqtt.tls: cannot load .*nope.pem"):
-        MqttSink(tree, mqtt_config(1, tls={"ca": "nope.pem"}), tmp_path)
+        MqttSink(tree, mqtt_config(1, tls={"ca": "nope.pem"}), tmp_path, tree.mappings)

@@ -113,7 +113,7 @@ async def env(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Env]:
     folder = tmp_path_factory.mktemp("mappings")
     (folder / "laser.yaml").write_text(LASER)
     (folder / "press.yaml").write_text(PRESS)
-    tree = VariableTree([load_mapping(folder / "laser.yaml"), load_mapping(folder / "press.yaml")])
+    tree = VariableTree([load_mapping(folder / name).definition() for name in ("laser.yaml", "press.yaml")])
     writer = Writer()
     tree.machines["laser"].writer = writer
     config = OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/gateway")
@@ -493,7 +493,7 @@ def _big_mapping(index: int, count: int) -> MachineMapping:
 
 
 async def test_ten_thousand_variables_over_twenty_machines(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    tree = VariableTree([_big_mapping(i, 500) for i in range(20)])
+    tree = VariableTree([_big_mapping(i, 500).definition() for i in range(20)])
     config = OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/big")
     started = time.perf_counter()
     async with OpcUaSink(tree, config, tmp_path) as sink:

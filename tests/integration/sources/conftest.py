@@ -15,7 +15,9 @@ import pytest
 from asyncua import Server, ua
 
 from gateway.config.mapping import MachineMapping
-from gateway.model.tree import Machine, VariableTree
+from gateway.model.tree import Machine
+from gateway.sources.opcua_client import OpcUaSource
+from tests.trees import MappedTree
 from tests.waiting import free_port
 
 NS_URI = "urn:cnc-gateway:test-controller"
@@ -152,4 +154,11 @@ def make_machine(endpoint: str, variables: list[dict[str, Any]], **driver: Any) 
     }
     settings.update(driver)
     mapping = MachineMapping.model_validate({"machine": "cell-1", "driver": settings, "variables": variables})
-    return VariableTree([mapping]).machines["cell-1"]
+    return MappedTree([mapping]).machines["cell-1"]
+
+
+def source_for(machine: Machine) -> OpcUaSource:
+    """The OPC UA source of a machine made by `make_machine`, with its mapping's driver settings."""
+    tree = machine.tree
+    assert isinstance(tree, MappedTree)
+    return OpcUaSource(machine, tree.mappings[machine.name])

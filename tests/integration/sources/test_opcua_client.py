@@ -14,9 +14,10 @@ from pathlib import Path
 import pytest
 
 from gateway.errors import ControllerRefused, ControllerUnavailable
-from gateway.model.tree import Machine, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine
 from gateway.sources.opcua_client import OpcUaSource
-from tests.integration.sources.conftest import NS_URI, SOURCE_TS, Controller, make_machine
+from tests.integration.sources.conftest import NS_URI, SOURCE_TS, Controller, make_machine, source_for
 from tests.waiting import free_port, wait_until
 
 CTX = WriteContext("test")
@@ -40,7 +41,7 @@ def variables(ctl: Controller) -> list[dict]:
 
 @asynccontextmanager
 async def running(machine: Machine) -> AsyncIterator[tuple[OpcUaSource, asyncio.Task[None]]]:
-    async with OpcUaSource(machine) as source:
+    async with source_for(machine) as source:
         task = asyncio.create_task(source.run(), name="test-source")
         try:
             yield source, task

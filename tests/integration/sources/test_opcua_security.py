@@ -9,8 +9,8 @@ from asyncua import Server, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from gateway.sources.opcua_client import OpcUaSource, certificate_uri
-from tests.integration.sources.conftest import make_machine
+from gateway.sources.opcua_client import certificate_uri
+from tests.integration.sources.conftest import make_machine, source_for
 from tests.waiting import free_port, wait_until
 
 
@@ -41,7 +41,7 @@ async def test_basic256sha256_sign_and_encrypt_session(tmp_path: Path) -> None:
         machine = make_machine(
             endpoint, [{"path": "Speed", "source": f"ns={ns};s=Speed", "type": "Double"}], security=security
         )
-        async with OpcUaSource(machine) as source:
+        async with source_for(machine) as source:
             task = asyncio.create_task(source.run())
             try:
                 await wait_until(

@@ -16,7 +16,9 @@ from gateway.alarms.records import AlarmChange, Kind, Quality
 from gateway.alarms.service import AlarmService
 from gateway.config.mapping import MachineMapping
 from gateway.errors import AccessDenied, InvalidState
-from gateway.model.tree import Machine, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableTree
+from tests.trees import MappedTree
 from tests.waiting import wait_until
 
 T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
@@ -67,8 +69,8 @@ class Rig:
 
 @pytest.fixture
 async def rig(tmp_path: Path, request: pytest.FixtureRequest) -> AsyncIterator[Rig]:
-    tree = VariableTree([mapping(getattr(request, "param", False))])
-    async with AlarmService(tree, tmp_path) as service:
+    tree = MappedTree([mapping(getattr(request, "param", False))])
+    async with AlarmService(tree, tree.mappings, tmp_path) as service:
         r = Rig(tree, service)
 
         async def listen(change: AlarmChange) -> None:
@@ -187,15 +189,15 @@ async def test_a_controller_that_drops_clears_nothing_and_reconnecting_reconcile
 
 
 async def test_a_restart_picks_up_the_retained_occurrences_with_their_acknowledgement(tmp_path: Path) -> None:
-    tree = VariableTree([mapping()])
-    async with AlarmService(tree, tmp_path) as service:
+    tree = MappedTree([mapping()])
+    async with AlarmService(tree, tree.mappings, tmp_path) as service:
         rig = Rig(tree, service)
         rig.controller((1001, "Soft limit", 3))
         await rig.look()
         [record] = rig.manager.retained()
         await rig.manager.acknowledge(record.occurrence, OPERATOR, "seen")
-    tree = VariableTree([mapping()])
-    async with AlarmService(tree, tmp_path) as service:
+    tree = MappedTree([mapping()])
+    async with AlarmService(tree, tree.mappings, tmp_path) as service:
         [again] = service.managers["m"].retained()
         assert again.occurrence == record.occurrence and again.acked_by == "olga"
         assert again.quality is Quality.UNCERTAIN  # until the controller's list is read again

@@ -10,9 +10,11 @@ import pytest
 
 from gateway.alarms.manager import AlarmManager, AlreadyAcknowledged, UnknownAlarm
 from gateway.alarms.service import AlarmService
-from gateway.audit.entry import AuditEntry
+from gateway.model.audit import AuditEntry
 from gateway.errors import AccessDenied, WriteError
-from gateway.model.tree import VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableTree
+from tests.trees import MappedTree
 from tests.unit.alarms.test_manager import T0, mapping
 
 ROLES = ("viewer", "operator", "engineer", "admin")
@@ -38,9 +40,9 @@ class Rig:
 
 @pytest.fixture
 async def rig(tmp_path: Path) -> AsyncIterator[Rig]:
-    tree = VariableTree([mapping(confirm=True)])
+    tree = MappedTree([mapping(confirm=True)])
     tree.access.configure(ROLES, enabled=True)
-    async with AlarmService(tree, tmp_path) as service:
+    async with AlarmService(tree, tree.mappings, tmp_path) as service:
         yield Rig(tree, service.managers["m"])
 
 

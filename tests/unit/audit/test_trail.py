@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway.audit.entry import MAX_TEXT, AuditEntry, as_text
+from gateway.model.audit import MAX_TEXT, AuditEntry, as_text
 from gateway.audit.store import AuditStore
 from gateway.audit.trail import AuditTrail
 from tests.waiting import wait_until

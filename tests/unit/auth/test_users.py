@@ -53,7 +53,7 @@ def test_built_from_the_gateway_file(hashed: str) -> None:
         "users": [{"name": "olga", "password_hash": hashed, "role": "engineer"}],
         "access": {"anonymous": "refuse", "lockout": {"failures": 2, "window": 10, "duration": 20}},
     })
-    users = UserDirectory.from_config(config)
+    users = config.user_directory()
     assert users.has_users and not users.anonymous_allowed
     assert users.limiter.failures == 2 and users.limiter.lockout == 20
     assert users.authenticate("olga", "s3cret", "h") == Identity("olga", "engineer")

@@ -4,9 +4,9 @@ from datetime import datetime, timedelta, timezone
 
 import pytest
 
-from gateway.audit.entry import AuditEntry
 from gateway.cli.audit import as_json, as_line
 from gateway.cli.since import parse_since
+from gateway.model.audit import AuditEntry
 
 NOW = datetime(2026, 5, 6, 12, 0, tzinfo=timezone.utc)
 

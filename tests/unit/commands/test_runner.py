@@ -11,8 +11,10 @@ import pytest
 
 from gateway.commands.runner import OUTPUTS, install_commands
 from gateway.config.mapping import MachineMapping
-from gateway.errors import InvalidState, OutOfRange, Timeout, TypeMismatch, WriteError
-from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
+from gateway.errors import ConfirmTimeout, InvalidState, OutOfRange, RequestError, TypeMismatch
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableNode
+from tests.trees import MappedTree
 from tests.waiting import wait_until
 
 T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
@@ -76,8 +78,8 @@ class Controller:
 
 
 def rig(timeout: float = 2.0) -> tuple[Machine, Controller]:
-    tree = VariableTree([mapping(timeout)])
-    assert install_commands(tree) == 3
+    tree = MappedTree([mapping(timeout)])
+    assert install_commands(tree, tree.mappings) == 3
     machine = tree.machines["m"]
     controller = Controller(machine)
     machine.writer = controller
@@ -132,7 +134,7 @@ async def test_the_guard_refuses_naming_the_state_and_nothing_is_written() -> No
 async def test_no_answer_within_the_timeout_is_bad_timeout_saying_what_it_waited_for() -> None:
     machine, controller = rig(timeout=0.3)
     controller.start_states = []
-    with pytest.raises(Timeout) as info:
+    with pytest.raises(ConfirmTimeout) as info:
         await call(machine, "start")
     assert info.value.status == "BadTimeout"
     assert "no completion within 0.3 s" in info.value.reason and "Machine/State is 0 (Idle)" in info.value.reason
@@ -145,7 +147,7 @@ async def test_a_controller_that_drops_while_waiting_ends_the_command_with_its_s
     task = asyncio.create_task(call(machine, "start"))
     await wait_until(lambda: controller.writes, message="the start write")
     machine.invalidate("BadNotConnected", "connection lost")
-    with pytest.raises(WriteError) as info:
+    with pytest.raises(RequestError) as info:
         await task
     assert info.value.status == "BadNotConnected" and "lost Machine/State" in info.value.reason
 
@@ -153,7 +155,7 @@ async def test_a_controller_that_drops_while_waiting_ends_the_command_with_its_s
 async def test_an_unknown_state_refuses_with_its_status() -> None:
     machine, _ = rig()
     machine.invalidate("BadNotConnected", "controller unreachable")
-    with pytest.raises(WriteError) as info:
+    with pytest.raises(RequestError) as info:
         await call(machine, "start")
     assert info.value.status == "BadNotConnected"
 

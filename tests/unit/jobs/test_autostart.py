@@ -54,7 +54,7 @@ def machine(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Machine:
     monkeypatch.setattr(autostart, "POLL", 0.005)
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    return VariableTree([load_mapping(path)]).machines["m1"]
+    return VariableTree([load_mapping(path).definition()]).machines["m1"]
 
 
 @pytest.fixture

@@ -32,7 +32,7 @@ def publisher(keep: int | None = None) -> tuple[JobPublisher, Any]:
                     "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
                     "variables": [{"path": "State", "source": "s", "type": "Int16"}],
                 }
-            )
+            ).definition()
         ]
     )
     events = tree.events.subscribe("test")

@@ -32,7 +32,7 @@ def test_a_role_the_configuration_does_not_define_is_nobodys() -> None:
 
 
 def test_gateway_writers_without_a_role_of_their_own_use_their_origins() -> None:
-    from gateway.model.tree import WriteContext
+    from gateway.model.context import WriteContext
 
     policy = AccessPolicy()
     policy.configure(["viewer", "operator"], enabled=True, origin_roles={"jobs": "operator", "copydata": None},

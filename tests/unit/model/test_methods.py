@@ -7,7 +7,7 @@ import pytest
 
 from gateway.errors import ArgumentsMissing, TooManyArguments, TypeMismatch
 from gateway.model.methods import Argument, Method
-from gateway.model.tree import WriteContext
+from gateway.model.context import WriteContext
 from gateway.model.types import TypeSpec
 
 

@@ -1,6 +1,6 @@
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
@@ -8,7 +8,9 @@ import pytest
 
 from gateway.config.loader import load_mapping
 from gateway.errors import ControllerRefused, ControllerUnavailable, NotWritable, OutOfRange, TypeMismatch, UnknownVariable
-from gateway.model.tree import VariableNode, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.sample import ReadBack
+from gateway.model.tree import VariableNode, VariableTree
 
 MAPPING = """
 machine: m1
@@ -41,7 +43,7 @@ class Recorder:
 def tree(tmp_path: Path) -> VariableTree:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    return VariableTree([load_mapping(path)])
+    return VariableTree([load_mapping(path).definition()])
 
 
 def published(tree: VariableTree) -> list[tuple[str, Any, str]]:
@@ -159,6 +161,67 @@ async def test_write_hooks_can_refuse(tree: VariableTree) -> None:
     with pytest.raises(AccessDenied):
         await m.write("Feed/Override", 80, WriteContext("opcua", user="viewer"))
     assert rec.writes == []
+
+
+class ReadingBack:
+    """A source that reads the written value back from the controller, stamped `at`."""
+
+    def __init__(self, at: datetime, hold: float = 60.0) -> None:
+        self.at = at
+        self.hold = hold
+
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack:
+        return ReadBack(raw, self.at, hold=self.hold)
+
+
+def later(seconds: float) -> datetime:
+    return TS + timedelta(seconds=seconds)
+
+
+async def test_a_write_is_answered_with_the_read_back_already_in_the_tree(tree: VariableTree) -> None:
+    m = tree.machines["m1"]
+    counts = m.nodes["Axes/X/Counts"]
+    m.ingest(counts, 0, TS)
+    tree.hub.subscribe("t", every_change=True)
+    m.writer = ReadingBack(later(1))
+    await m.write("Axes/X/Counts", 20.0, CTX)
+    assert (counts.sample.value, counts.sample.source_ts, counts.sample.status) == (20.0, later(1), "Good")
+    assert published(tree) == [("Axes/X/Counts", 20.0, "Good")]
+
+
+async def test_a_notification_older_than_the_read_back_does_not_undo_it(tree: VariableTree) -> None:
+    m = tree.machines["m1"]
+    override = m.nodes["Feed/Override"]
+    m.ingest(override, 100, TS)
+    m.writer = ReadingBack(later(2))
+    await m.write("Feed/Override", 50, CTX)
+    m.ingest(override, 100, later(1))  # sampled before the write, delivered after its answer
+    assert override.sample.value == 50
+    m.ingest(override, 60, later(3))  # the controller's next change
+    assert (override.sample.value, override.sample.source_ts) == (60, later(3))
+    m.ingest(override, 70, later(1))  # the hold ended with the first newer notification
+    assert override.sample.value == 70
+
+
+async def test_the_hold_on_older_notifications_ends_with_its_time(tree: VariableTree) -> None:
+    m = tree.machines["m1"]
+    override = m.nodes["Feed/Override"]
+    m.writer = ReadingBack(later(2), hold=0.0)  # a controller whose clock stepped back must not freeze it
+    await m.write("Feed/Override", 50, CTX)
+    m.ingest(override, 100, later(1))
+    assert override.sample.value == 100
+
+
+def test_a_bad_or_older_read_back_changes_nothing(tree: VariableTree) -> None:
+    m = tree.machines["m1"]
+    override = m.nodes["Feed/Override"]
+    m.ingest(override, 100, later(5))
+    m.confirm(override, ReadBack(50, later(4)))
+    m.confirm(override, ReadBack(None, later(6), "BadNotReadable", "write-only"))
+    sample = override.sample
+    assert (sample.value, sample.status, sample.source_ts) == (100, "Good", later(5))
+    m.ingest(override, 90, later(4.5))  # neither set a hold
+    assert override.sample.value == 90
 
 
 def test_status_variables_track_the_connection(tree: VariableTree) -> None:

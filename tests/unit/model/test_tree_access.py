@@ -8,11 +8,12 @@ from typing import Any
 
 import pytest
 
-from gateway.audit.entry import AuditEntry
+from gateway.model.audit import AuditEntry
 from gateway.config.loader import load_mapping
 from gateway.errors import AccessDenied, InvalidState, NotWritable, OutOfRange, TypeMismatch
 from gateway.model.methods import Argument, Method
-from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.model.types import TypeSpec
 
 MAPPING = """
@@ -48,7 +49,7 @@ START = Method("Commands", "Start", "Start", (Argument("Program", TypeSpec.parse
 def machine(tmp_path: Path) -> Machine:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    tree = VariableTree([load_mapping(path)])
+    tree = VariableTree([load_mapping(path).definition()])
     tree.access.configure(
         ["viewer", "operator", "engineer", "admin"], enabled=True, default_write_role="operator",
         origin_roles={"jobs": "operator", "copydata": None},

@@ -27,8 +27,8 @@ def make_source() -> tuple[OpcUaSource, Machine]:
             ],
         }
     )
-    machine = VariableTree([mapping]).machines["m"]
-    return OpcUaSource(machine), machine
+    machine = VariableTree([mapping.definition()]).machines["m"]
+    return OpcUaSource(machine, mapping), machine
 
 
 def handle(source: OpcUaSource, path: str) -> int:

@@ -7,6 +7,7 @@ from typing import Any
 from gateway.config.mapping import MachineMapping
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.sinks.copydata.sink import CopydataSink
 
 VARIABLES: list[dict[str, Any]] = [
     {"path": "Axes/X/Position", "source": "ns=2;s=x", "type": "Double", "copydata": {"id": 1}},
@@ -40,8 +41,13 @@ def mapping(target: dict[str, Any] | None = None, **machine: Any) -> MachineMapp
     return MachineMapping.model_validate(data)
 
 
+def copydata_sink(m: MachineMapping) -> CopydataSink:
+    """The COPYDATA sink of a tree with this one machine."""
+    return CopydataSink(VariableTree([m.definition()]), {m.machine: m})
+
+
 def machine(target: dict[str, Any] | None = None, **kw: Any) -> Machine:
-    tree = VariableTree([mapping(target, **kw)])
+    tree = VariableTree([mapping(target, **kw).definition()])
     return tree.machines["m1"]
 
 

@@ -11,9 +11,7 @@ from pydantic import ValidationError
 from gateway.config.copydata import CopydataTarget, check_encoding
 from gateway.config.loader import load_mapping
 from gateway.errors import SinkError
-from gateway.model.tree import VariableTree
-from gateway.sinks.copydata.sink import CopydataSink
-from tests.unit.sinks.copydata.helpers import mapping
+from tests.unit.sinks.copydata.helpers import copydata_sink, mapping
 
 ROOT = Path(__file__).resolve().parents[4]
 
@@ -90,7 +88,7 @@ def test_laser_sim_serves_what_nesting_software_follows() -> None:
 def test_win32_loads_everywhere_but_starts_only_on_windows() -> None:
     """A mapping is checked where it is edited (CI, a laptop): the platform matters only at start."""
     m = mapping({"name": "nest", "transport": "win32", "window_class": "NestWnd", "timeout": 0.5})
-    sink = CopydataSink(VariableTree([m]))
+    sink = copydata_sink(m)
     if sys.platform == "win32":
         pytest.skip("this is Windows: win32 targets start here")
     emitter = sink.emitters[0]

@@ -9,11 +9,10 @@ from typing import Any
 import pytest
 
 from gateway.codecs.copydata import decode_lpdata
-from gateway.model.tree import Machine, VariableTree
+from gateway.model.tree import Machine
 from gateway.sinks.copydata.channel import Channel, OutFrame
 from gateway.sinks.copydata.emitter import Emitter
-from gateway.sinks.copydata.sink import CopydataSink
-from tests.unit.sinks.copydata.helpers import ingest, mapping
+from tests.unit.sinks.copydata.helpers import copydata_sink, ingest, mapping
 from tests.waiting import wait_until
 
 
@@ -43,7 +42,7 @@ class Receiver:
 @pytest.fixture
 async def started(request: pytest.FixtureRequest) -> AsyncIterator[tuple[Machine, Emitter]]:
     target = {"name": "nest", "transport": "tcp-server", "port": 0, **getattr(request, "param", {})}
-    sink = CopydataSink(VariableTree([mapping(target)]))
+    sink = copydata_sink(mapping(target))
     emitter = sink.emitters[0]
     async with sink:
         task = asyncio.create_task(emitter.emit(emitter.subscription))

@@ -9,9 +9,10 @@ import pytest
 
 from gateway.codecs.copydata import FrameDecoder, Layout, decode_lpdata
 from gateway.model.sample import Sample, utcnow
+from gateway.model.tree import VariableTree
 from gateway.sinks.copydata.emitter import target_layout, target_nodes
 from gateway.sinks.copydata.encoder import TargetEncoder
-from tests.unit.sinks.copydata.helpers import ingest, machine
+from tests.unit.sinks.copydata.helpers import ingest, mapping
 
 VALUES = {
     "Axes/X/Position": 1234.5,
@@ -27,9 +28,10 @@ VALUES = {
 
 
 def encoder_for(layout: Layout | None = None, **target: object):  # type: ignore[no-untyped-def]
-    m = machine({"name": "nest", "transport": "tcp-server", **target})
-    t = m.mapping.copydata.targets[0]  # type: ignore[union-attr]
-    return m, TargetEncoder("m1/nest", target_nodes(m, t), layout or target_layout(t))
+    mp = mapping({"name": "nest", "transport": "tcp-server", **target})
+    m = VariableTree([mp.definition()]).machines["m1"]
+    t = mp.copydata.targets[0]  # type: ignore[union-attr]
+    return m, TargetEncoder("m1/nest", target_nodes(m, mp, t), layout or target_layout(t))
 
 
 def decoded(encoder: TargetEncoder, frames: list[tuple[int, bytes]]) -> dict[str, object]:

@@ -15,10 +15,9 @@ from tests.unit.sinks.copydata.helpers import RecordingWriter, mapping
 
 
 def setup(accept_writes: bool) -> tuple[Machine, Emitter, RecordingWriter]:
-    tree = VariableTree(
-        [mapping({"name": "nest", "transport": "tcp-server", "accept_writes": accept_writes})]
-    )
-    sink = CopydataSink(tree)
+    m = mapping({"name": "nest", "transport": "tcp-server", "accept_writes": accept_writes})
+    tree = VariableTree([m.definition()])
+    sink = CopydataSink(tree, {m.machine: m})
     machine = tree.machines["m1"]
     writer = RecordingWriter()
     machine.writer = writer

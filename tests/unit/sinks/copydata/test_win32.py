@@ -20,10 +20,8 @@ from gateway.codecs.copydata import (
     pack_copydatastruct,
 )
 from gateway.errors import SinkError
-from gateway.model.tree import VariableTree
 from gateway.sinks.copydata import win32_api as api
 from gateway.sinks.copydata.emitter import Emitter
-from gateway.sinks.copydata.sink import CopydataSink
 from gateway.sinks.copydata.win32 import (
     CopydataSender,
     MessageWindow,
@@ -34,7 +32,7 @@ from gateway.sinks.copydata.win32 import (
     read_copydatastruct,
 )
 from tests.unit.sinks.copydata.fake_win32 import ERROR_TIMEOUT, FakeKernel32, FakeUser32
-from tests.unit.sinks.copydata.helpers import ingest, mapping
+from tests.unit.sinks.copydata.helpers import copydata_sink, ingest, mapping
 from tests.waiting import wait_until
 
 # --- layout and signatures: the same numbers on every host ---------------------------------------
@@ -247,7 +245,7 @@ async def win32_target(
 ) -> AsyncIterator[tuple[Emitter, Win32Transport, FakeUser32]]:
     settings = {"name": "nest", "transport": "win32", "window_class": "NestWnd", "max_rate": None,
                 "backoff": {"initial": 0.02, "max": 0.05}, **getattr(request, "param", {})}  # fmt: skip
-    sink = CopydataSink(VariableTree([mapping(settings)]))
+    sink = copydata_sink(mapping(settings))
     emitter = sink.emitters[0]
     user32, kernel32 = os_pair()
     emitter.transport = transport = Win32Transport(
@@ -350,11 +348,8 @@ async def test_real_wm_copydata_round_trip_on_windows() -> None:
         user32, kernel32, MessageWindow(user32, kernel32, on_copydata, title=title, parent=0)
     )
     receiver.start()
-    sink = CopydataSink(
-        VariableTree(
-            [mapping({"name": "nest", "transport": "win32", "window_title": title, "max_rate": None})]
-        )
-    )
+    target = {"name": "nest", "transport": "win32", "window_title": title, "max_rate": None}
+    sink = copydata_sink(mapping(target))
     emitter = sink.emitters[0]
     events = emitter.machine.tree.events.subscribe("test")
     async with sink:

@@ -12,7 +12,7 @@ import pytest
 from gateway.commands.runner import install_commands
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
-from gateway.errors import ArgumentsMissing, BadWriteRequest, Timeout, TooManyArguments
+from gateway.errors import ArgumentsMissing, ConfirmTimeout, MalformedRequest, TooManyArguments
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.commands import (
@@ -23,12 +23,13 @@ from gateway.sinks.mqtt.commands import (
     encode_reply,
     read_body,
 )
+from tests.trees import MappedTree
 from tests.waiting import wait_until
 
 T0 = datetime(2026, 5, 6, tzinfo=timezone.utc)
 
 
-def tree(commands_enabled: bool = True, timeout: float = 2.0) -> VariableTree:
+def tree(commands_enabled: bool = True, timeout: float = 2.0) -> MappedTree:
     mapping = MachineMapping.model_validate({
         "machine": "laser-sim",
         "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
@@ -46,8 +47,8 @@ def tree(commands_enabled: bool = True, timeout: float = 2.0) -> VariableTree:
         },
         "mqtt": MachineMqtt(commands=commands_enabled).model_dump(),
     })
-    t = VariableTree([mapping])
-    install_commands(t)
+    t = MappedTree([mapping])
+    install_commands(t, t.mappings)
     machine = t.machines["laser-sim"]
     machine.ingest(machine.nodes["Program/Name"], "", T0)
     return t
@@ -70,8 +71,8 @@ class Answers(list[tuple[str, dict[str, Any], bytes | None]]):
         self.append((topic, json.loads(payload), correlation))
 
 
-def requests(t: VariableTree, answers: Answers, **cfg: Any) -> CommandRequests:
-    return CommandRequests(t, MqttConfig.model_validate(cfg), answers)
+def requests(t: MappedTree, answers: Answers, **cfg: Any) -> CommandRequests:
+    return CommandRequests(t, MqttConfig.model_validate(cfg), t.mappings, answers)
 
 
 TOPIC = "cnc/laser-sim/commands/select-program"
@@ -89,7 +90,7 @@ def test_bodies_and_arguments() -> None:
     assert read_body(b'{"name": "a.nc", "correlation_id": "c1"}') == {"name": "a.nc", "correlation_id": "c1"}
     for bad, fragment in [(b"\xff", "not UTF-8"), (b"{nope", "malformed JSON"), (b"[1]", "JSON object"),
                           (b"5", "JSON object"), (b"[" * 100_000, "malformed JSON")]:
-        with pytest.raises(BadWriteRequest, match=fragment):
+        with pytest.raises(MalformedRequest, match=fragment):
             read_body(bad)
     method = tree().machines["laser-sim"].methods[("Commands", "select-program")]
     assert arguments(method, {"name": "a.nc", "correlation_id": 7}) == ["a.nc"]
@@ -98,7 +99,7 @@ def test_bodies_and_arguments() -> None:
     with pytest.raises(TooManyArguments, match="does not take 'nmae'"):
         arguments(method, {"nmae": "a.nc"})
     assert correlation_of({"correlation_id": 42}) == 42
-    with pytest.raises(BadWriteRequest):
+    with pytest.raises(MalformedRequest):
         correlation_of({"correlation_id": {"a": 1}})
 
 
@@ -106,7 +107,7 @@ def test_replies_carry_ok_or_error_reason_status_and_duration() -> None:
     ok = json.loads(encode_reply("start", duration_ms=12.34, correlation="c", result="Machine/State is 1"))
     assert ok == {"ok": True, "command": "start", "status": "Good", "reason": "Machine/State is 1",
                   "result": "Machine/State is 1", "duration_ms": 12.3, "correlation_id": "c"}
-    bad = json.loads(encode_reply("start", duration_ms=5001, error=Timeout("no completion")))
+    bad = json.loads(encode_reply("start", duration_ms=5001, error=ConfirmTimeout("no completion")))
     assert bad == {"ok": False, "command": "start", "status": "BadTimeout", "error": "no completion",
                    "reason": "no completion", "duration_ms": 5001}
 
@@ -217,7 +218,7 @@ def test_other_topics_are_not_ours() -> None:
 
 
 def test_no_commands_no_subscription() -> None:
-    t = VariableTree([MachineMapping.model_validate({
+    t = MappedTree([MachineMapping.model_validate({
         "machine": "m", "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
         "variables": [{"path": "A", "source": "ns=2;s=a", "type": "Int16"}],
     })])

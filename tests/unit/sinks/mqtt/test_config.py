@@ -70,8 +70,8 @@ def test_settings_precedence_variable_then_machine_then_gateway() -> None:
             ],
         }
     )
-    tree = VariableTree([mapping])
-    routes = Routes(tree, MqttConfig(qos=1, retain=True, prefix="plant"))
+    tree = VariableTree([mapping.definition()])
+    routes = Routes(tree, MqttConfig(qos=1, retain=True, prefix="plant"), {"m1": mapping})
     r = {n.path: routes.by_node[n] for n in tree.machines["m1"].mapped}
     assert (r["A"].qos, r["A"].retain, r["A"].writable, r["A"].raw) == (2, True, False, False)  # read-only
     assert (r["B"].qos, r["B"].retain, r["B"].writable) == (0, False, True)

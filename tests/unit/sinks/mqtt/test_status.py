@@ -17,7 +17,7 @@ def machine():  # type: ignore[no-untyped-def]
             "variables": [{"path": "A", "source": "a", "type": "Double"}],
         }
     )
-    return VariableTree([mapping]).machines["m1"]
+    return VariableTree([mapping.definition()]).machines["m1"]
 
 
 def test_document_follows_the_connection() -> None:

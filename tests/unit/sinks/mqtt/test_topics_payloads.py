@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gateway.config.mqtt import MqttConfig, VariableMqtt
-from gateway.errors import BadWriteRequest, OutOfRange, TypeMismatch, WriteError
+from gateway.errors import MalformedRequest, OutOfRange, RequestError, TypeMismatch
 from gateway.model.sample import Sample
 from gateway.model.types import TypeSpec
 from gateway.sinks.mqtt.payloads import decode_set, encode_json, encode_raw, encode_result, iso, unit_suffix
@@ -168,15 +168,15 @@ def test_accepted_requests(payload: bytes, spec: TypeSpec, value: object) -> Non
 @pytest.mark.parametrize(
     ("payload", "spec", "error", "fragment"),
     [
-        (b'{"value": 5', U16, BadWriteRequest, "malformed JSON"),
-        (b'{"valeu": 5}', U16, BadWriteRequest, '"value" key'),
-        (b'{"value": 5, "x": 1}', U16, BadWriteRequest, "unknown key 'x'"),
-        (b"", U16, BadWriteRequest, "empty"),
-        (b"\xff\xfe", U16, BadWriteRequest, "not UTF-8"),
+        (b'{"value": 5', U16, MalformedRequest, "malformed JSON"),
+        (b'{"valeu": 5}', U16, MalformedRequest, '"value" key'),
+        (b'{"value": 5, "x": 1}', U16, MalformedRequest, "unknown key 'x'"),
+        (b"", U16, MalformedRequest, "empty"),
+        (b"\xff\xfe", U16, MalformedRequest, "not UTF-8"),
         (b"fast", U16, TypeMismatch, "expected UInt16"),
         (b"70000", U16, OutOfRange, "does not fit UInt16"),
-        (b"[" * 100_000, U16, BadWriteRequest, "cannot read"),
-        (b'{"value": ' + b"[" * 100_000, U16, BadWriteRequest, "nested too deeply"),
+        (b"[" * 100_000, U16, MalformedRequest, "cannot read"),
+        (b'{"value": ' + b"[" * 100_000, U16, MalformedRequest, "nested too deeply"),
         (b"9" * 5000, U16, TypeMismatch, "expected UInt16"),
     ],
 )
@@ -204,7 +204,7 @@ SPECS = [
 def test_arbitrary_bytes_never_raise_anything_but_a_write_error(payload: bytes, spec: TypeSpec) -> None:
     try:
         decode_set(payload, spec)
-    except WriteError as exc:
+    except RequestError as exc:
         assert exc.reason and exc.status.startswith("Bad")
 
 
@@ -220,5 +220,5 @@ def test_arbitrary_bytes_never_raise_anything_but_a_write_error(payload: bytes, 
 def test_arbitrary_json_never_raises_anything_but_a_write_error(doc: object, spec: TypeSpec) -> None:
     try:
         decode_set(json.dumps(doc).encode(), spec)
-    except WriteError:
+    except RequestError:
         pass

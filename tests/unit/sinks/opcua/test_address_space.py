@@ -41,7 +41,7 @@ STATUS_VARIABLES = 6  # Connected, State, LastError, ReconnectCount, LastChange,
 def tree(tmp_path: Path) -> VariableTree:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    return VariableTree([load_mapping(path)])
+    return VariableTree([load_mapping(path).definition()])
 
 
 def by_id(items: list[ua.AddNodesItem]) -> dict[str, ua.AddNodesItem]:

@@ -14,7 +14,8 @@ from gateway.auth.passwords import hash_password
 from gateway.auth.users import UserDirectory
 from gateway.config.loader import load_mapping
 from gateway.model.methods import Method
-from gateway.model.tree import Machine, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableTree
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -44,7 +45,7 @@ async def nothing(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
 def machine(tmp_path: Path) -> Machine:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    tree = VariableTree([load_mapping(path)])
+    tree = VariableTree([load_mapping(path).definition()])
     tree.access.configure(["viewer", "operator", "engineer", "admin"], enabled=True, default_write_role="operator")
     return tree.machines["m1"]
 

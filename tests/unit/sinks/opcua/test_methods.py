@@ -12,7 +12,8 @@ from asyncua import ua
 from gateway.config.loader import load_mapping
 from gateway.errors import InvalidState
 from gateway.model.methods import Argument, Method
-from gateway.model.tree import VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
 from gateway.sinks.opcua.address_space import BASE_OBJECT_TYPE, HAS_COMPONENT, HAS_PROPERTY, AddressSpacePlan
 from gateway.sinks.opcua.methods import call_result, check_inputs, encode_outputs, plan_methods
@@ -48,7 +49,7 @@ METHOD = Method(
 def tree(tmp_path: Path) -> VariableTree:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    tree = VariableTree([load_mapping(path)])
+    tree = VariableTree([load_mapping(path).definition()])
     tree.machines["m1"].add_method(METHOD)
     return tree
 

@@ -8,7 +8,8 @@ from asyncua import ua
 
 from gateway.config.loader import load_mapping
 from gateway.errors import ControllerRefused, ControllerUnavailable
-from gateway.model.tree import VariableNode, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.opcua.values import value_kind
 from gateway.sinks.opcua.writes import precheck, write_node
 
@@ -37,7 +38,7 @@ class Recorder:
 def tree(tmp_path: Path) -> VariableTree:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
-    return VariableTree([load_mapping(path)])
+    return VariableTree([load_mapping(path).definition()])
 
 
 def wv(value: Any, vtype: ua.VariantType, *, attr: int = ua.AttributeIds.Value, status: int = ua.StatusCodes.Good,

@@ -7,7 +7,10 @@ the driver resolves it against the server's namespace array at every connect.
 
 asyncua's own parser silently ignores what it does not understand; this one says
 what is wrong, so a typo turns one variable Bad with a reason instead of
-subscribing to the wrong node. Pure: no I/O, no asyncua.
+subscribing to the wrong node. Pure: no I/O, no asyncua, so that the config
+loader checks every address at load time and the OPC UA source driver
+(gateway/sources/opcua_client.py) resolves them at connect time with the same code.
+Errors are `gateway.errors.AddressError` (a CodecError).
 """
 
 from __future__ import annotations
@@ -18,11 +21,11 @@ import re
 import uuid
 from dataclasses import dataclass
 
+from gateway.errors import AddressError
+
+__all__ = ["AddressError", "OpcUaAddress", "parse_address"]
+
 _ADDRESS_RE = re.compile(r"^(?:ns=(?P<ns>[^;]*);|nsu=(?P<nsu>.+?);)?(?P<kind>[isgb])=(?P<id>.*)$", re.DOTALL)
-
-
-class AddressError(ValueError):
-    """A `source` string that is not a usable OPC UA node id."""
 
 
 @dataclass(frozen=True, slots=True)

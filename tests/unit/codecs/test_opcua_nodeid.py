@@ -2,7 +2,8 @@ import uuid
 
 import pytest
 
-from gateway.sources.opcua_address import AddressError, OpcUaAddress, parse_address
+from gateway.codecs.opcua_nodeid import OpcUaAddress, parse_address
+from gateway.errors import AddressError
 
 
 @pytest.mark.parametrize(

@@ -1,8 +1,10 @@
 """One audit entry, and how values appear in it.
 
-Pure data: the tree builds entries (gateway/model/tree.py), the trail logs and
-stores them (trail.py, store.py), the CLI prints them. Values are kept as short
-JSON text, so a 5 MB program passed to `Programs.Put` cannot bloat the table.
+Pure data, owned by the model: the tree builds an entry for every write and call
+(gateway/model/tree.py) and hands it to `VariableTree.audit_sinks`; the audit
+trail (gateway/audit/trail.py, store.py), which sits above the model, logs and
+stores them, and the CLI prints them. Values are kept as short JSON text, so a
+5 MB program passed to `Programs.Put` cannot bloat the table.
 """
 
 from __future__ import annotations
