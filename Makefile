@@ -50,6 +50,7 @@ bench: $(BENCH_STAMP) system-deps
 
 schema: $(STAMP)
 	$(BIN)/cnc-gateway schema > mappings/mapping.schema.json
+	$(BIN)/cnc-gateway schema --gateway > mappings/gateway.schema.json
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info
