@@ -61,6 +61,7 @@ bench: $(BENCH_STAMP) $(PEER_STAMP) system-deps
 
 schema: $(STAMP)
 	$(BIN)/cnc-gateway schema > mappings/mapping.schema.json
+	$(BIN)/cnc-gateway schema --gateway > mappings/gateway.schema.json
 
 # Regenerates gateway/codecs/sparkplug/sparkplug_b_pb2.py and .pyi from sparkplug_b.proto with protoc as
 # pinned in pyproject.toml (grpcio-tools, extra `proto`); tests/unit/codecs/sparkplug/test_generated.py

@@ -70,19 +70,29 @@ def configure_access(config: Config, tree: VariableTree) -> None:
     """Roles, whether they are enforced, and the roles of callers without a login (gateway/model/access.py)."""
     gw = config.gateway
     access = gw.access
+
+    def door(role: str | None) -> str | None:
+        return access.door_role(role, gw.users, gw.roles)
+
     tree.access.configure(
         gw.roles,
-        enabled=access.is_enabled(gw.users),
+        enabled=access.checks_roles(),  # with or without users: anonymous OPC UA clients get their role
         default_write_role=access.default_write_role,
-        origin_roles={"jobs": access.jobs_role, "copydata": access.copydata_role},
+        origin_roles={"jobs": door(access.jobs_role), "copydata": door(access.copydata_role)},
         mqtt_roles={
-            m.machine: (m.mqtt.writer_role if m.mqtt and m.mqtt.writer_role else access.mqtt_writer_role)
+            m.machine: door(m.mqtt.writer_role if m.mqtt and m.mqtt.writer_role else access.mqtt_writer_role)
             for m in config.machines
         },
     )
-    if tree.access.enabled:
+    if not tree.access.enabled:
+        log.warning("access.enabled is false: no role is checked; every client may change what the mappings "
+                    "allow")
+    elif access.is_enabled(gw.users):
         log.info("access control on: %d user(s), roles %s, anonymous OPC UA logins: %s",
                  len(gw.users), " < ".join(gw.roles), access.anonymous)
+    else:
+        log.info("no users: OPC UA clients are anonymous, with role %s (access.anonymous); writes and commands "
+                 "that mappings open to MQTT or COPYDATA act as %s", access.anonymous, gw.roles[-1])
 
 
 def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None = None) -> list[Sink]:

@@ -53,8 +53,12 @@ def print_config(config: Config, out: TextIO) -> None:
     print(f"OK: {len(config.machines)} machine(s), {sum(len(m.variables) for m in config.machines)} variables", file=out)
     if enabled:
         print(f"access control on: {len(gw.users)} user(s), roles {' < '.join(gw.roles)}", file=out)
+    elif not gw.access.checks_roles():
+        print("access control off (access.enabled: false): no role is checked; anonymous OPC UA clients may "
+              "change what the mappings allow", file=out)
     else:
-        print("access control off (no users in the gateway file): roles are not enforced", file=out)
+        print(f"no users: OPC UA clients are anonymous, with role {gw.access.anonymous} (access.anonymous); "
+              f"writes and commands the mappings open to MQTT or COPYDATA act as {gw.roles[-1]}", file=out)
 
 
 def print_tree(mapping: MachineMapping, out: TextIO, default_role: str | None = None) -> None:

@@ -1,9 +1,10 @@
 """`cnc-gateway demo` (what `make demo` runs): the simulator, the laser-sim mapping, live values.
 
 The simulator runs in-process unless one is already listening on its port, in
-which case the demo uses that one. A small driver keeps a program running by
-writing the simulator's command variables through the gateway's own write path,
-so the demo also shows that writes reach the controller. Pressing Enter (or
+which case the demo uses that one. A small driver (demo_driver.py) keeps a program running
+by writing the simulator's command variables through the gateway's own write path,
+so the demo also shows that writes reach the controller; it steps aside while
+someone else commands the machine. Pressing Enter (or
 sending SIGUSR1) stops and restarts the in-process simulator, to rehearse a
 controller outage: values turn Bad within seconds and Good again after.
 """
@@ -18,33 +19,29 @@ import os
 import signal
 import socket
 import sys
-from collections.abc import Callable
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
 from gateway.cli.check import report_config_error
+from gateway.cli.demo_driver import keep_program_running
 from gateway.config.access import AccessConfig, UserConfig
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
-from gateway.errors import ConfigError, RequestError, SinkError
+from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
-from gateway.model.context import WriteContext
-from gateway.model.tree import Machine
 
 log = logging.getLogger("gateway.demo")
 
-DEMO_PROGRAM = "demo.nc"
 DEMO_INBOX_USER = "nesting"
 DEMO_INBOX_PASSWORD = "nesting"  # a demo-only default, printed in the banner
 DEMO_INBOX_PASSWORD_ENV = "CNC_DEMO_INBOX_PASSWORD"
 DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the role of its name
 DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
-STATE_IDLE, STATE_ALARM = 0, 3
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -259,28 +256,6 @@ def _install_toggle(toggle: asyncio.Event) -> None:
 
         with contextlib.suppress(NotImplementedError, OSError, ValueError):
             loop.add_reader(sys.stdin, on_input)
-
-
-async def keep_program_running(machine: Machine, busy: Callable[[], bool] = lambda: False) -> None:
-    """Select and start the demo program whenever the machine is idle (and no job wants it); reset alarms."""
-    ctx = WriteContext("demo", "demo", role="operator")  # selects and starts programs, as an operator would
-    state = machine.nodes["Machine/State"]
-    name = machine.nodes["Program/Name"]
-    while True:
-        await asyncio.sleep(1.0)
-        if not machine.status.is_connected or not state.sample.good:
-            continue
-        try:
-            if state.sample.value == STATE_ALARM:
-                log.info("demo: machine in alarm, resetting")
-                await machine.write("Control/Reset", True, ctx)
-            elif state.sample.value == STATE_IDLE and not busy():
-                if name.sample.value != DEMO_PROGRAM:
-                    await machine.write("Control/SelectProgram", DEMO_PROGRAM, ctx)
-                await machine.write("Control/Start", True, ctx)
-                log.info("demo: started %s", DEMO_PROGRAM)
-        except RequestError as exc:
-            log.info("demo: %s (%s); will retry", exc.reason, exc.status)
 
 
 def print_banner(

@@ -5,13 +5,20 @@ roles: [viewer, operator, engineer, admin]      # lowest first; insert your own
 users:
   - {name: olga, password_hash: "scrypt$…", role: operator}   # cnc-gateway hash-password
 access:
-  enabled: auto              # on as soon as users are configured
-  anonymous: viewer          # a role, or refuse
+  enabled: auto              # logins as soon as users are configured; false: no role is checked at all
+  anonymous: viewer          # the role of OPC UA clients without credentials, users or not; or refuse
   default_write_role: operator
   mqtt_writer_role: null     # role of MQTT /set and command requests (a machine's mqtt.writer_role overrides)
   copydata_role: null        # role of COPYDATA accept_writes
   jobs_role: operator        # role of the job queue's auto-start writes
 ```
+
+Roles are checked with or without users, so anonymous OPC UA clients only read
+unless the gateway file gives them a role that may write (`anonymous: operator`),
+or turns the checks off (`enabled: false`); the gateway warns at start-up about
+what that opens. Without users (and `enabled: auto`), the doors a mapping opens
+itself (`mqtt.writable`/`commands`, COPYDATA `accept_writes`, the jobs' auto-start)
+act with their role, or with the highest role when none is set (`door_role`).
 
 Role names are checked here against `roles`; the mapping files' roles are
 checked against them by the loader.
@@ -93,10 +100,17 @@ class AccessConfig(Strict):
     """Whether roles are enforced, and the roles of callers that have no login of their own."""
 
     enabled: bool | Literal["auto"] = Field(
-        default="auto", description="auto: on as soon as users are configured; true or false to force it"
+        default="auto",
+        description="auto: logins and every role as soon as users are configured (without users, anonymous "
+        "clients still get the anonymous role, and MQTT/COPYDATA writes the mapping opens act with the "
+        "highest role unless their role is set); true: as with users; false: no role is checked, anonymous "
+        "OPC UA clients may write whatever the mapping allows (warned at start-up)",
     )
     anonymous: str = Field(
-        default="viewer", description="Role of OPC UA clients without credentials, or 'refuse'"
+        default="viewer",
+        description="Role of OPC UA clients without credentials, with or without users, or 'refuse'. "
+        "viewer reads only; a role that may write opens those writes to anyone who reaches the endpoint "
+        "(warned at start-up)",
     )
     default_write_role: str = Field(
         default="operator", description="Role needed to write a variable whose mapping names none"
@@ -128,7 +142,20 @@ class AccessConfig(Strict):
         return None if value is None else check_role_name(value)
 
     def is_enabled(self, users: Sequence[UserConfig]) -> bool:
+        """Whether logins govern access: users are configured, or `enabled: true`."""
         return bool(users) if self.enabled == "auto" else bool(self.enabled)
+
+    def checks_roles(self) -> bool:
+        """Whether roles are checked at all: always, unless `enabled: false` turns them off."""
+        return self.enabled is not False
+
+    def door_role(self, role: str | None, users: Sequence[UserConfig], roles: Sequence[str]) -> str | None:
+        """The role of a door nobody logs in at (MQTT writers, COPYDATA replies, the jobs' auto-start):
+        its own; without one, while logins do not govern access, the highest (the mapping's own switch
+        opened that door); else none, and the door is refused."""
+        if role is not None or self.is_enabled(users) or not roles:
+            return role
+        return roles[-1]
 
 
 def check_roles(roles: list[str]) -> list[str]:

@@ -346,6 +346,7 @@ class MachineMapping(Strict):
             description=self.description,
             write_role=self.defaults.write_role,
             endpoint=self.driver.endpoint,
+            acknowledge_role=self.alarms.acknowledge_role if self.alarms is not None else None,
         )
 
     def sampling_interval(self, var: VariableSpec) -> float:

@@ -31,7 +31,7 @@ from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Self
 
-from gateway.config.jobs import InboxConfig
+from gateway.config.jobs import InboxConfig, machines_allowed
 from gateway.errors import SinkError
 from gateway.jobs.accounts import Accounts
 from gateway.jobs.inbox_server import STAGING, CheckUpload, InboxServer, Submit, Upload, UploadReply
@@ -114,6 +114,11 @@ class Inbox:
         self._started = True
         self.port = self._server.address[1]
         log.info("FTP inbox listening on %s (folders: %s)", self.url, ", ".join(self.machines))
+        if self.config.anonymous:  # an explicit setting; say what it opens
+            open_to = [m for m in self.machines if machines_allowed(self.config.anonymous_machines, m)]
+            log.warning("FTP inbox: anonymous logins (any password) may submit programs for %s: validated, "
+                        "queued, delivered, and started where the mapping has jobs.auto (inbox.anonymous)",
+                        ", ".join(open_to) or "no machine")
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:

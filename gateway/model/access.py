@@ -5,8 +5,10 @@ file may insert its own). A variable, command or operation names the lowest role
 that may use it; a caller's role comes from its sink (the OPC UA session's user,
 the MQTT writers' role of the machine, ...) through `WriteContext.role`.
 
-While access control is off (the default, and what a mapping run on its own
-gets), every caller may do what the mapping allows, as before.
+Roles are checked with or without users (gateway/app.py configures the
+policy): anonymous OPC UA clients act with `access.anonymous`, viewer by
+default. Only `access.enabled: false` turns the checks off (`enabled`), and
+a policy nobody configured (unit tests of the tree) checks nothing.
 
 The gateway's own writers have no login: the job queue's auto-start (origin
 "jobs") and COPYDATA replies ("copydata") act with the role configured for

@@ -70,7 +70,8 @@ class MachineDefinition:
 
     `write_role` is the lowest role that may write a variable whose definition
     names none (None: the gateway's default). `endpoint` is the controller's
-    address as users know it, shown as `Status/Endpoint`.
+    address as users know it, shown as `Status/Endpoint`. `acknowledge_role` is the
+    lowest role that may acknowledge and confirm its alarms (None: it has no alarms).
     """
 
     name: str
@@ -78,3 +79,4 @@ class MachineDefinition:
     description: str = ""
     write_role: str | None = None
     endpoint: str = ""
+    acknowledge_role: str | None = None

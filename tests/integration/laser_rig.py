@@ -53,6 +53,8 @@ def laser_config(state_dir: Path, mapping: MachineMapping, gw_port: int, mqtt: M
         "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"},
         "state_dir": str(state_dir),
         "inbox": {"enabled": False},
+        # These tests command the machine as anonymous OPC UA clients: the gateway file opens that explicitly.
+        "access": {"anonymous": "operator"},
     }).model_copy(update={"mqtt": mqtt})
     return Config(gateway, (mapping,), state_dir.parent)
 

@@ -116,7 +116,10 @@ async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_
     override = next(line for line in lines if line.strip().startswith("Override"))
     assert override.split()[1:4] == ["UInt16", "%", "readwrite"]
     assert "copydata 6" in override and "role" not in override  # no users: roles are not shown on variables
-    assert lines[-1] == "access control off (no users in the gateway file): roles are not enforced"
+    assert lines[-1] == (
+        "no users: OPC UA clients are anonymous, with role viewer (access.anonymous); "
+        "writes and commands the mappings open to MQTT or COPYDATA act as admin"
+    )
     command = next(line for line in lines if line.strip().startswith("select-program"))
     assert command.split() == ["select-program(name:", "String)", "operator", "Machine/State", "is", "Idle", "or", "Alarm"]
     assert next(line for line in lines if line.strip().startswith("stop ")).split() == ["stop", "operator", "any", "state"]

@@ -17,6 +17,7 @@ import yaml
 from asyncua import Client, ua
 
 from gateway.app import Gateway
+from gateway.config.access import AccessConfig
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
@@ -66,6 +67,7 @@ def gateway_config(tmp_path: Path, sim_port: int, gw_port: int, mapping_text: st
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"),
         state_dir=str(tmp_path / "state"),
         inbox=InboxConfig(port=free_port()),
+        access=AccessConfig(anonymous="operator"),  # the client writes anonymously: the gateway file opens it
     )
     return Config(gateway, (mapping,), tmp_path, (mapping_file,))
 

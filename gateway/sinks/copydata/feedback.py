@@ -27,6 +27,7 @@ from gateway.codecs.copydata import CopydataError, Frame, Layout, VariableTable
 from gateway.errors import RequestError
 from gateway.model.events import Event
 from gateway.model.context import WriteContext
+from gateway.model.reach import reach
 from gateway.model.tree import Machine, VariableNode
 from gateway.sinks.copydata.status import CopydataStatus
 from gateway.sinks.copydata.throttle import LogThrottle
@@ -76,6 +77,20 @@ class Feedback:
         self.received = 0
         self.written = 0
         self.refused = 0
+
+    def report_writers(self) -> None:
+        """Say at start-up what replies may write, with which role; or that they are refused for want of one."""
+        if not self.accept_writes:
+            return
+        access = self.machine.tree.access
+        role = access.role_of(WriteContext(ORIGIN))
+        if access.enabled and role is None:
+            log.info("copydata %s: accept_writes is on, but its writes are refused: they have no role "
+                     "(the gateway file's access.copydata_role)", self.name)
+            return
+        opened = reach(self.machine, role, variables=self.by_id.values(), objects=(), alarms=False)
+        log.info("copydata %s: replies act as %s and may %s", self.name,
+                 role or "no role (access.enabled is false)", opened.what())
 
     async def handle(self, frame: Frame, peer: str) -> dict[str, Any]:
         """Decode, (write,) publish; returns the published document."""

@@ -74,6 +74,8 @@ class CopydataSink:
             await self._stack.aclose()
             raise
         log.info("COPYDATA: %d target(s): %s", len(self.emitters), self.endpoint)
+        for emitter in self.emitters:
+            emitter.feedback.report_writers()
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:

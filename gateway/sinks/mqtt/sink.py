@@ -46,7 +46,7 @@ from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
 from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
 from gateway.sinks.mqtt.commands import CommandRequests
-from gateway.sinks.mqtt.writes import WriteBack
+from gateway.sinks.mqtt.writes import WriteBack, report_writers
 
 log = logging.getLogger(__name__)
 
@@ -178,6 +178,7 @@ class MqttSink:
             "MQTT: %d topics under %s/ for %s; broker %s",
             len(self.routes.by_topic), self.config.prefix, ", ".join(self.tree.machines), self.endpoint,
         )  # fmt: skip
+        report_writers(self.tree, self.routes)
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:

@@ -8,10 +8,11 @@ writes to one machine stay in order, a slow controller holds up only its own
 machine, and a flood cannot queue more than `max_pending_writes` per machine.
 Refusals are counted and logged with a quota, so junk cannot flood the log either.
 
-While access control is on, requests act with the machine's MQTT writers' role
-(`mqtt.writer_role` in the mapping, else the gateway's `access.mqtt_writer_role`;
-none: refused with BadUserAccessDenied): the broker authenticates the clients,
-the gateway authorises the topic. Refusals of a known variable are audited.
+Requests act with the machine's MQTT writers' role (`mqtt.writer_role` in the
+mapping, else the gateway's `access.mqtt_writer_role`; without users and
+without one, the highest role; with users and without one: refused with
+BadUserAccessDenied): the broker authenticates the clients, the gateway
+authorises the topic. Refusals of a known variable are audited.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from gateway.errors import (
     WriteError,
 )
 from gateway.model.context import WriteContext
+from gateway.model.reach import reach
 from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.payloads import decode_set, encode_result
@@ -38,6 +40,27 @@ from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.topics import result_topic, target_of_set, valid_publish_topic
 
 log = logging.getLogger(__name__)
+
+
+def report_writers(tree: VariableTree, routes: Routes) -> None:
+    """Say at start-up, per machine, which `/set` writes and commands the mapping opens to MQTT and the
+    role they act with; or that they are refused for want of a role."""
+    access = tree.access
+    for machine in tree.machines.values():
+        nodes = [r.node for r in routes.by_node.values() if r.writable and r.node.machine is machine]
+        settings = machine.mapping.mqtt
+        objects = {"Commands"} if settings is not None and settings.commands else set()
+        if not nodes and not objects:
+            continue
+        role = access.mqtt_role(machine.name)
+        if access.enabled and role is None:
+            log.info("MQTT: %s: writes and commands enabled in the mapping are refused: they have no role "
+                     "(mapping: mqtt.writer_role, or the gateway file's access.mqtt_writer_role)", machine.name)
+            continue
+        opened = reach(machine, role, variables=nodes, objects=objects, alarms=False)
+        log.info("MQTT: requests to %s act as %s and may %s", machine.name,
+                 role or "no role (access.enabled is false)", opened.what())
+
 
 # (topic to answer on, payload, MQTT v5 correlation data)
 Answer = Callable[[str, bytes, "bytes | None"], None]

@@ -16,6 +16,8 @@ role travels beside it in `SessionUser.role_name`.
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
@@ -25,8 +27,11 @@ from asyncua.crypto.permission_rules import User, UserRole
 from gateway.auth.users import UserDirectory
 from gateway.model.access import AccessPolicy
 from gateway.model.methods import Method
-from gateway.model.tree import VariableNode
+from gateway.model.reach import reach
+from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.opcua.address_space import READ, access_level
+
+log = logging.getLogger("gateway.sinks.opcua")
 
 # "host" of the client whose ActivateSession is being served (set by the server module).
 CLIENT_ADDRESS: ContextVar[str] = ContextVar("opcua_client_address", default="unknown")
@@ -59,7 +64,7 @@ class GatewayUserManager:
 
 
 def session_role(user: Any) -> str | None:
-    """The gateway role of a session's user (None: anonymous with access control off, or unknown)."""
+    """The gateway role of a session's user (None: unknown, e.g. a sink built without a user directory)."""
     role = getattr(user, "role_name", None)
     return role if isinstance(role, str) else None
 
@@ -83,3 +88,25 @@ def address_of(peer: Any) -> str:
     if isinstance(peer, (tuple, list)) and peer:
         return str(peer[0])
     return str(peer) if peer else "unknown"
+
+
+def report_anonymous(
+    users: UserDirectory | None, tree: VariableTree, endpoint: str, endpoints: Sequence[str]
+) -> None:
+    """Say at start-up what clients without credentials may change. Nothing, by default (they are
+    viewers); a gateway file that gives them more gets a WARNING naming their role, the endpoints and,
+    per machine, the writes, calls and alarm acknowledgements that are open to anyone reaching them."""
+    if users is not None and not users.anonymous_allowed:
+        log.info("OPC UA: anonymous logins are refused (access.anonymous: refuse)")
+        return
+    role = users.anonymous_role if users is not None else None
+    policy = tree.access
+    where = f"{endpoint} (every endpoint: {', '.join(endpoints)})"
+    open_ = [r for r in (reach(m, role) for m in tree.machines.values()) if r]
+    if not open_:
+        log.info("OPC UA: anonymous clients on %s act as %s: they read, and change nothing", where, role)
+        return
+    why = ("access.enabled is false: no role is checked" if not policy.enabled
+           else f"access.anonymous gives them role {role!r}")
+    log.warning("OPC UA: anonymous clients, without user name or password, on %s may change machines "
+                "(%s): %s", where, why, " | ".join(r.describe() for r in open_))

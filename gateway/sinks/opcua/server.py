@@ -52,6 +52,7 @@ from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
     address_of,
+    report_anonymous,
     session_role,
     user_access_level,
     user_executable,
@@ -261,7 +262,7 @@ class OpcUaSink:
         self.config = config
         self.state_dir = state_dir  # pki/ (own certificate, trusted/, rejected/) lives here
         self.pki = Pki(state_dir / "pki")
-        self.users = users  # None: anyone, anonymously (no users configured, access control off)
+        self.users = users  # None: asyncua's own logins, without roles (tests of the sink alone)
         self.extensions = tuple(extensions)  # alarm conditions …: installed with the address space
         self.endpoint: str = config.endpoint
         self.namespace_index: int = -1
@@ -391,6 +392,7 @@ class OpcUaSink:
             self.endpoint, len(self._vars), self.config.namespace, self.namespace_index,
             time.perf_counter() - started,
         )
+        report_anonymous(self.users, self.tree, self.endpoint, self.config.endpoints)
         return self
 
     async def _start(self) -> None:

@@ -85,7 +85,7 @@ async def test_start_in_alarm_is_refused_with_the_state(tmp_path: Path) -> None:
             await rig.command(client, "start")
         assert bad(info) == "BadInvalidState"
         with pytest.raises(InvalidState) as reason:  # the same call, from inside: what the refusal says
-            await rig.machine.call_method(rig.machine.methods[("Commands", "start")], [], WriteContext("test"))
+            await rig.machine.call_method(rig.machine.methods[("Commands", "start")], [], WriteContext("test", role="operator"))
         assert reason.value.reason == (
             "start is not allowed while Machine/State is 3 (Alarm); it needs Machine/State = 0 (Idle)"
         )

@@ -70,7 +70,7 @@ class Rig:
 
     async def start_program(self, name: str = "demo.nc") -> None:
         await self.connected()
-        ctx = WriteContext("test")
+        ctx = WriteContext("test", role="operator")
         await self.machine.write("Control/SelectProgram", name, ctx)
         await wait_until(lambda: self.value("Program/Name") == name, message=f"{name} selected")
         await self.machine.write("Control/Start", True, ctx)

@@ -266,8 +266,11 @@ async def test_a_long_upload_is_not_an_idle_session(store: Store, harness) -> No
         await h.wait_state(1, S.DELIVERED)
 
 
-async def test_anonymous_login_when_enabled(store: Store, harness) -> None:
+async def test_anonymous_login_when_enabled(store: Store, harness, caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="gateway")
     async with harness([mapping_text("laser", store.port)], accounts=[], anonymous=True) as h:
+        assert any(r.levelno == logging.WARNING and "anonymous logins (any password) may submit programs for laser"
+                   in r.getMessage() for r in caplog.records), "start-up says the inbox is open to anyone"
         reply = await h.stor("laser", "anon.nc", GOOD, user="anonymous", password="guest@")
         assert reply.startswith("226 J000001")
         assert h.job(1).user == "anonymous"

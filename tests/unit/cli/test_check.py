@@ -95,7 +95,18 @@ def test_without_users_no_write_roles_are_shown_and_the_summary_says_so() -> Non
     assert line(lines, "Override")[1:] == ["UInt16", "-", "readwrite", "copydata", "1"]
     assert line(lines, "stop")[1] == "admin"  # a command's own role is part of its definition
     assert "accepts writes" in " ".join(line(lines, "nest")) and "role" not in " ".join(line(lines, "nest"))
-    assert lines[-1] == "access control off (no users in the gateway file): roles are not enforced"
+    assert lines[-1] == (
+        "no users: OPC UA clients are anonymous, with role viewer (access.anonymous); "
+        "writes and commands the mappings open to MQTT or COPYDATA act as admin"
+    )
+
+
+def test_with_access_off_the_summary_says_anonymous_clients_may_change_the_machines() -> None:
+    lines = check_output({"access": {"enabled": False}})
+    assert lines[-1] == (
+        "access control off (access.enabled: false): no role is checked; "
+        "anonymous OPC UA clients may change what the mappings allow"
+    )
 
 
 def test_id_ranges_join_runs() -> None:
