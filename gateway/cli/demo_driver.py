@@ -27,10 +27,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from gateway.audit.entry import AuditEntry
-from gateway.errors import WriteError
+from gateway.errors import RequestError
+from gateway.model.audit import AuditEntry
 from gateway.model.sample import Sample, utcnow
-from gateway.model.tree import Machine, VariableNode, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableNode
 
 log = logging.getLogger("gateway.demo")
 
@@ -179,7 +180,7 @@ class DemoDriver:
                 if await self._write("Control/Start", True):
                     log.info("demo: started %s", DEMO_PROGRAM)
                 self._state_since = time.monotonic()  # one attempt per settle period
-        except WriteError as exc:
+        except RequestError as exc:
             self._starting = 0.0
             self._selecting = None
             self._state_since = time.monotonic()

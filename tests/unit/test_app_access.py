@@ -18,7 +18,9 @@ from gateway.config.loader import Config, load_mapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
 from gateway.errors import AccessDenied
 from gateway.model.reach import reach
-from gateway.model.tree import VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import VariableTree
+from tests.trees import MappedTree
 from gateway.sinks.mqtt.routes import Routes
 from gateway.sinks.mqtt.writes import report_writers
 
@@ -37,13 +39,13 @@ class Store:
         self.written.append((node.path, raw))
 
 
-def tree_for(gateway: dict[str, Any] | None = None, mqtt: MachineMqtt | None = None) -> tuple[VariableTree, Store]:
+def tree_for(gateway: dict[str, Any] | None = None, mqtt: MachineMqtt | None = None) -> tuple[MappedTree, Store]:
     mapping = load_mapping(ROOT / "mappings" / "laser-sim.yaml", environ={})
     mapping = mapping.model_copy(update={"mqtt": mqtt, "jobs": None})
     config = Config(GatewayConfig.model_validate(gateway or {}), (mapping,), ROOT)
-    tree = VariableTree(config.machines)
+    tree = MappedTree(config.mappings.values())
     configure_access(config, tree)
-    install_commands(tree)
+    install_commands(tree, config.mappings)
     store = Store()
     tree.machines[MACHINE].writer = store
     return tree, store
@@ -104,12 +106,12 @@ def test_reach_lists_what_a_role_may_change() -> None:
 def test_mqtt_says_at_start_up_what_its_requests_may_change_and_as_whom(caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.INFO, logger="gateway")
     tree, _ = tree_for(mqtt=MachineMqtt(writable=True, commands=True))
-    report_writers(tree, Routes(tree, MqttConfig()))
+    report_writers(tree, Routes(tree, MqttConfig(), tree.mappings), tree.mappings)
     [line] = [r.getMessage() for r in caplog.records if r.getMessage().startswith("MQTT: requests")]
     assert line.startswith("MQTT: requests to laser-sim act as admin and may write Feed/Override, ")
     assert "Machine/Mode" in line and "; call Commands.start, " in line and "Commands.select-program" in line
 
     caplog.clear()
     tree, _ = tree_for({"users": USERS}, mqtt=MachineMqtt(writable=True))
-    report_writers(tree, Routes(tree, MqttConfig()))
+    report_writers(tree, Routes(tree, MqttConfig(), tree.mappings), tree.mappings)
     assert any("are refused: they have no role" in r.getMessage() for r in caplog.records)

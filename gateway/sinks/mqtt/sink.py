@@ -83,6 +83,7 @@ class MqttSink:
         self._dropped_nodes: dict[str, VariableNode] = {}
         for machine in tree.machines.values():
             self._add_status_variables(machine)
+        self.mappings = mappings
         try:
             self.routes = Routes(tree, config, mappings)
         except TopicClash as exc:
@@ -178,7 +179,7 @@ class MqttSink:
             "MQTT: %d topics under %s/ for %s; broker %s",
             len(self.routes.by_topic), self.config.prefix, ", ".join(self.tree.machines), self.endpoint,
         )  # fmt: skip
-        report_writers(self.tree, self.routes)
+        report_writers(self.tree, self.routes, self.mappings)
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:

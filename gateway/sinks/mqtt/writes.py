@@ -20,8 +20,9 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
+from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
 from gateway.errors import (
     AccessDenied,
@@ -42,13 +43,14 @@ from gateway.sinks.mqtt.topics import result_topic, target_of_set, valid_publish
 log = logging.getLogger(__name__)
 
 
-def report_writers(tree: VariableTree, routes: Routes) -> None:
+def report_writers(tree: VariableTree, routes: Routes, mappings: Mapping[str, MachineMapping]) -> None:
     """Say at start-up, per machine, which `/set` writes and commands the mapping opens to MQTT and the
     role they act with; or that they are refused for want of a role."""
     access = tree.access
     for machine in tree.machines.values():
         nodes = [r.node for r in routes.by_node.values() if r.writable and r.node.machine is machine]
-        settings = machine.mapping.mqtt
+        mapping = mappings.get(machine.name)
+        settings = mapping.mqtt if mapping is not None else None
         objects = {"Commands"} if settings is not None and settings.commands else set()
         if not nodes and not objects:
             continue

@@ -16,7 +16,9 @@ from gateway.cli.demo_driver import DEMO_PROGRAM, DemoDriver
 from gateway.commands.runner import install_commands
 from gateway.config.mapping import MachineMapping
 from gateway.errors import InvalidState
-from gateway.model.tree import Machine, VariableNode, VariableTree, WriteContext
+from gateway.model.context import WriteContext
+from gateway.model.tree import Machine, VariableNode, VariableTree
+from tests.trees import MappedTree
 from tests.waiting import wait_until
 
 T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
@@ -91,8 +93,8 @@ class Trail:
 
 @asynccontextmanager
 async def running(**options: Any) -> AsyncIterator[tuple[Machine, Controller, DemoDriver, Trail]]:
-    tree = VariableTree([mapping()])
-    install_commands(tree)
+    tree = MappedTree([mapping()])
+    install_commands(tree, tree.mappings)
     machine = tree.machines["m"]
     controller = Controller(machine)
     machine.writer = controller
