@@ -81,7 +81,7 @@ def _run(coro: object) -> int:
 
 
 def handle_list(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
+    from gateway.jobs.delivery.transports.ftp import ProgramStore
 
     cfg = jobs_config(args)
 
@@ -98,7 +98,7 @@ def handle_list(args: argparse.Namespace) -> int:
 
 
 def handle_get(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
+    from gateway.jobs.delivery.transports.ftp import ProgramStore
 
     cfg = jobs_config(args)
 
@@ -118,8 +118,8 @@ def handle_get(args: argparse.Namespace) -> int:
 
 
 def handle_put(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
-    from gateway.jobs.validation import validate_program
+    from gateway.jobs.delivery.transports.ftp import ProgramStore
+    from gateway.jobs.validation.pipeline import validate_program
 
     cfg = jobs_config(args)
     if not args.file.is_file():
@@ -152,7 +152,7 @@ def handle_put(args: argparse.Namespace) -> int:
 
 
 def handle_delete(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
+    from gateway.jobs.delivery.transports.ftp import ProgramStore
 
     cfg = jobs_config(args)
 

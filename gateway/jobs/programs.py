@@ -19,7 +19,7 @@ from gateway.errors import (
     ProgramNotFound,
     WriteError,
 )
-from gateway.jobs.paths import PathRefused, check_file_name
+from gateway.jobs.inbox.paths import PathRefused, check_file_name
 from gateway.model.methods import Argument, Method
 from gateway.model.types import TypeSpec
 

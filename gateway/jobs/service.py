@@ -33,20 +33,20 @@ from typing import Any, Self, TypeVar
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import ConfigError, JobError, SinkError
-from gateway.jobs import compiled
-from gateway.jobs.accounts import Accounts
-from gateway.jobs.autostart import AutoStarter
-from gateway.jobs.controller_ftp import ProgramStore
-from gateway.jobs.delivery import DeliveryWorker
-from gateway.jobs.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
-from gateway.jobs.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
-from gateway.jobs.paths import PathRefused, check_file_name
+from gateway.jobs.delivery.autostart import AutoStarter
+from gateway.jobs.delivery.transports.ftp import ProgramStore
+from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.inbox.accounts import Accounts
+from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
+from gateway.jobs.inbox.paths import PathRefused, check_file_name
 from gateway.jobs.programs import program_methods
-from gateway.jobs.publish import JobPublisher
-from gateway.jobs.queue import Job, JobQueue, JobState
+from gateway.jobs.queue.publish import JobPublisher
+from gateway.jobs.queue.store import Job, JobQueue, JobState
 from gateway.jobs.threads import JobThreads
-from gateway.jobs.upload_check import UploadCheck
-from gateway.jobs.verdict import Verdict
+from gateway.jobs.validation import compiled
+from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
+from gateway.jobs.validation.upload_check import UploadCheck
+from gateway.jobs.validation.verdict import Verdict
 from gateway.model.tree import VariableTree
 
 log = logging.getLogger("gateway.jobs")

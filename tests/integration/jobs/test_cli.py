@@ -14,7 +14,7 @@ import pytest
 
 from gateway.auth.passwords import verify_password
 from gateway.cli.jobs import Progress
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from tests.integration.jobs.conftest import GOOD, PASSWORD, USER, Store, in_thread, mapping_text
 from tests.waiting import free_port
 

@@ -1,0 +1,1 @@
+"""The delivery transports, one module each: how a program reaches a controller."""
