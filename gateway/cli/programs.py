@@ -1,4 +1,4 @@
-"""`cnc-gateway programs list|get|put|delete MACHINE …`: the controller's program store over FTP.
+"""`cnc-gateway programs list|get|put|delete MACHINE …`: the controller's program store (FTP).
 
 The machine's mapping file says where the store is (`jobs.controller`). `put`
 checks the program with the machine's validation rules first (`--no-validate`
@@ -11,13 +11,16 @@ from __future__ import annotations
 import argparse
 import asyncio
 import sys
-import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gateway.cli.check import report_config_error
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import load
 from gateway.errors import ConfigError, DeliveryError
+
+if TYPE_CHECKING:
+    from gateway.jobs.delivery.transport import OpenStore
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -72,6 +75,17 @@ def jobs_config(args: argparse.Namespace) -> JobsConfig:
     raise SystemExit(2)
 
 
+def open_store(args: argparse.Namespace, cfg: JobsConfig) -> OpenStore:
+    """The machine's program store; exits 2 if its delivery transport has none."""
+    from gateway.jobs.delivery.transports import program_store_for
+
+    store = program_store_for(cfg)
+    if store is None:
+        print(f"error: {args.machine}'s controller has no program store to list or change", file=sys.stderr)
+        raise SystemExit(2)
+    return store
+
+
 def _run(coro: object) -> int:
     try:
         return asyncio.run(coro)  # type: ignore[arg-type]
@@ -81,12 +95,11 @@ def _run(coro: object) -> int:
 
 
 def handle_list(args: argparse.Namespace) -> int:
-    from gateway.jobs.delivery.transports.ftp import ProgramStore
-
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
 
     async def main() -> int:
-        async with ProgramStore(cfg.controller) as store:
+        async with store_of() as store:
             files = await store.list()
         for f in files:
             size = "?" if f.size is None else str(f.size)
@@ -98,12 +111,11 @@ def handle_list(args: argparse.Namespace) -> int:
 
 
 def handle_get(args: argparse.Namespace) -> int:
-    from gateway.jobs.delivery.transports.ftp import ProgramStore
-
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
 
     async def main() -> int:
-        async with ProgramStore(cfg.controller) as store:
+        async with store_of() as store:
             data = await store.get(args.name)
         if args.output == "-":
             sys.stdout.buffer.write(data)
@@ -118,10 +130,10 @@ def handle_get(args: argparse.Namespace) -> int:
 
 
 def handle_put(args: argparse.Namespace) -> int:
-    from gateway.jobs.delivery.transports.ftp import ProgramStore
     from gateway.jobs.validation.pipeline import validate_program
 
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
     if not args.file.is_file():
         print(f"error: {args.file}: no such file", file=sys.stderr)
         return 2
@@ -138,10 +150,9 @@ def handle_put(args: argparse.Namespace) -> int:
         program = verdict.program
 
     async def main() -> int:
-        with tempfile.TemporaryDirectory() as scratch:
-            async with ProgramStore(cfg.controller) as store:
-                await store.put_bytes(name, program, Path(scratch) / "program")
-                size = await store.size(name)
+        async with store_of() as store:
+            await store.put(name, program)
+            size = await store.size(name)
         if size != len(program):
             print(f"error: the controller reports {size} bytes for {name}, expected {len(program)}", file=sys.stderr)
             return 1
@@ -152,12 +163,11 @@ def handle_put(args: argparse.Namespace) -> int:
 
 
 def handle_delete(args: argparse.Namespace) -> int:
-    from gateway.jobs.delivery.transports.ftp import ProgramStore
-
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
 
     async def main() -> int:
-        async with ProgramStore(cfg.controller) as store:
+        async with store_of() as store:
             await store.delete(args.name)
         print(f"deleted {args.name} from {store.address}")
         return 0

@@ -1,4 +1,4 @@
-"""Delivery: one worker per machine moves its queue to the controller's program store.
+"""Delivery: one worker per machine moves its queue to the controller, through its delivery transport.
 
 Machines deliver in parallel; each machine's jobs go strictly one at a time, in
 queue order (priority first, then FIFO), because sheets are cut in sequence.
@@ -6,11 +6,14 @@ A failed attempt waits with exponential backoff; after `max_attempts` the job
 is FAILED (dead letter) and the next one goes.
 
 Idempotent after a crash. A job found in SENDING when the gateway starts may or
-may not have reached the controller: the worker first looks on the controller
-for the program under its name with the expected size, and downloads it back
-to compare the SHA-256. Found and equal: DELIVERED, without sending it again
+may not have reached the controller: the worker asks the transport whether the
+controller holds it already (FTP: the name, the expected size, and the SHA-256
+of the program downloaded back). Found: DELIVERED, without sending it again
 (and without auto-starting it: nobody can know whether it already ran).
-Otherwise any temporary upload is removed and the job is sent again.
+Otherwise what the interrupted delivery left is removed and the job is sent again.
+
+How a program travels is the transport's business (transport.py); this module
+knows jobs, attempts, backoff and auto-start, and nothing of FTP.
 """
 
 from __future__ import annotations
@@ -19,14 +22,13 @@ import asyncio
 import logging
 import time
 from collections.abc import Awaitable, Callable
-from contextlib import AbstractAsyncContextManager
 from pathlib import Path
 from typing import Any, Protocol
 
 from gateway.config.jobs import JobsConfig
 from gateway.errors import DeliveryError, JobError
 from gateway.jobs.delivery.autostart import AutoStarter
-from gateway.jobs.delivery.transports.ftp import ProgramStore
+from gateway.jobs.delivery.transport import DeliveryTransport, Program, Progress
 from gateway.jobs.queue.publish import JobPublisher
 from gateway.jobs.queue.store import Job, JobQueue, JobState
 
@@ -41,7 +43,6 @@ class Spool(Protocol):
     def discard(self, job: Job) -> None: ...
 
 
-StoreFactory = Callable[[], AbstractAsyncContextManager[ProgramStore]]
 # Runs a JobQueue method off the event loop (and tells the publisher something may have changed).
 QueueCall = Callable[..., Awaitable[Any]]
 
@@ -57,9 +58,9 @@ class DeliveryWorker:
         spool: Spool,
         publisher: JobPublisher,
         run: QueueCall,
+        transport: DeliveryTransport,
         *,
         autostart: AutoStarter | None = None,
-        store: StoreFactory | None = None,
     ) -> None:
         self.machine = machine
         self.config = config
@@ -67,8 +68,8 @@ class DeliveryWorker:
         self.spool = spool
         self.publisher = publisher
         self._q = run
+        self.transport = transport
         self.autostart = autostart
-        self.store: StoreFactory = store or (lambda: ProgramStore(config.controller))
         self._wake = asyncio.Event()
 
     def wake(self) -> None:
@@ -105,27 +106,27 @@ class DeliveryWorker:
             job = await self._q(self.queue.start_sending, job.seq)
         except JobError:  # cancelled or changed from the CLI a moment ago
             return
-        name = job.filename
-        source = self.spool.program(job)
-        total = job.program_size or 0
+        program = self.program(job)
+        name, total = program.name, program.size
         started = time.monotonic()
         log.info("%s: sending %s (%s, %d bytes), attempt %d", self.machine, job.id, name, total, job.attempts)
         self.publisher.progress(job, 0, total)
+
+        def report(progress: Progress) -> None:
+            self.publisher.progress(job, progress.sent, total)
+
         try:
-            if not source.is_file():
-                raise DeliveryError(f"the program file {source} is missing from the spool", permanent=True)
-            async with self.store() as store:
-                await store.upload(name, source, progress=lambda sent: self.publisher.progress(job, sent, total))
-                await self._verify(store, job, name)
+            if not program.path.is_file():
+                missing = f"the program file {program.path} is missing from the spool"
+                raise DeliveryError(missing, permanent=True)
+            where = await self.transport.deliver(program, report)
         except DeliveryError as exc:
             await self._failed(job, exc)
             return
         finally:
             self.publisher.forget(job)
         seconds = time.monotonic() - started
-        job = await self._q(
-            self.queue.delivered, job.seq, name, f"delivered to {self.config.controller.folder}/{name} in {seconds:.1f} s"
-        )
+        job = await self._q(self.queue.delivered, job.seq, name, f"delivered to {where} in {seconds:.1f} s")
         log.info("%s: %s delivered as %s", self.machine, job.id, name)
         self.spool.discard(job)
         if self.autostart is not None:
@@ -133,17 +134,10 @@ class DeliveryWorker:
             log.info("%s: %s %s", self.machine, job.id, outcome)
             await self._q(self.queue.note, job.seq, f"{job.reason}; {outcome}")
 
-    async def _verify(self, store: ProgramStore, job: Job, name: str) -> None:
-        expected = job.program_size
-        if self.config.verify == "hash":
-            digest = await store.sha256(name)
-            if digest != job.program_sha256:
-                raise DeliveryError(f"verification failed: {name} on the controller has different content")
-            return
-        size = await store.size(name)
-        if size != expected:
-            found = "no such file" if size is None else f"{size} bytes"
-            raise DeliveryError(f"verification failed: {name} on the controller has {found}, expected {expected}")
+    def program(self, job: Job) -> Program:
+        """What the transport needs of a queued job."""
+        size, digest = job.program_size or 0, job.program_sha256 or ""
+        return Program(job.filename, self.spool.program(job), size, digest, job.program_name)
 
     async def _failed(self, job: Job, exc: DeliveryError) -> None:
         attempts, limit = job.attempts, self.config.max_attempts
@@ -164,21 +158,17 @@ class DeliveryWorker:
 
     async def recover(self, job: Job) -> None:
         """A job left SENDING by an earlier run: delivered after all, or to be sent again?"""
-        name = job.filename
+        program = self.program(job)
         attempt = 0
         while True:
             attempt += 1
             try:
-                async with self.store() as store:
-                    if await self._on_controller(store, job, name):
-                        await store.remove_temp(name)
-                        job = await self._q(
-                            self.queue.delivered, job.seq, name, "found complete on the controller after a restart"
-                        )
-                        log.info("%s: %s was delivered before the restart; not sending it again", self.machine, job.id)
-                        self.spool.discard(job)
-                        return
-                    await store.remove_temp(name)
+                if await self.transport.holds(program):
+                    found = "found complete on the controller after a restart"
+                    job = await self._q(self.queue.delivered, job.seq, program.name, found)
+                    log.info("%s: %s was delivered before the restart; not sending it again", self.machine, job.id)
+                    self.spool.discard(job)
+                    return
                 break
             except DeliveryError as exc:
                 delay = self.config.retry.delay(attempt)
@@ -186,9 +176,3 @@ class DeliveryWorker:
                             exc.reason, delay)
                 await asyncio.sleep(delay)
         await self._q(self.queue.send_failed, job.seq, "interrupted by a restart; sending again", retry_at=time.time())
-
-    async def _on_controller(self, store: ProgramStore, job: Job, name: str) -> bool:
-        size = await store.size(name)
-        if size is None or size != job.program_size:
-            return False
-        return await store.sha256(name) == job.program_sha256

@@ -19,6 +19,7 @@ side calls them in a worker thread.
 
 from __future__ import annotations
 
+import builtins
 import json
 import sqlite3
 import time
@@ -318,9 +319,10 @@ class JobQueue(SqliteFile):
         with self._lock:
             return self._get(self.db, seq)
 
+    # Below this method, `list` in annotations would name it: they say builtins.list.
     def list(
         self, *, machine: str | None = None, states: Sequence[JobState] = (), limit: int = 50, newest_first: bool = True
-    ) -> list[Job]:
+    ) -> builtins.list[Job]:
         where, args = self._filter(machine, states)
         order = "DESC" if newest_first else "ASC"
         with self._lock:
@@ -340,7 +342,7 @@ class JobQueue(SqliteFile):
             ).fetchone()
             return _job(row) if row else None
 
-    def history(self, seq: int) -> list[Transition]:
+    def history(self, seq: int) -> builtins.list[Transition]:
         with self._lock:
             rows = self.db.execute(
                 "SELECT t.*, j.machine FROM transitions t JOIN jobs j ON j.seq = t.seq WHERE t.seq = ? ORDER BY t.id",
@@ -348,13 +350,13 @@ class JobQueue(SqliteFile):
             )
             return [_transition(r) for r in rows]
 
-    def changes_since(self, rev: int) -> list[Job]:
+    def changes_since(self, rev: int) -> builtins.list[Job]:
         """Jobs changed after revision `rev` (by this process or another), oldest change first."""
         with self._lock:
             rows = self.db.execute("SELECT * FROM jobs WHERE rev > ? ORDER BY rev", (rev,))
             return [_job(r) for r in rows]
 
-    def transitions_since(self, last_id: int) -> list[Transition]:
+    def transitions_since(self, last_id: int) -> builtins.list[Transition]:
         with self._lock:
             rows = self.db.execute(
                 "SELECT t.*, j.machine FROM transitions t JOIN jobs j ON j.seq = t.seq WHERE t.id > ? ORDER BY t.id",
@@ -376,8 +378,8 @@ class JobQueue(SqliteFile):
 
     @staticmethod
     def _filter(machine: str | None, states: Sequence[JobState]) -> tuple[str, tuple[Any, ...]]:
-        clauses: list[str] = []
-        args: list[Any] = []
+        clauses: builtins.list[str] = []
+        args: builtins.list[Any] = []
         if machine is not None:
             clauses.append("machine = ?")
             args.append(machine)

@@ -1,42 +1,37 @@
-"""The controller's FTP program store, as the gateway's FTP client sees it (aioftp).
+"""Delivery over the controller's FTP program store, as the gateway's FTP client sees it (aioftp).
 
-The one module that imports aioftp's client side. Every aioftp, socket and
-timeout error becomes a DeliveryError (or ProgramNotFound) here, with the
-server's own reply when it gave one, so the queue can record "550 disk full"
-rather than a stack trace.
+The one module that imports aioftp's client side. `FtpProgramStore` is one FTP
+session (a `ProgramStore`: list, get, put, delete, size); `FtpTransport` is the
+`DeliveryTransport` built on it. Every aioftp, socket and timeout error becomes
+a DeliveryError (or ProgramNotFound) here, with the server's own reply when it
+gave one, so the queue can record "550 disk full" rather than a stack trace;
+`553` (name not allowed) is permanent.
 
 Uploads go to a temporary name and are renamed into place, so the controller
 never sees half a program under its real name; controllers whose FTP server
-cannot rename use `upload: direct`.
+cannot rename use `upload: direct`. After an upload, the program is checked by
+its size (SIZE, or a listing) or, with `verify: hash`, downloaded back and hashed.
 """
 
 from __future__ import annotations
 
 import asyncio
 import hashlib
-import logging
+import io
 import ssl
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Awaitable, Callable
 from pathlib import Path, PurePosixPath
-from typing import Any, Self
+from typing import BinaryIO, Literal, Self, TypeVar
 
 import aioftp
 
 from gateway.config.jobs import ControllerFtp
 from gateway.errors import DeliveryError, ProgramNotFound
-
-log = logging.getLogger(__name__)
+from gateway.jobs.delivery.transport import Program, Progress, RemoteFile, ReportProgress
 
 BLOCK = 64 * 1024
-Progress = Callable[[int], None]
-
-
-@dataclass(frozen=True, slots=True)
-class RemoteFile:
-    name: str
-    size: int | None
-    modified: str | None  # the server's YYYYMMDDhhmmss (MLSD) or listing date text
+Sent = Callable[[int], None]  # bytes sent so far
+T = TypeVar("T")
 
 
 def reply_of(exc: aioftp.StatusCodeError) -> str:
@@ -51,8 +46,8 @@ def _code(exc: aioftp.StatusCodeError) -> str:
     return str(exc.received_codes[-1]) if exc.received_codes else ""
 
 
-class ProgramStore:
-    """One FTP session with a controller: `async with ProgramStore(cfg) as store: await store.list()`."""
+class FtpProgramStore:
+    """One FTP session with a controller: `async with FtpProgramStore(cfg) as store: await store.list()`."""
 
     def __init__(self, config: ControllerFtp, *, what: str = "controller") -> None:
         self.config = config
@@ -115,7 +110,7 @@ class ProgramStore:
             raise DeliveryError(f"not connected to {self.address}")
         return self._client
 
-    async def _call(self, what: str, coro: Any, *, missing: str | None = None) -> Any:
+    async def _call(self, what: str, coro: Awaitable[T], *, missing: str | None = None) -> T:
         """Run one client operation, translating its errors."""
         try:
             return await coro
@@ -195,20 +190,27 @@ class ProgramStore:
     async def delete(self, name: str) -> None:
         await self._call(f"deleting {name}", self.client.remove_file(self.path(name)), missing=name)
 
-    async def upload(self, name: str, source: Path, *, progress: Progress | None = None) -> None:
+    async def upload(self, name: str, source: Path, *, progress: Sent | None = None) -> None:
         """Store a local file under `name`: via a temporary name and a rename, unless configured `direct`."""
+        with source.open("rb") as f:
+            await self._store(name, f, progress)
+
+    async def put(self, name: str, data: bytes) -> None:
+        """Store `data` under `name`, the same way as `upload`."""
+        await self._store(name, io.BytesIO(data), None)
+
+    async def _store(self, name: str, f: BinaryIO, progress: Sent | None) -> None:
         final = self.path(name)
         temp = self.path(self.temp_name(name)) if self.config.upload == "temp-rename" else final
 
         async def send() -> None:
             sent = 0
             async with self.client.upload_stream(temp) as stream:
-                with source.open("rb") as f:
-                    while block := f.read(BLOCK):
-                        await stream.write(block)
-                        sent += len(block)
-                        if progress is not None:
-                            progress(sent)
+                while block := f.read(BLOCK):
+                    await stream.write(block)
+                    sent += len(block)
+                    if progress is not None:
+                        progress(sent)
 
         await self._call(f"uploading {name}", send())
         if temp != final:
@@ -227,13 +229,50 @@ class ProgramStore:
     def temp_name(self, name: str) -> str:
         return name + self.config.temp_suffix
 
-    async def put_bytes(self, name: str, data: bytes, scratch: Path) -> None:
-        """Upload bytes (the CLI's `programs put`) through a scratch file."""
-        scratch.write_bytes(data)
-        try:
-            await self.upload(name, scratch)
-        finally:
-            scratch.unlink(missing_ok=True)
+
+
+class FtpTransport:
+    """Delivery to the controller's FTP program store: one FTP session per delivery (or check)."""
+
+    def __init__(self, config: ControllerFtp, *, verify: Literal["size", "hash"] = "size") -> None:
+        self.config = config
+        self.verify = verify
+
+    def store(self) -> FtpProgramStore:
+        return FtpProgramStore(self.config)
+
+    async def deliver(self, program: Program, progress: ReportProgress) -> str:
+        async with self.store() as store:
+            await store.upload(program.name, program.path, progress=lambda sent: progress(Progress(sent)))
+            await self._verify(store, program)
+        return f"{self.config.folder}/{program.name}"
+
+    async def holds(self, program: Program) -> bool:
+        async with self.store() as store:
+            found = await self._on_controller(store, program)
+            await store.remove_temp(program.name)
+        return found
+
+    async def _verify(self, store: FtpProgramStore, program: Program) -> None:
+        name = program.name
+        if self.verify == "hash":
+            digest = await store.sha256(name)
+            if digest != program.sha256:
+                raise DeliveryError(f"verification failed: {name} on the controller has different content")
+            return
+        size = await store.size(name)
+        if size != program.size:
+            found = "no such file" if size is None else f"{size} bytes"
+            raise DeliveryError(
+                f"verification failed: {name} on the controller has {found}, expected {program.size}"
+            )
+
+    @staticmethod
+    async def _on_controller(store: FtpProgramStore, program: Program) -> bool:
+        size = await store.size(program.name)
+        if size is None or size != program.size:
+            return False
+        return await store.sha256(program.name) == program.sha256
 
 
 def check_remote_name(name: str) -> str:
