@@ -24,7 +24,6 @@ control connection alone), so idle sessions are closed by the inbox instead.
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import ssl
 from collections.abc import Callable, Collection
@@ -35,13 +34,19 @@ from gateway.config.jobs import InboxConfig
 from gateway.errors import SinkError
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.paths import TMP
-from gateway.jobs.inbox.server import STAGING, CheckUpload, InboxServer, Submit, Upload, UploadReply
+from gateway.jobs.inbox.server import (
+    STAGING,
+    CheckUpload,
+    InboxServer,
+    Submit,
+    Upload,
+    UploadReply,
+    close_server,
+)
 
 __all__ = ["STAGING", "Inbox", "Submit", "Upload", "UploadReply", "tls_context"]
 
 log = logging.getLogger("gateway.jobs.inbox")
-
-CLOSE_GRACE = 0.5  # s for sessions to end before the server is closed
 
 
 def tls_context(state_dir: Path, cert: str, key: str) -> ssl.SSLContext:
@@ -120,11 +125,4 @@ class Inbox:
         if not self._started:
             return
         self._started = False
-        server = self._server
-        server.server.close()
-        dispatchers = [c._dispatcher for c in server.connections.values()]
-        for stream in list(server.connections):
-            stream.close()
-        if dispatchers:
-            await asyncio.wait(dispatchers, timeout=CLOSE_GRACE)
-        await server.close()
+        await close_server(self._server)

@@ -5,6 +5,9 @@ every command that touches a path is replaced, here and in the BrowseCommands
 mixin, so that gateway.jobs.inbox.paths decides what a client may see and write and
 nothing is resolved by aioftp's own path logic. See gateway/jobs/inbox/inbox.py for
 how an upload is judged complete.
+
+`close_server` is how any aioftp server here stops (the simulator's program store
+uses it too): the one place that reaches into aioftp's private state.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import aioftp
 from aioftp.server import AbstractUserManager, Connection, ConnectionConditions
@@ -29,7 +32,9 @@ from gateway.config.jobs import InboxConfig
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.browse import BrowseCommands, Session, login_required, refusals, session_of
 from gateway.jobs.inbox.paths import InboxPath, PathRefused, resolve
-from gateway.jobs.validation.upload_check import UploadCheck
+
+if TYPE_CHECKING:  # only named here; the job service makes them (and the simulator need not import validation)
+    from gateway.jobs.validation.upload_check import UploadCheck
 
 log = logging.getLogger("gateway.jobs.inbox")
 
@@ -38,6 +43,7 @@ COMMIT_GRACE = 0.25  # s the control connection must outlive the data connection
 LOGIN_FAILURE_DELAY = 0.5  # s before a wrong password is answered
 MAX_LOGIN_FAILURES = 3  # then the session is closed
 STAGING = ".staging"  # under the inbox root: plain STORs in progress; not visible to clients
+CLOSE_GRACE = 0.5  # s for sessions to end before the server is closed
 IDLE, GONE = "\x00idle", "\x00gone"  # pseudo-commands from parse_command
 
 
@@ -476,3 +482,22 @@ def _digest(path: Path) -> tuple[int, str]:
             size += len(block)
             h.update(block)
     return size, h.hexdigest()
+
+
+async def close_server(server: aioftp.Server, grace: float = CLOSE_GRACE) -> None:
+    """Stop an aioftp server that has started, with no traceback in the log.
+
+    aioftp's `Server.close()` cancels every session's task, and Python 3.11's asyncio
+    reports each as an "exception in callback". So: stop listening, close every
+    client's stream (the client sees its connection end, and its session task
+    finishes on its own), give them `grace` seconds, then close. aioftp keeps a
+    session's task only in a private attribute (`Connection._dispatcher`); this is
+    the one place that reads it.
+    """
+    server.server.close()  # no new connections
+    dispatchers = [c._dispatcher for c in server.connections.values()]
+    for stream in list(server.connections):
+        stream.close()
+    if dispatchers:
+        await asyncio.wait(dispatchers, timeout=grace)
+    await server.close()

@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from gateway.codecs.arcs import TOLERANCE, ArcProblem, PlaneArc, arc_from_center, arc_from_radius
+from gateway.codecs.arcs import ArcProblem, PlaneArc, arc_from_center, arc_from_radius
 from gateway.codecs.gcode import Program, format_number
 
 AXES = "XYZ"
@@ -555,7 +555,7 @@ class _Estimator:
             self.reach(t)
             self.pos = t
             return
-        if arc.mismatch > max(TOLERANCE, 0.001 * arc.r0):
+        if arc.off_circle:
             self.note(
                 line,
                 f"the arc's end point is {arc.mismatch:.4f} mm off its circle "

@@ -29,7 +29,7 @@ import math
 import re
 from typing import TYPE_CHECKING, Any
 
-from gateway.codecs.arcs import TOLERANCE, ArcProblem, PlaneArc, arc_from_center, arc_from_radius
+from gateway.codecs.arcs import ArcProblem, PlaneArc, arc_from_center, arc_from_radius
 from gateway.codecs.gcode import format_number, lex_compact
 from gateway.jobs.validation import compiled
 
@@ -325,7 +325,7 @@ def _arc(
         arc = arc_from_center(s2, e2, (s2[0] + cu, s2[1] + cv), clockwise, turns=1, dw=dw)
     else:
         return None
-    if arc.mismatch > max(TOLERANCE, 0.001 * arc.r0):
+    if arc.off_circle:
         return None
     return arc
 
