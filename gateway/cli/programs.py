@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from gateway.jobs.delivery.transport import OpenStore
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("programs", help="list, fetch, store or delete programs on a controller (FTP)")
     actions = p.add_subparsers(dest="programs_command", metavar="ACTION", required=True)
 
