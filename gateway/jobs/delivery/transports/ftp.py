@@ -230,7 +230,6 @@ class FtpProgramStore:
         return name + self.config.temp_suffix
 
 
-
 class FtpTransport:
     """Delivery to the controller's FTP program store: one FTP session per delivery (or check)."""
 
