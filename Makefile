@@ -6,8 +6,8 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test unit integration install system-deps schema soak bench clean sparkplug-proto
 
-# setup.py builds gateway/jobs/_plain.c (validation's compiled reader) in place; a change to it reinstalls.
-$(STAMP): pyproject.toml setup.py gateway/jobs/_plain.c
+# setup.py builds gateway/jobs/validation/_plain.c (validation's compiled reader) in place; a change to it reinstalls.
+$(STAMP): pyproject.toml setup.py gateway/jobs/validation/_plain.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'

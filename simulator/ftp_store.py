@@ -9,8 +9,9 @@ There is one user and no anonymous access.
 Two aioftp habits would put tracebacks in the log for ordinary events: it logs
 every client that disconnects without QUIT as an exception, and closing the
 server cancels connection tasks, which Python 3.11's asyncio reports as an
-"exception in callback". `FtpStore` filters the first and closes client
-connections gracefully before closing the server.
+"exception in callback". `FtpStore` filters the first, and stops with the
+gateway inbox's `close_server` (gateway/jobs/inbox/server.py), which closes
+client connections gracefully before closing the server.
 """
 
 from __future__ import annotations
@@ -24,10 +25,10 @@ import aioftp
 from aioftp.common import END_OF_LINE
 from aioftp.server import Connection, ConnectionConditions, PathConditions, PathPermissions, worker
 
+from gateway.jobs.inbox.server import close_server
 from simulator.errors import SimulatorError
 
 log = logging.getLogger("simulator.ftp")
-CLOSE_GRACE = 0.5  # s for client connections to wind down before they are cancelled
 
 
 class _QuietDisconnects(logging.Filter):
@@ -141,11 +142,4 @@ class FtpStore:
         if not self._started:
             return
         self._started = False
-        server = self._server
-        server.server.close()  # no new connections
-        dispatchers = [c._dispatcher for c in server.connections.values()]
-        for stream in list(server.connections):
-            stream.close()  # the client sees the connection end; its task finishes on its own
-        if dispatchers:
-            await asyncio.wait(dispatchers, timeout=CLOSE_GRACE)
-        await server.close()
+        await close_server(self._server)

@@ -32,7 +32,7 @@ from bench.procs import Agent
 from bench.scenarios.common import write_gateway
 from gateway.auth.passwords import hash_password
 from gateway.config.validation import ValidationRules
-from gateway.jobs.validation import validate_program
+from gateway.jobs.validation.pipeline import validate_program
 
 SECTION = "Jobs: FTP inbox → validation → queue → simulator's FTP store"
 MACHINE = "laser"

@@ -19,7 +19,7 @@ from typing import Any, TextIO
 
 from gateway.cli.state_dir import load_config, resolve_state_dir
 from gateway.errors import JobError
-from gateway.jobs.queue import Job, JobQueue, JobState, parse_job_id
+from gateway.jobs.queue.store import Job, JobQueue, JobState, parse_job_id
 
 PASSWORD_ENV = "CNC_INBOX_PASSWORD"
 

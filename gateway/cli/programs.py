@@ -1,26 +1,47 @@
-"""`cnc-gateway programs list|get|put|delete MACHINE …`: the controller's program store over FTP.
+"""`cnc-gateway programs list|get|put|delete MACHINE …`: the controller's program store (FTP).
 
 The machine's mapping file says where the store is (`jobs.controller`). `put`
 checks the program with the machine's validation rules first (`--no-validate`
 skips that, for restoring a backup that a newer rule would refuse); to queue a
 program as a job instead, use `cnc-gateway jobs submit`.
+
+`put` and `delete` change the machine, so each records an audit entry in the
+gateway's audit trail, like a write or a method call through OPC UA or MQTT:
+`call Programs.Put` / `Programs.Delete`, origin `cli`, the OS user (or
+`--user`), and the outcome. The trail is opened before the controller is
+touched: a change that could not be recorded is not made. It is the state
+directory's `audit.sqlite3`, found as `cnc-gateway audit list` finds it
+(`--state-dir`, else the gateway file's, else $CNC_GATEWAY_STATE_DIR, else
+./state or ./state/demo).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import getpass
+import os
+import sqlite3
 import sys
-import tempfile
+import time
+from collections.abc import Sequence
+from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
+from gateway.model.audit import AuditEntry, as_text
+from gateway.audit.store import AuditStore, audit_path
 from gateway.cli.check import report_config_error
+from gateway.cli.state_dir import resolve_state_dir
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import load
 from gateway.errors import ConfigError, DeliveryError
 
+if TYPE_CHECKING:
+    from gateway.jobs.delivery.transport import OpenStore
 
-def register(sub: argparse._SubParsersAction) -> None:
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("programs", help="list, fetch, store or delete programs on a controller (FTP)")
     actions = p.add_subparsers(dest="programs_command", metavar="ACTION", required=True)
 
@@ -28,6 +49,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         q.add_argument("machine")
         q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
                        help="gateway or mapping file(s) (default: mappings/laser-sim.yaml, the demo's)")
+
+    def audited(q: argparse.ArgumentParser) -> None:
+        q.add_argument("--user", default=None,
+                       help="who makes the change, for the audit trail (default: the OS user)")
+        q.add_argument("--state-dir", type=Path, default=None,
+                       help="the gateway's state directory, whose audit trail records the change")
 
     q = actions.add_parser("list", help="programs in the controller's program folder")
     common(q)
@@ -44,11 +71,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("file", type=Path)
     q.add_argument("--name", default=None, help="name on the controller (default: the file's name)")
     q.add_argument("--no-validate", action="store_true", help="skip the machine's validation rules")
+    audited(q)
     q.set_defaults(handler=handle_put)
 
     q = actions.add_parser("delete", help="delete a program from the controller")
     common(q)
     q.add_argument("name")
+    audited(q)
     q.set_defaults(handler=handle_delete)
 
 
@@ -72,6 +101,64 @@ def jobs_config(args: argparse.Namespace) -> JobsConfig:
     raise SystemExit(2)
 
 
+def open_store(args: argparse.Namespace, cfg: JobsConfig) -> OpenStore:
+    """The machine's program store; exits 2 if its delivery transport has none."""
+    from gateway.jobs.delivery.transports import program_store_for
+
+    store = program_store_for(cfg)
+    if store is None:
+        print(f"error: {args.machine}'s controller has no program store to list or change", file=sys.stderr)
+        raise SystemExit(2)
+    return store
+
+
+def os_user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):  # no login name and no passwd entry (a container's bare uid)
+        return f"uid {os.getuid()}" if hasattr(os, "getuid") else "unknown"
+
+
+class Audit:
+    """The audit entry of one change made from the shell, as the tree records a method call.
+
+    Opened before the controller is touched, so that a change that could not be
+    recorded is not made; `record()` writes the entry once the outcome is known.
+    """
+
+    def __init__(self, args: argparse.Namespace, method: str) -> None:
+        self.machine = args.machine
+        self.target = f"Programs.{method}"
+        self.user = args.user or os_user()
+        self.path = audit_path(resolve_state_dir(args, "audit", audit_path))
+        try:
+            self.store = AuditStore(self.path)
+        except (sqlite3.Error, OSError) as exc:
+            print(f"error: cannot open the audit trail {self.path} ({exc}); nothing changed", file=sys.stderr)
+            raise SystemExit(2) from None
+        self.time = datetime.now(timezone.utc)
+        self.started = time.monotonic()
+
+    def record(self, arguments: Sequence[Any], status: str = "Good", reason: str = "") -> None:
+        entry = AuditEntry(
+            self.time, "call", self.machine, self.target, "cli", self.user, None, None,
+            as_text(list(arguments)), status, reason, time.monotonic() - self.started,
+        )
+        try:
+            self.store.insert([entry])
+        except (sqlite3.Error, OSError) as exc:
+            print(f"error: {entry.describe()}; not recorded in {self.path}: {exc}", file=sys.stderr)
+            raise SystemExit(1) from None
+        finally:
+            self.store.close()
+
+    def refused(self, arguments: Sequence[Any], exc: DeliveryError) -> None:
+        """The controller's store refused, or could not be reached: as a method call would answer."""
+        from gateway.jobs.programs import as_write_error
+
+        self.record(arguments, as_write_error(exc).status, exc.reason)
+
+
 def _run(coro: object) -> int:
     try:
         return asyncio.run(coro)  # type: ignore[arg-type]
@@ -81,12 +168,11 @@ def _run(coro: object) -> int:
 
 
 def handle_list(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
-
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
 
     async def main() -> int:
-        async with ProgramStore(cfg.controller) as store:
+        async with store_of() as store:
             files = await store.list()
         for f in files:
             size = "?" if f.size is None else str(f.size)
@@ -98,12 +184,11 @@ def handle_list(args: argparse.Namespace) -> int:
 
 
 def handle_get(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
-
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
 
     async def main() -> int:
-        async with ProgramStore(cfg.controller) as store:
+        async with store_of() as store:
             data = await store.get(args.name)
         if args.output == "-":
             sys.stdout.buffer.write(data)
@@ -118,19 +203,23 @@ def handle_get(args: argparse.Namespace) -> int:
 
 
 def handle_put(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
-    from gateway.jobs.validation import validate_program
+    from gateway.jobs.validation.pipeline import validate_program
 
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
     if not args.file.is_file():
         print(f"error: {args.file}: no such file", file=sys.stderr)
         return 2
     name = args.name or args.file.name
     data = args.file.read_bytes()
     program = data
+    audit = Audit(args, "Put")
+    arguments: list[Any] = [name, data, "--no-validate"] if args.no_validate else [name, data]
     if not args.no_validate:
         verdict = validate_program(data, name, cfg.validation)
         if not verdict.accepted:
+            first, more = verdict.rejections[0].reason, len(verdict.rejections) - 1
+            audit.record(arguments, "BadInvalidArgument", first + (f" (and {more} more)" if more else ""))
             print(f"error: {name} would be rejected:", file=sys.stderr)
             for r in verdict.rejections:
                 print(f"  [{r.rule}] {r.reason}", file=sys.stderr)
@@ -138,13 +227,19 @@ def handle_put(args: argparse.Namespace) -> int:
         program = verdict.program
 
     async def main() -> int:
-        with tempfile.TemporaryDirectory() as scratch:
-            async with ProgramStore(cfg.controller) as store:
-                await store.put_bytes(name, program, Path(scratch) / "program")
+        try:
+            async with store_of() as store:
+                await store.put(name, program)
                 size = await store.size(name)
+        except DeliveryError as exc:
+            audit.refused(arguments, exc)
+            raise
         if size != len(program):
-            print(f"error: the controller reports {size} bytes for {name}, expected {len(program)}", file=sys.stderr)
+            reason = f"the controller reports {size} bytes for {name}, expected {len(program)}"
+            audit.record(arguments, "BadUnexpectedError", reason)
+            print(f"error: {reason}", file=sys.stderr)
             return 1
+        audit.record(arguments)
         print(f"stored {name} ({len(program)} bytes) in {store.address}")
         return 0
 
@@ -152,13 +247,18 @@ def handle_put(args: argparse.Namespace) -> int:
 
 
 def handle_delete(args: argparse.Namespace) -> int:
-    from gateway.jobs.controller_ftp import ProgramStore
-
     cfg = jobs_config(args)
+    store_of = open_store(args, cfg)
+    audit = Audit(args, "Delete")
 
     async def main() -> int:
-        async with ProgramStore(cfg.controller) as store:
-            await store.delete(args.name)
+        try:
+            async with store_of() as store:
+                await store.delete(args.name)
+        except DeliveryError as exc:
+            audit.refused([args.name], exc)
+            raise
+        audit.record([args.name])
         print(f"deleted {args.name} from {store.address}")
         return 0
 

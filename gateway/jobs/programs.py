@@ -2,15 +2,21 @@
 
 Registered on each machine with a `jobs:` section (gateway.model.methods), so
 OPC UA shows them as Method nodes under the machine's `Programs` object. They
-talk to the controller's FTP program store directly, except `Put`, which goes
-through validation and the queue like an inbox upload: no back door.
+talk to the controller's program store directly (the `ProgramStore` of the
+machine's delivery transport), except `Put`, which goes through validation and
+the queue like an inbox upload: no back door. A transport with no store (a
+serial line cannot list) leaves `Put` alone.
+
+The job service passes in what the methods use (the store, its `submit_bytes`,
+the backups folder), so this module does not import the service.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime, timezone
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
 
 from gateway.errors import (
     ControllerRefused,
@@ -22,12 +28,13 @@ from gateway.errors import (
     ProgramNotFound,
     RequestError,
 )
-from gateway.jobs.paths import check_file_name
+from gateway.jobs.delivery.transport import OpenStore
+from gateway.jobs.inbox.inbox import UploadReply
+from gateway.jobs.inbox.paths import check_file_name
 from gateway.model.methods import Argument, Method
 from gateway.model.types import TypeSpec
 
 if TYPE_CHECKING:
-    from gateway.jobs.service import JobService
     from gateway.model.context import WriteContext
 
 OBJECT = "Programs"
@@ -53,21 +60,34 @@ def _name(value: Any) -> str:
         raise InvalidArgument(exc.reason) from None
 
 
-def program_methods(service: JobService, machine: str) -> list[Method]:
-    """The methods for one machine, bound to the service."""
+class SubmitProgram(Protocol):
+    """Queues a program for a machine as if it had been uploaded (JobService.submit_bytes)."""
+
+    async def __call__(self, machine: str, filename: str, data: bytes, *, user: str, origin: str) -> UploadReply: ...
+
+
+def program_methods(machine: str, *, store: OpenStore | None, submit: SubmitProgram, backups: Path) -> list[Method]:
+    """The methods for one machine: `store` opens its program store (None: Put only), `submit` queues a
+    program, `backups` is the folder Backup copies programs into."""
+    methods = _store_methods(store, backups) if store is not None else []
+    return [*methods, _put_method(machine, submit)]
+
+
+def _store_methods(store: OpenStore, backups: Path) -> list[Method]:
+    """List, Get, Backup and Delete: straight to the controller's program store."""
 
     async def listing(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
         try:
-            async with service.store(machine) as store:
-                files = await store.list()
+            async with store() as session:
+                files = await session.list()
         except DeliveryError as exc:
             raise as_write_error(exc) from None
         return [[f.name for f in files], [f.size if f.size is not None else 0 for f in files]]
 
     async def fetch(name: str) -> bytes:
         try:
-            async with service.store(machine) as store:
-                return await store.get(name, limit=GET_LIMIT)
+            async with store() as session:
+                return await session.get(name, limit=GET_LIMIT)
         except DeliveryError as exc:
             raise as_write_error(exc) from None
 
@@ -79,31 +99,20 @@ def program_methods(service: JobService, machine: str) -> list[Method]:
         name = _name(args[0])
         data = await fetch(name)
         stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-        folder = service.backups_dir / machine
-        folder.mkdir(parents=True, exist_ok=True)
-        target = folder / f"{stamp}-{name}"
+        backups.mkdir(parents=True, exist_ok=True)
+        target = backups / f"{stamp}-{name}"
         target.write_bytes(data)
         return [str(target)]
 
     async def delete(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
         name = _name(args[0])
         try:
-            async with service.store(machine) as store:
-                await store.delete(name)
+            async with store() as session:
+                await session.delete(name)
         except DeliveryError as exc:
             raise as_write_error(exc) from None
         return []
 
-    async def put(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
-        name = _name(args[0])
-        content = str(args[1]).encode("utf-8")
-        user = ctx.user or ctx.origin
-        reply = await service.submit_bytes(machine, name, content, user=user, origin=ctx.origin)
-        if reply.job_id is None and not reply.ok:
-            raise InvalidArgument(reply.message)
-        return [reply.job_id or "", reply.message]  # a rejection is a job too: its id and the reason
-
-    job = Argument("JobId", STRING, "The job that will deliver it")
     return [
         Method(
             OBJECT, "List", "The programs in the controller's program folder, with their sizes in bytes",
@@ -116,11 +125,26 @@ def program_methods(service: JobService, machine: str) -> list[Method]:
             (NAME,), (Argument("Path", STRING),), backup,
         ),
         Method(OBJECT, "Delete", "Delete a program from the controller", (NAME,), (), delete, role="operator"),
-        Method(
-            OBJECT, "Put", "Queue a program for delivery: validated and delivered like an inbox upload",
-            (NAME, Argument("Content", STRING, "The program text")),
-            (job, Argument("Message", STRING, "queued, or why it was rejected")),
-            put,
-            role="operator",
-        ),
     ]
+
+
+def _put_method(machine: str, submit: SubmitProgram) -> Method:
+    """Put: through validation and the queue, like an inbox upload."""
+
+    async def put(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
+        name = _name(args[0])
+        content = str(args[1]).encode("utf-8")
+        user = ctx.user or ctx.origin
+        reply = await submit(machine, name, content, user=user, origin=ctx.origin)
+        if reply.job_id is None and not reply.ok:
+            raise InvalidArgument(reply.message)
+        return [reply.job_id or "", reply.message]  # a rejection is a job too: its id and the reason
+
+    job = Argument("JobId", STRING, "The job that will deliver it")
+    return Method(
+        OBJECT, "Put", "Queue a program for delivery: validated and delivered like an inbox upload",
+        (NAME, Argument("Content", STRING, "The program text")),
+        (job, Argument("Message", STRING, "queued, or why it was rejected")),
+        put,
+        role="operator",
+    )

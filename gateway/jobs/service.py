@@ -26,27 +26,26 @@ import logging
 import os
 import uuid
 from collections.abc import Awaitable, Callable, Mapping
-from contextlib import AbstractAsyncContextManager
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import ConfigError, JobError, PathRefused, SinkError
-from gateway.jobs import compiled
-from gateway.jobs.accounts import Accounts
-from gateway.jobs.autostart import AutoStarter
-from gateway.jobs.controller_ftp import ProgramStore
-from gateway.jobs.delivery import DeliveryWorker
-from gateway.jobs.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
-from gateway.jobs.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
-from gateway.jobs.paths import check_file_name
+from gateway.jobs.delivery.autostart import AutoStarter
+from gateway.jobs.delivery.transports import program_store_for, transport_for
+from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.inbox.accounts import Accounts
+from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
+from gateway.jobs.inbox.paths import check_file_name
 from gateway.jobs.programs import program_methods
-from gateway.jobs.publish import JobPublisher
-from gateway.jobs.queue import Job, JobQueue, JobState
+from gateway.jobs.queue.publish import JobPublisher
+from gateway.jobs.queue.store import Job, JobQueue, JobState
 from gateway.jobs.threads import JobThreads
-from gateway.jobs.upload_check import UploadCheck
-from gateway.jobs.verdict import Verdict
+from gateway.jobs.validation import compiled
+from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
+from gateway.jobs.validation.upload_check import UploadCheck
+from gateway.jobs.validation.verdict import Verdict
 from gateway.model.tree import VariableTree
 
 log = logging.getLogger("gateway.jobs")
@@ -107,10 +106,13 @@ class JobService:
             if jobs.auto is not None:
                 self.autostarters[name] = AutoStarter(machine, jobs.auto, jobs.controller.folder)
             self.workers[name] = DeliveryWorker(
-                name, jobs, self.queue, self.spool, self.publisher, self._q,
+                name, jobs, self.queue, self.spool, self.publisher, self._q, transport_for(jobs),
                 autostart=self.autostarters.get(name),
             )
-            for method in program_methods(self, name):
+            methods = program_methods(
+                name, store=program_store_for(jobs), submit=self.submit_bytes, backups=self.backups_dir / name
+            )
+            for method in methods:
                 machine.add_method(method)
         self.inbox: Inbox | None = None
         self._changed = asyncio.Event()
@@ -333,10 +335,7 @@ class JobService:
             else:
                 await self._q(self.queue.reject, job.seq, "the upload was lost when the gateway stopped; send it again")
 
-    # --- operations for methods and the demo -----------------------------------------------------------
-
-    def store(self, machine: str) -> AbstractAsyncContextManager[ProgramStore]:
-        return ProgramStore(self.machines[machine].controller)
+    # --- for the demo ----------------------------------------------------------------------------------
 
     def machine_busy(self, machine: str) -> bool:
         """True while a job for this machine is on its way or waiting to be started."""

@@ -12,6 +12,13 @@ Validating a large program is seconds of pure-Python CPU, and a thread holds the
 GIL meanwhile: the event loop (OPC UA, MQTT) would stall. That work goes to a
 separate process, started with "spawn" (forking a threaded process can copy a
 held lock into the child).
+
+That process ignores SIGINT. Ctrl-C at a terminal reaches the whole process
+group, the worker too, which would die with a KeyboardInterrupt traceback while
+the gateway shuts down cleanly; the gateway stops it itself (`shutdown`). SIGINT
+is blocked while the process is spawned, so that it starts with it blocked and
+ignores it before unblocking it: a Ctrl-C during its start-up is lost, not a
+traceback (the stdlib's resource tracker starts the same way).
 """
 
 from __future__ import annotations
@@ -20,11 +27,13 @@ import asyncio
 import functools
 import multiprocessing
 import os
+import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -60,7 +69,9 @@ class JobThreads:
         """
         pool = self._pool()
         try:
-            return await asyncio.get_running_loop().run_in_executor(pool, functools.partial(fn, *args))
+            with interrupts_held():  # the call may spawn the process
+                future = pool.submit(fn, *args)
+            return await asyncio.wrap_future(future)
         except BrokenProcessPool:
             with self._lock:
                 if self._processes is pool:
@@ -81,7 +92,8 @@ class JobThreads:
         except RuntimeError:
             return  # shut down
         if not getattr(pool, "_processes", None):
-            pool.submit(ready)
+            with interrupts_held():
+                pool.submit(ready)
 
     def _pool(self) -> ProcessPoolExecutor:
         with self._lock:
@@ -91,7 +103,7 @@ class JobThreads:
                 self._processes = ProcessPoolExecutor(
                     1,
                     mp_context=multiprocessing.get_context("spawn"),
-                    initializer=follow_parent,
+                    initializer=worker_started,
                     initargs=(os.getpid(),),
                 )
             return self._processes
@@ -123,6 +135,35 @@ def _stop_processes(pool: ProcessPoolExecutor) -> None:
 
 
 PARENT_CHECK = 0.5  # s between the validation process's looks at whether the gateway still runs
+
+
+@contextmanager
+def interrupts_held() -> Iterator[None]:
+    """SIGINT blocked in this thread meanwhile: a process spawned now starts with it blocked.
+
+    A SIGINT that arrives meanwhile is not lost: it waits, or goes to a thread that
+    does not block it, and Python handles it in the main thread as always.
+    """
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows has no signal masks
+        yield
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def worker_started(parent: int) -> None:
+    """In the validation process, before any call: ignore SIGINT, then follow the parent.
+
+    The gateway stops this process at shutdown; a Ctrl-C, which reaches the whole
+    process group, must not stop it first with a traceback.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending one is dropped: ignored
+    follow_parent(parent)
 
 
 def follow_parent(parent: int) -> None:

@@ -21,16 +21,16 @@ import yaml
 
 from gateway.config.validation import ValidationRules
 from gateway.errors import ConfigError
-from gateway.jobs.queue import JobState
-from gateway.jobs.validation import validate_program
+from gateway.jobs.queue.store import JobState
+from gateway.jobs.validation.pipeline import validate_program
 from tests.integration.drills.corpus_rig import MACHINE, CorpusRig
 from tests.integration.drills.processes import BIN, ROOT, clean_env
 from tests.integration.jobs.conftest import PASSWORD, USER, in_thread
 from tests.integration.mqtt.conftest import Recorder
 from tests.unit.config.test_corpus import CASES as MAPPING_CASES
 from tests.unit.config.test_corpus import expectations
-from tests.unit.jobs.test_validation import CASES as GCODE_CASES
-from tests.unit.jobs.test_validation import header
+from tests.unit.jobs.validation.test_validation import CASES as GCODE_CASES
+from tests.unit.jobs.validation.test_validation import header
 from tests.waiting import wait_until
 
 CORPUS = ROOT / "tests" / "corpus"

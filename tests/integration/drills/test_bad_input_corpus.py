@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from asyncua import Client
 
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from tests.integration.drills import corpus_runners as runners
 from tests.integration.drills.conftest import Report
 from tests.integration.drills.corpus_rig import COMMANDS, MACHINE, CorpusRig, corpus_rig

@@ -24,7 +24,7 @@ from gateway.auth.passwords import hash_password
 from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.jobs.queue import Job, JobState
+from gateway.jobs.queue.store import Job, JobState
 from gateway.jobs.service import JobService
 from simulator.ftp_store import FtpStore
 from simulator.store import DirectoryStore

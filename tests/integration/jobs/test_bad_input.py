@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from tests.integration.jobs.conftest import GOOD, PASSWORD, USER, Harness, Store, in_thread, mapping_text
 from tests.waiting import wait_until
 

@@ -19,9 +19,9 @@ import aioftp
 import pytest
 
 from bench.gcode_gen import laser_program
-from gateway.jobs import compiled
-from gateway.jobs.file_check import ISOLATE_ABOVE, validate_file
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
+from gateway.jobs.validation import compiled
+from gateway.jobs.validation.file_check import ISOLATE_ABOVE, validate_file
 from tests.integration.jobs.conftest import PASSWORD, USER, Harness, Store, in_thread, mapping_text
 
 pytestmark = pytest.mark.skipif(

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import datetime
+import getpass
 import io
+import json
 import ssl
 import subprocess
 import sys
@@ -14,7 +16,7 @@ import pytest
 
 from gateway.auth.passwords import verify_password
 from gateway.cli.jobs import Progress
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from tests.integration.jobs.conftest import GOOD, PASSWORD, USER, Store, in_thread, mapping_text
 from tests.waiting import free_port
 
@@ -45,22 +47,56 @@ async def test_programs_list_get_put_delete(store: Store, tmp_path: Path) -> Non
 
     source = tmp_path / "new.nc"
     source.write_bytes(GOOD)
-    code, out, err = await cli("programs", "put", "laser", str(source), *c)
+    changes = (*c, "--state-dir", str(tmp_path / "state"))  # where put and delete record themselves
+    code, out, err = await cli("programs", "put", "laser", str(source), *changes)
     assert code == 0 and "stored new.nc" in out, err
     assert store.files()["new.nc"] == GOOD
 
     source.write_bytes(b"G1 X1 F100\n")
-    code, _, err = await cli("programs", "put", "laser", str(source), "--name", "bad.nc", *c)
+    code, _, err = await cli("programs", "put", "laser", str(source), "--name", "bad.nc", *changes)
     assert code == 1 and "would be rejected" in err and "end code" in err
     assert "bad.nc" not in store.files()
 
-    code, out, err = await cli("programs", "delete", "laser", "new.nc", *c)
+    code, out, err = await cli("programs", "delete", "laser", "new.nc", *changes)
     assert code == 0 and "deleted new.nc" in out, err
     assert "new.nc" not in store.files()
-    code, _, err = await cli("programs", "delete", "laser", "new.nc", *c)
+    code, _, err = await cli("programs", "delete", "laser", "new.nc", *changes)
     assert code == 1 and "new.nc is not in" in err
     code, _, err = await cli("programs", "list", "press", *c)
     assert code == 2 and "no machine 'press'" in err
+
+
+async def test_programs_put_and_delete_are_audited(store: Store, tmp_path: Path) -> None:
+    """Every change to a controller is in the audit trail, whatever door it came through: the shell's too."""
+    mapping = tmp_path / "laser.yaml"
+    mapping.write_text(mapping_text("laser", store.port))
+    state = tmp_path / "state"
+    c = ("-c", str(mapping), "--state-dir", str(state))
+    source = tmp_path / "part.nc"
+    source.write_bytes(GOOD)
+    code, _, err = await cli("programs", "put", "laser", str(source), *c)
+    assert code == 0, err
+    source.write_bytes(b"G1 X1 F100\n")
+    code, _, err = await cli("programs", "put", "laser", str(source), "--name", "bad.nc", "--user", "erik", *c)
+    assert code == 1, err
+    code, _, err = await cli("programs", "delete", "laser", "part.nc", "--user", "erik", *c)
+    assert code == 0, err
+    code, _, err = await cli("programs", "delete", "laser", "part.nc", *c)
+    assert code == 1, err
+
+    code, out, err = await cli("audit", "list", "--state-dir", str(state), "--json")
+    assert code == 0, err
+    entries = [json.loads(line) for line in reversed(out.splitlines())]  # oldest first
+    me = getpass.getuser()
+    assert [(e["machine"], e["kind"], e["target"], e["user"], e["origin"], e["status"]) for e in entries] == [
+        ("laser", "call", "Programs.Put", me, "cli", "Good"),
+        ("laser", "call", "Programs.Put", "erik", "cli", "BadInvalidArgument"),
+        ("laser", "call", "Programs.Delete", "erik", "cli", "Good"),
+        ("laser", "call", "Programs.Delete", me, "cli", "BadNotFound"),
+    ]
+    assert json.loads(entries[0]["new"]) == ["part.nc", f"<{len(GOOD)} bytes>"]
+    assert "end code" in entries[1]["reason"] and json.loads(entries[3]["new"]) == ["part.nc"]
+    assert "part.nc is not in" in entries[3]["reason"]
 
 
 async def test_programs_against_a_controller_that_is_down(tmp_path: Path) -> None:

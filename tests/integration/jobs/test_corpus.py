@@ -1,7 +1,7 @@
 """Corpora of broken and real-world G-code through the inbox: what the validator says is what happens.
 
 tests/corpus/gcode/*.nc carry their rules, upload name and expected rejections in
-header comments (see tests/unit/jobs/test_validation.py). Each goes through a
+header comments (see tests/unit/jobs/validation/test_validation.py). Each goes through a
 real FTP upload to a machine with those rules: accepted ones must arrive on the
 controller exactly as the validator passed them, rejected ones must be kept in
 rejected/ with every expected rule in the reason file, and none of them may reach
@@ -18,10 +18,10 @@ import pytest
 import yaml
 
 from gateway.config.validation import ValidationRules
-from gateway.jobs.queue import JobState
-from gateway.jobs.validation import validate_program
+from gateway.jobs.queue.store import JobState
+from gateway.jobs.validation.pipeline import validate_program
 from tests.integration.jobs.conftest import Store, mapping_text
-from tests.unit.jobs.test_validation import CASES, REAL_WORLD, header
+from tests.unit.jobs.validation.test_validation import CASES, REAL_WORLD, header
 from tests.waiting import wait_until
 
 

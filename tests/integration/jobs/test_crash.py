@@ -12,7 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from gateway.jobs.queue import JobQueue, JobState
+from gateway.jobs.queue.store import JobQueue, JobState
 from gateway.jobs.service import queue_path
 from tests.integration.jobs.conftest import PASSWORD, PASSWORD_HASH, USER, Store, in_thread, mapping_text
 from tests.waiting import free_port, wait_until

@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from gateway.jobs.queue import JobQueue, JobState
+from gateway.jobs.queue.store import JobQueue, JobState
 from gateway.jobs.service import queue_path
 from simulator.ftp_store import FtpStore
 from tests.integration.jobs.conftest import (

@@ -18,7 +18,7 @@ from gateway.app import Gateway
 from gateway.cli.demo import DEMO_INBOX_PASSWORD, DEMO_INBOX_USER, demo_inbox, demo_jobs, find_mapping
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.loader import Config, load
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from gateway.model.events import Event
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, subscriber  # noqa: F401

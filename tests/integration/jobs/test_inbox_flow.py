@@ -13,7 +13,7 @@ from pathlib import Path
 import aioftp
 import pytest
 
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from gateway.model.events import Event
 from tests.integration.jobs.conftest import (
     GOOD,

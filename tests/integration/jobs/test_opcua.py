@@ -14,7 +14,7 @@ from asyncua.ua.uaerrors import UaStatusCodeError
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.jobs.queue import JobState
+from gateway.jobs.queue.store import JobState
 from gateway.jobs.service import JobService
 from gateway.model.tree import VariableTree
 from gateway.sinks.opcua import OpcUaSink

@@ -12,7 +12,7 @@ from pathlib import Path
 from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.jobs.records import JobState
+from gateway.jobs.queue.records import JobState
 from gateway.jobs.service import JobService
 from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.sink import MqttSink

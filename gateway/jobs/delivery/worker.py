@@ -1,0 +1,178 @@
+"""Delivery: one worker per machine moves its queue to the controller, through its delivery transport.
+
+Machines deliver in parallel; each machine's jobs go strictly one at a time, in
+queue order (priority first, then FIFO), because sheets are cut in sequence.
+A failed attempt waits with exponential backoff; after `max_attempts` the job
+is FAILED (dead letter) and the next one goes.
+
+Idempotent after a crash. A job found in SENDING when the gateway starts may or
+may not have reached the controller: the worker asks the transport whether the
+controller holds it already (FTP: the name, the expected size, and the SHA-256
+of the program downloaded back). Found: DELIVERED, without sending it again
+(and without auto-starting it: nobody can know whether it already ran).
+Otherwise what the interrupted delivery left is removed and the job is sent again.
+
+How a program travels is the transport's business (transport.py); this module
+knows jobs, attempts, backoff and auto-start, and nothing of FTP.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+from gateway.config.jobs import JobsConfig
+from gateway.errors import DeliveryError, JobError
+from gateway.jobs.delivery.autostart import AutoStarter
+from gateway.jobs.delivery.transport import DeliveryTransport, Program, Progress
+from gateway.jobs.queue.publish import JobPublisher
+from gateway.jobs.queue.store import Job, JobQueue, JobState
+
+log = logging.getLogger("gateway.jobs.delivery")
+
+IDLE_POLL = 5.0  # s: a worker with nothing to do looks again at least this often
+
+
+class Spool(Protocol):
+    def program(self, job: Job) -> Path: ...
+
+    def discard(self, job: Job) -> None: ...
+
+
+# Runs a JobQueue method off the event loop (and tells the publisher something may have changed).
+QueueCall = Callable[..., Awaitable[Any]]
+
+
+class DeliveryWorker:
+    """Delivers one machine's jobs. `wake()` when its queue may have changed."""
+
+    def __init__(
+        self,
+        machine: str,
+        config: JobsConfig,
+        queue: JobQueue,
+        spool: Spool,
+        publisher: JobPublisher,
+        run: QueueCall,
+        transport: DeliveryTransport,
+        *,
+        autostart: AutoStarter | None = None,
+    ) -> None:
+        self.machine = machine
+        self.config = config
+        self.queue = queue
+        self.spool = spool
+        self.publisher = publisher
+        self._q = run
+        self.transport = transport
+        self.autostart = autostart
+        self._wake = asyncio.Event()
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    async def _sleep(self, seconds: float) -> None:
+        try:  # asyncio.timeout, not wait_for, which can swallow a cancellation in Python 3.11
+            async with asyncio.timeout(min(seconds, IDLE_POLL)):
+                await self._wake.wait()
+        except TimeoutError:
+            pass
+        self._wake.clear()
+
+    async def run(self) -> None:
+        """Until cancelled: take the head of the queue, deliver it (or re-check it after a crash)."""
+        while True:
+            job: Job | None = await self._q(self.queue.head, self.machine)
+            if job is None:
+                await self._sleep(IDLE_POLL)
+                continue
+            if job.state is JobState.SENDING:
+                await self.recover(job)
+                continue
+            wait = (job.next_attempt_at or 0.0) - time.time()
+            if wait > 0:
+                await self._sleep(wait)
+                continue
+            await self.deliver(job)
+
+    # --- one job ------------------------------------------------------------------------------------
+
+    async def deliver(self, job: Job) -> None:
+        try:
+            job = await self._q(self.queue.start_sending, job.seq)
+        except JobError:  # cancelled or changed from the CLI a moment ago
+            return
+        program = self.program(job)
+        name, total = program.name, program.size
+        started = time.monotonic()
+        log.info("%s: sending %s (%s, %d bytes), attempt %d", self.machine, job.id, name, total, job.attempts)
+        self.publisher.progress(job, 0, total)
+
+        def report(progress: Progress) -> None:
+            self.publisher.progress(job, progress.sent, total)
+
+        try:
+            if not program.path.is_file():
+                missing = f"the program file {program.path} is missing from the spool"
+                raise DeliveryError(missing, permanent=True)
+            where = await self.transport.deliver(program, report)
+        except DeliveryError as exc:
+            await self._failed(job, exc)
+            return
+        finally:
+            self.publisher.forget(job)
+        seconds = time.monotonic() - started
+        job = await self._q(self.queue.delivered, job.seq, name, f"delivered to {where} in {seconds:.1f} s")
+        log.info("%s: %s delivered as %s", self.machine, job.id, name)
+        self.spool.discard(job)
+        if self.autostart is not None:
+            outcome = await self.autostart.run(job, name)
+            log.info("%s: %s %s", self.machine, job.id, outcome)
+            await self._q(self.queue.note, job.seq, f"{job.reason}; {outcome}")
+
+    def program(self, job: Job) -> Program:
+        """What the transport needs of a queued job."""
+        size, digest = job.program_size or 0, job.program_sha256 or ""
+        return Program(job.filename, self.spool.program(job), size, digest, job.program_name)
+
+    async def _failed(self, job: Job, exc: DeliveryError) -> None:
+        attempts, limit = job.attempts, self.config.max_attempts
+        reason = exc.reason
+        if exc.permanent or attempts >= limit:
+            why = "" if exc.permanent else f" after {attempts} attempt{'s' if attempts != 1 else ''}"
+            await self._q(self.queue.send_failed, job.seq, f"failed{why}: {reason}", retry_at=None)
+            log.warning("%s: %s FAILED%s: %s", self.machine, job.id, why, reason)
+            return
+        delay = self.config.retry.delay(attempts)
+        await self._q(
+            self.queue.send_failed, job.seq, f"attempt {attempts} of {limit} failed: {reason}; next in {delay:g} s",
+            retry_at=time.time() + delay,
+        )
+        log.info("%s: %s attempt %d failed (%s); retrying in %g s", self.machine, job.id, attempts, reason, delay)
+
+    # --- after a crash ----------------------------------------------------------------------------
+
+    async def recover(self, job: Job) -> None:
+        """A job left SENDING by an earlier run: delivered after all, or to be sent again?"""
+        program = self.program(job)
+        attempt = 0
+        while True:
+            attempt += 1
+            try:
+                if await self.transport.holds(program):
+                    found = "found complete on the controller after a restart"
+                    job = await self._q(self.queue.delivered, job.seq, program.name, found)
+                    log.info("%s: %s was delivered before the restart; not sending it again", self.machine, job.id)
+                    self.spool.discard(job)
+                    return
+                break
+            except DeliveryError as exc:
+                delay = self.config.retry.delay(attempt)
+                log.warning("%s: cannot check %s on the controller (%s); again in %g s", self.machine, job.id,
+                            exc.reason, delay)
+                await asyncio.sleep(delay)
+        await self._q(self.queue.send_failed, job.seq, "interrupted by a restart; sending again", retry_at=time.time())

@@ -1,0 +1,133 @@
+"""The job inbox: an FTP server (aioftp) with one folder per machine.
+
+This module is the inbox as the gateway sees it: an async context manager,
+its folders, TLS. The FTP protocol side (aioftp's server) is in server.py
+and browse.py, the only modules that import aioftp's server API.
+
+When is an upload complete? FTP ends a stream-mode upload by closing the data
+connection, so a client that dies mid-STOR looks like one that finished. So:
+
+- a temporary name (`*.part`, `*.tmp`, `*.filepart`, or the `tmp/` folder) is
+  only stored; the RNFR/RNTO that gives it its real name commits it;
+- a plain STOR is committed only if the data connection ended cleanly and the
+  control connection is still alive a moment later (a killed client loses both
+  at once). The validator's end-marker check is the second guard.
+
+A committed upload is handed to `submit` (the JobService), whose verdict is the
+FTP reply: `226 J000042 queued` or `550 J000043 rejected: …`. Nothing is kept
+in a machine's folder after that: the folder is a drop box, not a store.
+
+aioftp lacks SIZE, MDTM, FEAT, NOOP, OPTS, ALLO, MODE, STRU, NLST and SITE; they
+are added there. Its idle timeout would also cut long uploads (it times the
+control connection alone), so idle sessions are closed by the inbox instead.
+"""
+
+from __future__ import annotations
+
+import logging
+import ssl
+from collections.abc import Callable, Collection
+from pathlib import Path
+from typing import Self
+
+from gateway.config.jobs import InboxConfig, machines_allowed
+from gateway.errors import SinkError
+from gateway.jobs.inbox.accounts import Accounts
+from gateway.jobs.inbox.paths import TMP
+from gateway.jobs.inbox.server import (
+    STAGING,
+    CheckUpload,
+    InboxServer,
+    Submit,
+    Upload,
+    UploadReply,
+    close_server,
+)
+
+__all__ = ["STAGING", "Inbox", "Submit", "Upload", "UploadReply", "tls_context"]
+
+log = logging.getLogger("gateway.jobs.inbox")
+
+
+def tls_context(state_dir: Path, cert: str, key: str) -> ssl.SSLContext:
+    """The server context for implicit FTPS; SinkError says which file is missing or wrong."""
+    cert_path, key_path = state_dir / cert, state_dir / key
+    for path in (cert_path, key_path):
+        if not path.is_file():
+            raise SinkError(
+                f"FTP inbox TLS: {path} does not exist; create it, e.g. `openssl req -x509 -newkey rsa:2048 -nodes "
+                f"-days 3650 -subj /CN=cnc-gateway -keyout {key_path} -out {cert_path}`"
+            )
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    try:
+        context.load_cert_chain(cert_path, key_path)
+    except (ssl.SSLError, OSError) as exc:
+        raise SinkError(f"FTP inbox TLS: cannot load {cert_path} / {key_path}: {exc}") from None
+    return context
+
+
+class Inbox:
+    """The FTP inbox as an async context manager. `port` is the bound port (also when 0 was asked)."""
+
+    def __init__(
+        self,
+        config: InboxConfig,
+        *,
+        root: Path,
+        machines: Collection[str],
+        accounts: Accounts,
+        submit: Submit,
+        tls: ssl.SSLContext | None = None,
+        jobs_coming: Callable[[], None] | None = None,
+        check_upload: CheckUpload | None = None,
+    ) -> None:
+        self.config = config
+        self.root = root
+        self.machines = sorted(machines)
+        self.port = config.port
+        self._server = InboxServer(config, root, accounts, submit, tls, jobs_coming, check_upload)
+        self._started = False
+
+    @property
+    def url(self) -> str:
+        scheme = "ftps" if self._server.ssl is not None else "ftp"
+        host = "127.0.0.1" if self.config.host in ("0.0.0.0", "::", "") else self.config.host
+        return f"{scheme}://{host}:{self.port}/"
+
+    def prepare(self) -> list[str]:
+        """Create the folders; discard uploads that a previous run left unfinished. Returns what was discarded."""
+        discarded = []
+        staging = self.root / STAGING
+        staging.mkdir(parents=True, exist_ok=True)
+        for leftover in staging.iterdir():
+            leftover.unlink(missing_ok=True)
+            discarded.append(leftover.name)
+        for machine in self.machines:
+            (self.root / machine / TMP).mkdir(parents=True, exist_ok=True)
+        return discarded
+
+    async def __aenter__(self) -> Self:
+        discarded = self.prepare()
+        if discarded:
+            log.warning("inbox: discarded %d unfinished upload(s) from the previous run", len(discarded))
+        try:
+            await self._server.start(self.config.host, self.config.port)
+        except OSError as exc:
+            raise SinkError(
+                f"FTP inbox cannot listen on {self.config.host}:{self.config.port}: {exc.strerror or exc}"
+            ) from None
+        self._started = True
+        self.port = self._server.address[1]
+        log.info("FTP inbox listening on %s (folders: %s)", self.url, ", ".join(self.machines))
+        if self.config.anonymous:  # an explicit setting; say what it opens
+            open_to = [m for m in self.machines if machines_allowed(self.config.anonymous_machines, m)]
+            log.warning("FTP inbox: anonymous logins (any password) may submit programs for %s: validated, "
+                        "queued, delivered, and started where the mapping has jobs.auto (inbox.anonymous)",
+                        ", ".join(open_to) or "no machine")
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        if not self._started:
+            return
+        self._started = False
+        await close_server(self._server)

@@ -1,0 +1,1 @@
+"""Validation of a program before it is queued: the pure pipeline, its compiled reader, the run-time estimate."""
