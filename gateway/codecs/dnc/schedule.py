@@ -106,6 +106,7 @@ class _Line:
     paused: bool = False
     starvations: int = 0
     executed_any: bool = False
+    last_served: float = -math.inf
     queue: deque[_Granted] = field(default_factory=deque)
 
     @property
@@ -149,6 +150,12 @@ class DripScheduler:
             raise ValueError(f"line {line.key!r}: rate and buffer size must be > 0")
         if line.link is not None and line.link not in self.links:
             raise ValueError(f"line {line.key!r}: unknown link {line.link!r}")
+        for index, block in enumerate(line.blocks):
+            if block.size > line.buffer_size:
+                raise ValueError(
+                    f"line {line.key!r}: block {index + 1} ({block.size} bytes) is longer than the "
+                    f"controller's buffer ({line.buffer_size} bytes): it cannot be drip-fed"
+                )
         self._lines[line.key] = _Line(line)
 
     def remove(self, key: str) -> None:
@@ -227,18 +234,23 @@ class DripScheduler:
         return room >= self._need(line)
 
     def next_grant(self, now: float) -> Grant | None:
-        """A chunk for the eligible line that runs dry first, or None (see `wake_at`)."""
+        """A chunk for the eligible line that runs dry first, or None (see `wake_at`).
+
+        Lines equally close to dry (all of them, on a link too slow for everyone) are
+        served least recently served first, so that they share the shortage alike.
+        """
         best: _Line | None = None
-        best_ahead = math.inf
+        best_key = (math.inf, math.inf)
         for line in self._lines.values():
             if not self._eligible(line, now):
                 continue
-            ahead = self._ahead(line, now)
-            if best is None or ahead < best_ahead:
-                best, best_ahead = line, ahead
+            key = (self._ahead(line, now), line.last_served)
+            if best is None or key < best_key:
+                best, best_key = line, key
         if best is None:
             return None
-        return self._grant(best, now, best_ahead)
+        best.last_served = now
+        return self._grant(best, now, best_key[0])
 
     def _grant(self, line: _Line, now: float, ahead: float) -> Grant:
         spec = line.spec
@@ -284,20 +296,38 @@ class DripScheduler:
         line.queue.append(_Granted(size, seconds, arrives, finishes))
 
     def wake_at(self, now: float) -> float | None:
-        """The earliest time after `now` when `next_grant` may give something, None if never."""
-        times: list[float] = []
+        """The earliest time after `now` when `next_grant` may give something, None if never (until a
+        `start` or `set_paused` changes the picture)."""
+        best: float | None = None
         for line in self._lines.values():
             if line.finished_sending or line.paused:
                 continue
-            if line.free_at > now:
-                times.append(line.free_at)
+            when = max(now, line.free_at)
             link = line.spec.link
-            if link is not None and self._link_free.get(link, -math.inf) > now:
-                times.append(self._link_free[link])
-            if line.started and line.exec_end - self.target > now:
-                times.append(line.exec_end - self.target)
+            if link is not None:
+                when = max(when, self._link_free.get(link, -math.inf))
+            if self._ahead(line, now) >= self.target:
+                if not line.started:
+                    continue  # holds enough until its machine starts
+                # Strictly after: at exec_end - target the line holds exactly the target, not less.
+                when = max(when, line.exec_end - self.target)
+                if when <= now:
+                    when = now + 1e-9 * max(1.0, abs(now))
             self._expire(line, now)
-            if line.queue and line.queue[0].finishes is not None:
-                times.append(line.queue[0].finishes)
-        later = [t for t in times if t > now]
-        return min(later) if later else None
+            room = line.spec.buffer_size - self.buffered(line.spec.key, now)
+            if room < self._need(line):
+                freed = room
+                for item in line.queue:  # finish times are in order
+                    if item.finishes is None:
+                        break
+                    freed += item.size
+                    if freed >= self._need(line):
+                        when = max(when, item.finishes)
+                        break
+                else:
+                    continue
+                if freed < self._need(line):
+                    continue
+            if when > now and (best is None or when < best):
+                best = when
+        return best
