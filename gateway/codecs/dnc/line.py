@@ -47,7 +47,7 @@ class LineSettingsError(CodecError):
 
 
 def _odd_bits(value: int) -> bool:
-    return bin(value).count("1") % 2 == 1
+    return value.bit_count() % 2 == 1
 
 
 def _parity_tables(parity: Literal["E", "O"]) -> tuple[bytes, bytes, bytes]:

@@ -207,4 +207,3 @@ def _identify(text: bytes, header: bytes) -> tuple[int | None, str | None]:
     if header:
         return None, header.decode("ascii", "replace")
     return None, None
-

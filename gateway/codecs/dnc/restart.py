@@ -73,7 +73,11 @@ def restart_lines(program: bytes, line: int) -> ProgramLines:
     first_motion = next((i for i, b in enumerate(blocks) if _is_motion(b)), len(blocks))
     if index <= first_motion:
         return parts
-    header = [ln for ln, b in zip(parts.lines[:first_motion], blocks[:first_motion], strict=True) if _keep_in_header(b)]
+    header = [
+        ln
+        for ln, b in zip(parts.lines[:first_motion], blocks[:first_motion], strict=True)
+        if _keep_in_header(b)
+    ]
     modal = _modal_block(blocks[:index], line)
     return ProgramLines((*header, SourceLine(GENERATED, modal), *parts.lines[index:]), parts.header)
 

@@ -24,9 +24,7 @@ INCH = 25.4
 _AXES = "XYZ"
 
 
-def block_times(
-    text: str, *, rapid: float = DEFAULT_RAPID, dwell_ms: bool = False
-) -> dict[int, float]:
+def block_times(text: str, *, rapid: float = DEFAULT_RAPID, dwell_ms: bool = False) -> dict[int, float]:
     """Seconds each line of the program runs, by line number (1-based); lines that take no time are absent.
 
     `dwell_ms`: G4 P is in milliseconds (Fanuc) rather than seconds (LinuxCNC, the simulator).

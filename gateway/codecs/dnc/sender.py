@@ -83,7 +83,9 @@ class DncSender:
         bad_positions: set[int] = set()
         if errors:
             self.parity_errors += errors
-            reasons.add(f"{errors} parity error(s): is the controller's character format {self.settings.format}?")
+            reasons.add(
+                f"{errors} parity error(s): is the controller's character format {self.settings.format}?"
+            )
             bad_positions = {i for i, b in enumerate(data) if b not in self._good}
         for index, char in enumerate(chars):
             if index in bad_positions:
@@ -97,7 +99,9 @@ class DncSender:
                 continue
             junk.append(char)
             if char in (DC1, DC3):
-                reasons.add(f"{'DC1' if char == DC1 else 'DC3'} while the handshake is {self.settings.handshake}")
+                reasons.add(
+                    f"{'DC1' if char == DC1 else 'DC3'} while the handshake is {self.settings.handshake}"
+                )
             elif self.settings.seven_bit and char > 0x7F:
                 reasons.add("bytes above 0x7F on a 7-bit line (wrong baud rate or character format?)")
             else:

@@ -65,15 +65,15 @@ def test_software_parity_sets_bit_7_and_finds_every_wrong_bit() -> None:
     even = LineSettings(software_parity=True)  # 7E2
     odd = dataclasses.replace(even, parity="O")
     for char in range(128):
-        ones = bin(char).count("1")
-        assert bin(even.encode(bytes([char]))[0]).count("1") % 2 == 0
-        assert bin(odd.encode(bytes([char]))[0]).count("1") % 2 == 1
+        ones = char.bit_count()
+        assert even.encode(bytes([char]))[0].bit_count() % 2 == 0
+        assert odd.encode(bytes([char]))[0].bit_count() % 2 == 1
         assert even.encode(bytes([char]))[0] & 0x7F == char
         assert (even.encode(bytes([char]))[0] >> 7) == ones % 2
     chars = bytes(range(128))
     assert even.decode(even.encode(chars)) == (chars, 0)
     # A sender that sends plain 7-bit bytes (8N1, no parity) gets a parity error for every odd character.
-    odd_weight = sum(1 for c in chars if bin(c).count("1") % 2)
+    odd_weight = sum(1 for c in chars if c.bit_count() % 2)
     assert even.decode(chars) == (chars, odd_weight)
     assert LineSettings().encode(b"\x93") == b"\x93"  # no software parity: bytes pass unchanged
 
@@ -85,7 +85,9 @@ def test_frame_has_leader_markers_and_the_configured_end_of_block() -> None:
     wire = frame_program(PROGRAM, SEVEN_E2)
     assert wire.data == b"\x00" * 20 + b"%\nO4711 (BRACKET)\nG21 G90\nG0 X10 Y10\nG1 X20 F1200\nM30\n%"
     crlf = frame_program(PROGRAM, dataclasses.replace(SEVEN_E2, eob="crlf", leader=3))
-    assert crlf.data == b"\x00\x00\x00%\r\nO4711 (BRACKET)\r\nG21 G90\r\nG0 X10 Y10\r\nG1 X20 F1200\r\nM30\r\n%"
+    assert (
+        crlf.data == b"\x00\x00\x00%\r\nO4711 (BRACKET)\r\nG21 G90\r\nG0 X10 Y10\r\nG1 X20 F1200\r\nM30\r\n%"
+    )
     bare = frame_program(PROGRAM, dataclasses.replace(SEVEN_E2, markers=False, leader=0))
     assert bare.data == b"O4711 (BRACKET)\nG21 G90\nG0 X10 Y10\nG1 X20 F1200\nM30\n"
 
@@ -129,7 +131,9 @@ def test_index_maps_offsets_to_source_lines() -> None:
         (b"G0 X1\rG1 X2\n", 1, "carriage return inside a line"),
     ],
 )
-def test_programs_that_cannot_travel_are_refused_with_their_line(program: bytes, line: int, fragment: str) -> None:
+def test_programs_that_cannot_travel_are_refused_with_their_line(
+    program: bytes, line: int, fragment: str
+) -> None:
     with pytest.raises(FramingError, match=fragment) as info:
         frame_program(program, SEVEN_E2)
     assert info.value.line == line
@@ -145,9 +149,9 @@ def test_eight_bit_bytes_only_on_eight_bit_lines() -> None:
 
 # --- round trips -----------------------------------------------------------------------------------
 
-_block_text = st.text(
-    alphabet=st.sampled_from("GXYZFMNOST0123456789.- ()#="), min_size=0, max_size=30
-).map(lambda t: t.encode("ascii").strip(b" "))
+_block_text = st.text(alphabet=st.sampled_from("GXYZFMNOST0123456789.- ()#="), min_size=0, max_size=30).map(
+    lambda t: t.encode("ascii").strip(b" ")
+)
 _programs = st.lists(_block_text.filter(lambda b: not b.startswith(b"%")), min_size=1, max_size=30)
 
 

@@ -6,7 +6,14 @@ import math
 
 import pytest
 
-from gateway.codecs.dnc import GENERATED, FramingError, LineSettings, block_times, frame_program, restart_lines
+from gateway.codecs.dnc import (
+    GENERATED,
+    FramingError,
+    LineSettings,
+    block_times,
+    frame_program,
+    restart_lines,
+)
 
 PROGRAM = b"""%
 O4711 (BRACKET)
@@ -87,7 +94,9 @@ def test_block_times_follow_t_equals_s_over_v() -> None:
 
 def test_arcs_by_centre_and_radius_and_full_circles() -> None:
     # Quarter circle of radius 10 at 600 mm/min (10 mm/s): 15.708 mm.
-    times = block_times("G1 X10 Y0 F600\nG3 X0 Y10 I-10 J0\nG2 X10 Y0 R10\nG2 X10 Y0 I-10 J0\nG2 X0 Y10 R-10\n")
+    times = block_times(
+        "G1 X10 Y0 F600\nG3 X0 Y10 I-10 J0\nG2 X10 Y0 R10\nG2 X10 Y0 I-10 J0\nG2 X0 Y10 R-10\n"
+    )
     assert times[2] == pytest.approx(math.pi * 10 / 2 / 10)
     assert times[3] == pytest.approx(math.pi * 10 / 2 / 10)
     assert times[4] == pytest.approx(2 * math.pi * 10 / 10)

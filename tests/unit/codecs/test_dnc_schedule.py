@@ -32,7 +32,9 @@ class Outcome:
     starts: dict[str, float] = field(default_factory=dict)
 
 
-def run(sched: DripScheduler, lines: list[DripLine], *, horizon: float = 1e6, max_steps: int = 200_000) -> Outcome:
+def run(
+    sched: DripScheduler, lines: list[DripLine], *, horizon: float = 1e6, max_steps: int = 200_000
+) -> Outcome:
     """Drive the scheduler in simulated time; start each machine once it holds lead_time (or everything)."""
     for line in lines:
         sched.add(line)

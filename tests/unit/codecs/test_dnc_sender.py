@@ -77,7 +77,9 @@ def test_junk_is_counted_and_described_and_never_acted_on() -> None:
     s = sender()
     events = s.feed(b"\xfe\x11garbage\x13")
     assert [type(e) for e in events] == [Junk, Resume, Junk, Pause]
-    assert events[0] == Junk(1, b"\xfe", "bytes above 0x7F on a 7-bit line (wrong baud rate or character format?)")
+    assert events[0] == Junk(
+        1, b"\xfe", "bytes above 0x7F on a 7-bit line (wrong baud rate or character format?)"
+    )
     assert isinstance(events[2], Junk) and events[2].count == 7 and "other than DC1/DC3" in events[2].reason
     assert s.junk_bytes == 8
 
