@@ -153,14 +153,14 @@ async def test_a_sender_that_ignores_dc3_overflows_the_buffer_alarm_087(tmp_path
 
 async def test_a_sender_too_slow_for_the_program_starves_the_drip_feed(tmp_path: Path) -> None:
     # 1 mm moves at 6000 mm/min run in 10 ms (2.5 ms at speed 4); this sender gives 100 characters a second.
-    program = drip_program(60, 1.0, 6000)
+    program = drip_program(24, 1.0, 6000)
     async with simulator(tmp_path, mode=Mode.DRIP, buffer_size=128, high_water=96, low_water=32) as sim:
         await asyncio.to_thread(send, face(sim).socket_url, program, SOFT, rate=100.0, timeout=60)
         await wait_until(lambda: sim.machine.state is MachineState.IDLE and face(sim).stats()["drips"] == 1,
                          timeout=30, message="the drip program to end")  # fmt: skip
         assert face(sim).stats()["starvations"] >= 1
         assert sim.machine.starvations == face(sim).stats()["starvations"]
-        assert sim.machine.axes[0].actual == pytest.approx(70.0)
+        assert sim.machine.axes[0].actual == pytest.approx(34.0)
 
 
 # --- punch and remote requests, commanded over OPC UA ----------------------------------------------
@@ -226,12 +226,18 @@ async def test_cnc_simulator_serves_dnc_on_the_ports_it_is_given(tmp_path: Path)
     )  # fmt: skip
 
     def first_byte() -> bytes:
-        with serial.serial_for_url(f"socket://127.0.0.1:{dnc}", timeout=0) as port:
-            deadline = time.monotonic() + 10
-            while time.monotonic() < deadline:
-                if data := port.read(1):
-                    return data
-                time.sleep(0.01)
+        """The first byte the controller sends. `listening()` connected too: until the simulator has seen
+        that probe go, the port (one cable) refuses another link, so a refused link is tried again."""
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                with serial.serial_for_url(f"socket://127.0.0.1:{dnc}", timeout=0) as port:
+                    while time.monotonic() < deadline:
+                        if data := port.read(1):
+                            return bytes(data)
+                        time.sleep(0.01)
+            except serial.SerialException:
+                time.sleep(0.05)
         return b""
 
     try:
