@@ -23,9 +23,9 @@ import logging
 import os
 import termios
 import tty
-from typing import Protocol, Self
+from typing import Protocol, Self, cast
 
-from serial.rfc2217 import PortManager
+from serial.rfc2217 import PortManager, Serial
 
 from gateway.codecs.dnc import LineSettings
 from simulator.dnc.uart import Coupling, Frame
@@ -167,7 +167,9 @@ class _Rfc2217Link(_TcpLink):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
-        self.manager = PortManager(self.state, _Raw(transport))  # type: ignore[arg-type]
+        # PortManager only touches the settings and modem lines of its "serial", and only calls
+        # `write` on its "connection": these stand in for the real port and socket (duck typing).
+        self.manager = PortManager(cast(Serial, self.state), cast(Serial, _Raw(transport)))
         super().connection_made(transport)
 
     def data_received(self, data: bytes) -> None:
