@@ -12,6 +12,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from simulator.dnc import DncOptions
+from simulator.dnc.options import add_dnc_arguments, dnc_banner, dnc_options
 from simulator.errors import SimulatorError
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
@@ -66,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--noise-mapping", type=Path, default=None, metavar="FILE",
         help="write a gateway mapping file for the noise variables to FILE at start",
     )  # fmt: skip
+    add_dnc_arguments(p)
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
 
@@ -112,14 +115,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         build_parser().error("--noise-variables must be >= 0 and --noise-per-folder >= 1")
     if args.noise_mapping is not None and not args.noise_variables:
         build_parser().error("--noise-mapping needs --noise-variables")
+    try:
+        dnc = dnc_options(args)
+    except ValueError as exc:
+        build_parser().error(str(exc))
     configure_logging(args.log_level)
     try:
-        return asyncio.run(serve(args))
+        return asyncio.run(serve(args, dnc))
     except KeyboardInterrupt:  # a signal before the handlers were installed
         return 0
 
 
-async def serve(args: argparse.Namespace) -> int:
+async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -138,6 +145,7 @@ async def serve(args: argparse.Namespace) -> int:
         opcua_user=args.opcua_user,
         opcua_password=args.opcua_password,
         noise=_noise(args),
+        dnc=dnc,
     )
     try:
         async with simulator:
@@ -176,6 +184,7 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
         f"  programs {programs}",
         f"  speed    {sim.speed:g}x" + (f", looping {sim.loop_program}" if sim.loop_program else ""),
         *(_noise_banner(sim, args) if sim.noise is not None else []),
+        *(dnc_banner(sim.dnc) if sim.dnc is not None else []),
         "  stop     Ctrl-C",
         "",
     ]

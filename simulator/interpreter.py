@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from gateway.codecs.gcode import Block, GcodeError, Word, lex_lines, split_lines
+from gateway.codecs.gcode import Block, GcodeError, Word, lex_line, lex_lines, split_lines
 from simulator.alarms import Alarm, program_error, soft_limit
 from simulator.geometry import ArcError, Line, Point, Segment, arc_from_center, arc_from_radius
 
@@ -156,27 +156,30 @@ class _Planner:
     def run(self, text: str) -> Plan:
         end: Action = ProgramEnd(count_part=False)
         for raw, item in _program_lines(text):
-            if isinstance(item, GcodeError):
-                self.actions.append(BeginBlock(item.line, raw.strip()))
-                end = Fault(program_error(item.line, f"{item.reason} (column {item.column})"))
-                break
-            if item.is_blank or (item.block_delete and self.block_delete):
-                continue
-            self.actions.append(BeginBlock(item.line, item.text.strip()))
-            try:
-                acts, ended = self.block(item)
-            except _BlockError as exc:
-                end = Fault(program_error(item.line, exc.reason))
-                break
-            except _LimitError as exc:
-                end = Fault(exc.alarm)
-                break
+            acts, stop = self.line(raw, item)
             self.actions.extend(acts)
-            if ended:
-                end = ProgramEnd(count_part=True)
+            if stop is not None:
+                end = stop
                 break
         self.actions.append(end)
         return Plan(tuple(self.actions), self.total)
+
+    def line(self, raw: str, item: Block | GcodeError) -> tuple[list[Action], Action | None]:
+        """The actions of one line, and the action that ends the program there (a Fault, M2/M30), if any."""
+        if isinstance(item, GcodeError):
+            fault = Fault(program_error(item.line, f"{item.reason} (column {item.column})"))
+            return [BeginBlock(item.line, raw.strip())], fault
+        if item.is_blank or (item.block_delete and self.block_delete):
+            return [], None
+        acts: list[Action] = [BeginBlock(item.line, item.text.strip())]
+        try:
+            more, ended = self.block(item)
+        except _BlockError as exc:
+            return acts, Fault(program_error(item.line, exc.reason))
+        except _LimitError as exc:
+            return acts, Fault(exc.alarm)
+        acts.extend(more)
+        return acts, ProgramEnd(count_part=True) if ended else None
 
     def block(self, b: Block) -> tuple[list[Action], bool]:
         """The actions of one block, or _BlockError/_LimitError before any of them happens."""
@@ -314,6 +317,36 @@ class _Planner:
                 raise _LimitError(soft_limit(axis, "+", line))
             if lo[i] < low - 1e-9:
                 raise _LimitError(soft_limit(axis, "-", line))
+
+
+class StreamPlanner:
+    """Plans a program line by line as it arrives (DNC drip feed), with the modal state carried over.
+
+    Lines are numbered from 2: line 1 is the `%` that opened the program, as in the file it came from.
+    """
+
+    def __init__(
+        self, start: Point, *, limits: dict[str, tuple[float, float]] = SOFT_LIMITS, block_delete: bool = True
+    ) -> None:
+        self._planner = _Planner(start, limits, block_delete)
+        self._line = 1
+
+    @property
+    def total_path(self) -> float:
+        return self._planner.total
+
+    def feed(self, raw: str) -> tuple[list[Action], bool]:
+        """The actions of the next line; True when they end the program (their last is ProgramEnd or Fault)."""
+        self._line += 1
+        item: Block | GcodeError
+        try:
+            item = lex_line(raw, self._line)
+        except GcodeError as exc:
+            item = exc
+        acts, stop = self._planner.line(raw, item)
+        if stop is None:
+            return acts, False
+        return [*acts, stop], True
 
 
 def _check_groups(words: tuple[Word, ...]) -> None:

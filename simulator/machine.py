@@ -11,6 +11,7 @@ refuses them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -24,7 +25,6 @@ from simulator.interpreter import (
     Dwell,
     Fault,
     Move,
-    Plan,
     ProgramEnd,
     ProgramStop,
     SetLaser,
@@ -97,11 +97,18 @@ class ProgramStatus:
     run_time: float = 0.0  # s of simulated time while running
 
 
+#: Gives the actions of the next block of a streamed (drip-fed) program, or None while none has arrived.
+Refill = Callable[[], "list[Action] | None"]
+
+
 @dataclass(slots=True)
 class _Run:
-    """Where execution stands in a planned program."""
+    """Where execution stands in a planned program (or in a streamed one, planned as it arrives)."""
 
-    plan: Plan
+    actions: list[Action]
+    total_path: float  # mm of the moves planned so far
+    refill: Refill | None = None
+    waiting: bool = False  # a streamed program ran out of blocks and waits for more
     index: int = 0
     along: float = 0.0  # mm along the current move, or s into the current dwell
     done_path: float = 0.0  # mm of completed moves
@@ -126,6 +133,7 @@ class Machine:
     alarms: list[Alarm] = field(default_factory=list)
     ignore_start: bool = False  # test hook: Start is accepted and ignored
     sim_time: float = 0.0
+    starvations: int = 0  # times a drip-fed program ran out of blocks while running
     _run: _Run | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -164,10 +172,29 @@ class Machine:
             raise InvalidState(f"program {name!r} is no longer in the program store") from None
         start = (self.axes[0].actual, self.axes[1].actual, self.axes[2].actual)
         plan = plan_program(text, start, limits=self.limits, block_delete=self.block_delete)
-        self._run = _Run(plan)
+        self._run = _Run(list(plan.actions), plan.total_path)
         self.program.progress = 0.0
         self.program.run_time = 0.0
         self.state = MachineState.RUNNING
+
+    def start_stream(self, name: str, refill: Refill) -> None:
+        """Run a program whose blocks arrive while it runs (DNC drip feed): `refill` gives the next
+        block's actions (planned with `interpreter.StreamPlanner`), or None while none has arrived;
+        the machine then holds, and counts a starvation, until one does."""
+        if self.state is MachineState.ALARM:
+            raise InvalidState("cannot start with active alarms: reset first")
+        if self.state is not MachineState.IDLE:
+            raise InvalidState("a program is already running")
+        self.program.name = name
+        self._run = _Run([], 0.0, refill)
+        self.program.progress = 0.0
+        self.program.run_time = 0.0
+        self.state = MachineState.RUNNING
+
+    @property
+    def waiting_for_data(self) -> bool:
+        """A drip-fed program is running and its next block has not arrived."""
+        return self._run is not None and self._run.waiting
 
     def stop(self) -> None:
         """Abort the program (accepted, and harmless, when nothing runs)."""
@@ -226,7 +253,11 @@ class Machine:
         left = dt
         while self.state is MachineState.RUNNING and self._run is not None:
             run = self._run
-            action = run.plan.actions[run.index]
+            if run.index >= len(run.actions):
+                if not self._refill(run):
+                    break  # a drip-fed program waits for its next block; time still passes
+                continue
+            action = run.actions[run.index]
             if isinstance(action, Move):
                 feed = self._feed_of(action)
                 remaining = action.segment.length - run.along
@@ -262,6 +293,19 @@ class Machine:
         self._update_progress()
 
     # --- internals -----------------------------------------------------------------------------
+
+    def _refill(self, run: _Run) -> bool:
+        more = run.refill() if run.refill is not None else None
+        if not more:
+            if not run.waiting:
+                run.waiting = True
+                self.starvations += 1
+                self._halt()
+            return False
+        run.waiting = False
+        run.actions.extend(more)
+        run.total_path += sum(a.segment.length for a in more if isinstance(a, Move))
+        return True
 
     def _feed_of(self, move: Move) -> float:
         if move.feed is None:
@@ -302,7 +346,7 @@ class Machine:
     def _set_commanded(self) -> None:
         """Commanded position: the end point of the current block's motion, if it has one."""
         assert self._run is not None
-        actions = self._run.plan.actions
+        actions = self._run.actions
         for action in actions[self._run.index + 1 :]:
             if isinstance(action, Move):
                 for axis, value in zip(self.axes, action.segment.end, strict=True):
@@ -346,12 +390,11 @@ class Machine:
         run = self._run
         if run is None or self.state is MachineState.ALARM:
             return
-        total = run.plan.total_path
+        total = run.total_path
         if total <= 0:
             return
         done = run.done_path
-        action = run.plan.actions[run.index]
-        if isinstance(action, Move):
+        if run.index < len(run.actions) and isinstance(run.actions[run.index], Move):
             done += run.along
         self.program.progress = min(100.0, 100.0 * done / total)
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Self
 
 from gateway.errors import RequestError
+from simulator.dnc import DncFace, DncOptions
 from simulator.errors import SimulatorError
 from simulator.ftp_store import FtpStore
 from simulator.machine import Machine, MachineState
@@ -57,6 +58,7 @@ class Simulator:
         extra_variables: Sequence[Variable] = (),
         clock: Callable[[], datetime] = utcnow,
         noise: NoiseSpec | None = None,
+        dnc: DncOptions | None = None,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -79,6 +81,12 @@ class Simulator:
         self.variables: list[Variable] = build_variables() + list(extra_variables)
         if self.noise is not None:
             self.variables += self.noise.variables
+        # The serial DNC face (simulator/dnc): off unless asked for; its variables join the PLC's.
+        self.dnc: DncFace | None = None
+        if dnc is not None:
+            self.dnc = DncFace(dnc.spec, self.machine, self.programs, host=host, tcp_port=dnc.tcp_port,
+                               rfc2217_port=dnc.rfc2217_port, pty=dnc.pty, speed=speed)  # fmt: skip
+            self.variables += self.dnc.variables
         self._opcua_auth = (opcua_user, opcua_password)
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
@@ -106,6 +114,8 @@ class Simulator:
             stack.callback(shutil.rmtree, self.store, ignore_errors=True)
             self.programs = DirectoryStore(self.store)
             self.machine.store = self.programs
+            if self.dnc is not None:
+                self.dnc.controller.store = self.programs
         try:
             self.programs.prepare()
         except OSError as exc:
@@ -132,6 +142,8 @@ class Simulator:
             )
         )
         self.ftp_port = ftp.port
+        if self.dnc is not None:
+            await stack.enter_async_context(self.dnc)
         if self.loop_program:
             try:
                 self.machine.select_program(self.loop_program)

@@ -1,6 +1,6 @@
 """The program store: where the controller keeps its part programs.
 
-The machine model only needs `exists` and `read`; `DirectoryStore` serves them
+The machine model only needs `exists` and `read` (the DNC face also `write`s); `DirectoryStore` serves them
 from `<root>/DATA/Programs` on disk, the folder the FTP server exposes, and reads
 a program afresh each time it is selected or started, so programs uploaded over
 FTP are runnable at once. `MemoryStore` serves unit tests.
@@ -9,6 +9,7 @@ FTP are runnable at once. `MemoryStore` serves unit tests.
 from __future__ import annotations
 
 import logging
+import os
 from importlib import resources
 from importlib.resources.abc import Traversable
 from pathlib import Path
@@ -57,6 +58,10 @@ class MemoryStore:
         except KeyError:
             raise ProgramNotFound(name) from None
 
+    def write(self, name: str, data: bytes) -> None:
+        check_name(name)
+        self.programs[name] = data.decode("utf-8", errors="replace")
+
 
 class DirectoryStore:
     """Programs as files in `<root>/DATA/Programs`."""
@@ -94,6 +99,14 @@ class DirectoryStore:
             return path.read_bytes().decode("utf-8", errors="replace")
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
             raise ProgramNotFound(name) from None
+
+    def write(self, name: str, data: bytes) -> None:
+        """Store a program (a DNC load) under `name`, replacing one of that name: a whole file or nothing."""
+        check_name(name)
+        target = self.programs / name
+        staging = self.programs / f".{name}.dnc-partial"
+        staging.write_bytes(data)
+        os.replace(staging, target)
 
     def names(self) -> list[str]:
         if not self.programs.is_dir():

@@ -1,3 +1,4 @@
+import os
 import sys
 from pathlib import Path
 
@@ -10,6 +11,10 @@ settings.register_profile(
     "shared-machine", deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
 )
 settings.load_profile("shared-machine")
+
+# A simulator started by a test (in-process or `cnc-simulator`) takes no fixed DNC port unless asked to.
+os.environ.setdefault("CNC_SIM_DNC_PORT", "off")
+os.environ.setdefault("CNC_SIM_DNC_RFC2217_PORT", "off")
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`
