@@ -70,8 +70,13 @@ class Context:
         print(f"  {text}", flush=True)
 
 
-async def poll(check: Callable[[], Awaitable[T | None]], *, timeout: float, interval: float = 0.2,
-               what: str = "condition") -> T:
+async def poll(
+    check: Callable[[], Awaitable[T | None]],
+    *,
+    timeout: float,
+    interval: float = 0.2,
+    what: str = "condition",
+) -> T:
     """Call `check` until it returns something other than None (or a falsy value); raise on the deadline."""
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout

@@ -50,7 +50,12 @@ def _part(rng: random.Random) -> list[str]:
     ]
     # a hole: a full circle by I/J, then a short slot of straight segments
     cx, cy, hr = x0 + w / 2, y0 + h / 2, min(w, h) * 0.15
-    lines += [f"G0 X{cx + hr:.3f} Y{cy:.3f}", "M3", f"G2 X{cx + hr:.3f} Y{cy:.3f} I{-hr:.3f} J0 F{feed // 2}", "M5"]
+    lines += [
+        f"G0 X{cx + hr:.3f} Y{cy:.3f}",
+        "M3",
+        f"G2 X{cx + hr:.3f} Y{cy:.3f} I{-hr:.3f} J0 F{feed // 2}",
+        "M5",
+    ]
     sx = x0 + w * 0.2
     lines += [f"G0 X{sx:.3f} Y{y0 + h * 0.8:.3f}", "M3"]
     for k in range(1, rng.randint(4, 12)):

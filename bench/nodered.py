@@ -52,7 +52,9 @@ def installed_versions() -> dict[str, str]:
     for name in PACKAGES:
         manifest = MODULES / name / "package.json"
         if not manifest.exists():
-            raise BenchError(f"{name} is not installed in {MODULES}: `make bench` installs the peer (needs npm)")
+            raise BenchError(
+                f"{name} is not installed in {MODULES}: `make bench` installs the peer (needs npm)"
+            )
         found[name] = str(json.loads(manifest.read_text(encoding="utf-8"))["version"])
     if not NODE.exists():
         raise BenchError(f"{NODE} is missing: the `node` package's install script did not run (make bench)")
@@ -74,8 +76,11 @@ def settings_js(user_dir: Path, port: int, flow_file: Path) -> str:
         "diagnostics": {"enabled": False, "ui": False},
         "runtimeState": {"enabled": False, "ui": False},
         "telemetry": {"enabled": False, "updateNotification": False},
-        "externalModules": {"autoInstall": False, "palette": {"allowInstall": False, "allowUpload": False},
-                            "modules": {"allowInstall": False}},
+        "externalModules": {
+            "autoInstall": False,
+            "palette": {"allowInstall": False, "allowUpload": False},
+            "modules": {"allowInstall": False},
+        },
         "functionExternalModules": False,
         "editorTheme": {"projects": {"enabled": False}},
         "logging": {"console": {"level": "warn", "metrics": False, "audit": False}},
@@ -83,35 +88,122 @@ def settings_js(user_dir: Path, port: int, flow_file: Path) -> str:
     return "module.exports = " + json.dumps(settings, indent=2) + ";\n"
 
 
-def flow(endpoint: str, node_ids: list[str], broker_port: int, *, interval_ms: float, qos: int,
-         topic_prefix: str) -> list[dict[str, Any]]:
+def flow(
+    endpoint: str, node_ids: list[str], broker_port: int, *, interval_ms: float, qos: int, topic_prefix: str
+) -> list[dict[str, Any]]:
     """inject (once, at start: the node ids) → OpcUa-Client (subscribe, multiple) → function → mqtt out."""
     items = [{"nodeId": ident} for ident in node_ids]
     return [
         {"id": "bench.tab", "type": "tab", "label": "cnc-gateway bench peer", "disabled": False, "info": ""},
-        {"id": "bench.endpoint", "type": "OpcUa-Endpoint", "endpoint": endpoint, "secpol": "None",
-         "secmode": "None", "none": True, "login": False, "usercert": False, "name": "simulator"},
-        {"id": "bench.broker", "type": "mqtt-broker", "name": "bench mosquitto", "broker": "127.0.0.1",
-         "port": str(broker_port), "clientid": f"bench-nodered-{broker_port}", "autoConnect": True,
-         "usetls": False, "protocolVersion": "4", "keepalive": "30", "cleansession": True,
-         "autoUnsubscribe": True, "birthTopic": "", "closeTopic": "", "willTopic": "", "sessionExpiry": ""},
-        {"id": "bench.start", "type": "inject", "z": "bench.tab", "name": "subscribe all", "props": [
-            {"p": "topic", "vt": "str"}, {"p": "payload"}],
-         "repeat": "", "crontab": "", "once": True, "onceDelay": "0.5", "topic": "multiple",
-         "payload": json.dumps(items), "payloadType": "json", "x": 120, "y": 80, "wires": [["bench.client"]]},
-        {"id": "bench.client", "type": "OpcUa-Client", "z": "bench.tab", "endpoint": "bench.endpoint",
-         "action": "subscribe", "deadbandtype": "a", "deadbandvalue": 1, "time": interval_ms, "timeUnit": "ms",
-         "certificate": "n", "localfile": "", "localkeyfile": "", "securitymode": "None", "securitypolicy": "None",
-         "useTransport": False, "maxChunkCount": 1, "maxMessageSize": 8192, "receiveBufferSize": 8192,
-         "sendBufferSize": 8192, "setstatusandtime": False, "keepsessionalive": False, "name": "noise",
-         "applicationName": "", "applicationUri": "", "x": 320, "y": 80,
-         "wires": [["bench.format"], [], []]},
-        {"id": "bench.format", "type": "function", "z": "bench.tab", "name": "gateway JSON",
-         "func": FORMAT.replace("PREFIX", json.dumps(topic_prefix)), "outputs": 1, "timeout": 0, "noerr": 0,
-         "initialize": "", "finalize": "", "libs": [], "x": 520, "y": 80, "wires": [["bench.out"]]},
-        {"id": "bench.out", "type": "mqtt out", "z": "bench.tab", "name": "", "topic": "", "qos": str(qos),
-         "retain": "true", "respTopic": "", "contentType": "", "userProps": "", "correl": "", "expiry": "",
-         "broker": "bench.broker", "x": 700, "y": 80, "wires": []},
+        {
+            "id": "bench.endpoint",
+            "type": "OpcUa-Endpoint",
+            "endpoint": endpoint,
+            "secpol": "None",
+            "secmode": "None",
+            "none": True,
+            "login": False,
+            "usercert": False,
+            "name": "simulator",
+        },
+        {
+            "id": "bench.broker",
+            "type": "mqtt-broker",
+            "name": "bench mosquitto",
+            "broker": "127.0.0.1",
+            "port": str(broker_port),
+            "clientid": f"bench-nodered-{broker_port}",
+            "autoConnect": True,
+            "usetls": False,
+            "protocolVersion": "4",
+            "keepalive": "30",
+            "cleansession": True,
+            "autoUnsubscribe": True,
+            "birthTopic": "",
+            "closeTopic": "",
+            "willTopic": "",
+            "sessionExpiry": "",
+        },
+        {
+            "id": "bench.start",
+            "type": "inject",
+            "z": "bench.tab",
+            "name": "subscribe all",
+            "props": [{"p": "topic", "vt": "str"}, {"p": "payload"}],
+            "repeat": "",
+            "crontab": "",
+            "once": True,
+            "onceDelay": "0.5",
+            "topic": "multiple",
+            "payload": json.dumps(items),
+            "payloadType": "json",
+            "x": 120,
+            "y": 80,
+            "wires": [["bench.client"]],
+        },
+        {
+            "id": "bench.client",
+            "type": "OpcUa-Client",
+            "z": "bench.tab",
+            "endpoint": "bench.endpoint",
+            "action": "subscribe",
+            "deadbandtype": "a",
+            "deadbandvalue": 1,
+            "time": interval_ms,
+            "timeUnit": "ms",
+            "certificate": "n",
+            "localfile": "",
+            "localkeyfile": "",
+            "securitymode": "None",
+            "securitypolicy": "None",
+            "useTransport": False,
+            "maxChunkCount": 1,
+            "maxMessageSize": 8192,
+            "receiveBufferSize": 8192,
+            "sendBufferSize": 8192,
+            "setstatusandtime": False,
+            "keepsessionalive": False,
+            "name": "noise",
+            "applicationName": "",
+            "applicationUri": "",
+            "x": 320,
+            "y": 80,
+            "wires": [["bench.format"], [], []],
+        },
+        {
+            "id": "bench.format",
+            "type": "function",
+            "z": "bench.tab",
+            "name": "gateway JSON",
+            "func": FORMAT.replace("PREFIX", json.dumps(topic_prefix)),
+            "outputs": 1,
+            "timeout": 0,
+            "noerr": 0,
+            "initialize": "",
+            "finalize": "",
+            "libs": [],
+            "x": 520,
+            "y": 80,
+            "wires": [["bench.out"]],
+        },
+        {
+            "id": "bench.out",
+            "type": "mqtt out",
+            "z": "bench.tab",
+            "name": "",
+            "topic": "",
+            "qos": str(qos),
+            "retain": "true",
+            "respTopic": "",
+            "contentType": "",
+            "userProps": "",
+            "correl": "",
+            "expiry": "",
+            "broker": "bench.broker",
+            "x": 700,
+            "y": 80,
+            "wires": [],
+        },
     ]
 
 
@@ -158,8 +250,10 @@ class NodeRed:
 
     def check(self) -> None:
         if not self.running:
-            raise BenchError(f"Node-RED exited with {self.proc.returncode if self.proc else '?'} "
-                             f"(see {self.log}):\n{self.tail()}")
+            raise BenchError(
+                f"Node-RED exited with {self.proc.returncode if self.proc else '?'} "
+                f"(see {self.log}):\n{self.tail()}"
+            )
 
     def tail(self, lines: int = 20) -> str:
         try:

@@ -60,7 +60,9 @@ class Agent:
         return self.proc.pid
 
     @classmethod
-    async def start(cls, name: str, module: str, args: list[str], workdir: Path, *, timeout: float = 90.0) -> Agent:
+    async def start(
+        cls, name: str, module: str, args: list[str], workdir: Path, *, timeout: float = 90.0
+    ) -> Agent:
         log = workdir / f"{name}.log"
         with log.open("ab") as err:
             proc = await asyncio.create_subprocess_exec(
@@ -85,7 +87,9 @@ class Agent:
             raise BenchError(f"{self.name} did not answer within {timeout:g} s (see {self.log})") from None
         if not line:
             await self.proc.wait()
-            raise BenchError(f"{self.name} exited with {self.proc.returncode} (see {self.log}):\n{_tail(self.log)}")
+            raise BenchError(
+                f"{self.name} exited with {self.proc.returncode} (see {self.log}):\n{_tail(self.log)}"
+            )
         return json.loads(line)
 
     async def ask(self, cmd: str, *, timeout: float = 60.0, **params: Any) -> dict[str, Any]:
@@ -154,7 +158,9 @@ class Mosquitto:
         if not Path(MOSQUITTO).exists():
             raise BenchError("mosquitto is not installed (make system-deps installs it)")
         with (self.dir / "mosquitto.log").open("ab") as log:
-            self.proc = await asyncio.create_subprocess_exec(MOSQUITTO, "-c", str(conf), stdout=log, stderr=log)
+            self.proc = await asyncio.create_subprocess_exec(
+                MOSQUITTO, "-c", str(conf), stdout=log, stderr=log
+            )
         deadline = time.monotonic() + 10
         while not _listening(self.port):
             if self.proc.returncode is not None or time.monotonic() > deadline:

@@ -73,13 +73,25 @@ class Results:
     started: datetime = field(default_factory=lambda: datetime.now(UTC))
     figures: list[Figure] = field(default_factory=list)
     targets: list[Target] = field(default_factory=list)  # issue 7's table
-    targets_13: list[Target] = field(default_factory=list)  # issue 13's: against the peer (Node-RED), tighter scale
+    targets_13: list[Target] = field(
+        default_factory=list
+    )  # issue 13's: against the peer (Node-RED), tighter scale
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
 
-    def add(self, key: str, section: str, label: str, value: float | None, unit: str, *,
-            baseline: float | None = None, baseline_label: str = "", note: str = "") -> Figure:
+    def add(
+        self,
+        key: str,
+        section: str,
+        label: str,
+        value: float | None,
+        unit: str,
+        *,
+        baseline: float | None = None,
+        baseline_label: str = "",
+        note: str = "",
+    ) -> Figure:
         figure = Figure(key, section, label, _finite(value), unit, _finite(baseline), baseline_label, note)
         self.figures.append(figure)
         return figure
@@ -187,6 +199,10 @@ def _columns(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
     lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip()]
     lines.append("  ".join("-" * w for w in widths))
     for row in rows:
-        lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w) if i < 4 else c.ljust(w)
-                               for i, (c, w) in enumerate(zip(row, widths))).rstrip())
+        lines.append(
+            "  ".join(
+                c.ljust(w) if i == 0 else c.rjust(w) if i < 4 else c.ljust(w)
+                for i, (c, w) in enumerate(zip(row, widths))
+            ).rstrip()
+        )
     return "\n".join(lines)

@@ -42,11 +42,21 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="fewer and shorter steps (about two minutes)")
-    p.add_argument("--only", nargs="+", choices=list(SCENARIOS), metavar="SCENARIO",
-                   help=f"run only these scenarios: {', '.join(SCENARIOS)}")
-    p.add_argument("--out", type=Path, default=RESULTS, help="folder for the JSON results (default bench/results)")
-    p.add_argument("--profile", action="store_true",
-                   help="sample the gateway with py-spy during each mirror configuration's last step (flat out by default) and report where time goes")
+    p.add_argument(
+        "--only",
+        nargs="+",
+        choices=list(SCENARIOS),
+        metavar="SCENARIO",
+        help=f"run only these scenarios: {', '.join(SCENARIOS)}",
+    )
+    p.add_argument(
+        "--out", type=Path, default=RESULTS, help="folder for the JSON results (default bench/results)"
+    )
+    p.add_argument(
+        "--profile",
+        action="store_true",
+        help="sample the gateway with py-spy during each mirror configuration's last step (flat out by default) and report where time goes",
+    )
     p.add_argument("--keep", action="store_true", help="keep the work directory (logs, configs, profiles)")
     p.add_argument("--window", type=float, default=None, help="seconds per measurement window")
     p.add_argument("--sizes", type=int, nargs="+", metavar="N", help="mirror: numbers of variables")
@@ -84,7 +94,10 @@ async def main(args: argparse.Namespace) -> int:
     ctx = Context(settings, workdir, results)
     started = time.monotonic()
     results.load["before"] = load_average()
-    print(f"cnc-gateway benchmark ({'quick' if settings.quick else 'full'}); work directory {workdir}", flush=True)
+    print(
+        f"cnc-gateway benchmark ({'quick' if settings.quick else 'full'}); work directory {workdir}",
+        flush=True,
+    )
     try:
         for name in args.only or list(SCENARIOS):
             print(f"\n== {name}", flush=True)
@@ -103,8 +116,10 @@ async def main(args: argparse.Namespace) -> int:
         print("\n" + render(results))
         _print_profiles(ctx)
         path = results.write(args.out)
-        print(f"\nJSON: {path} (and {args.out / 'latest.json'}); load average before/after: "
-              f"{results.load['before']} / {results.load['after']}; {results.details['total_seconds']:.0f} s")
+        print(
+            f"\nJSON: {path} (and {args.out / 'latest.json'}); load average before/after: "
+            f"{results.load['before']} / {results.load['after']}; {results.details['total_seconds']:.0f} s"
+        )
         if args.keep or results.errors:
             print(f"work directory kept: {workdir}")
         else:
@@ -120,7 +135,9 @@ def _print_profiles(ctx: Context) -> None:
             continue
         if not prof or "own" not in prof:
             continue
-        print(f"\nWhere the gateway's time goes ({name}, flat out; py-spy, {prof['samples']} samples), own time:")
+        print(
+            f"\nWhere the gateway's time goes ({name}, flat out; py-spy, {prof['samples']} samples), own time:"
+        )
         for func, share in prof["own"][:12]:
             print(f"  {share:5.1f} %  {func}")
 

@@ -42,9 +42,18 @@ def judge(ctx: Context) -> None:
             p99 = step.get("p99_median")
             if step["rate"] == 5000 and p99 is not None and (worst is None or p99 > worst):
                 worst, where = p99, f"{name} (whole window: {step['latency'].get('p99') or 0:.0f} ms)"
-    targets.append(Target("p99 latency source → MQTT subscriber at 5,000 changes/s", 100, 20, "ms",
-                          higher_is_better=False, value=worst, source=where or "no 5,000/s step",
-                          note="median of the p99s of the window's seconds; the whole window's p99 is beside it"))
+    targets.append(
+        Target(
+            "p99 latency source → MQTT subscriber at 5,000 changes/s",
+            100,
+            20,
+            "ms",
+            higher_is_better=False,
+            value=worst,
+            source=where or "no 5,000/s step",
+            note="median of the p99s of the window's seconds; the whole window's p99 is beside it",
+        )
+    )
 
     # 3. sinks alone relative to the lower raw ceiling
     lower = ctx.ceilings.get("lower")
@@ -74,16 +83,43 @@ def judge(ctx: Context) -> None:
     # 5-6. scale
     scale = r.details.get("scale", {})
     tag = f"{scale.get('machines', '?')} machines × {scale.get('per_machine', '?')}"
-    targets.append(Target("10,000 variables over 20 machines: start-up to all Good", 10, 3, "s",
-                          higher_is_better=False, value=scale.get("startup"), source=tag))
+    targets.append(
+        Target(
+            "10,000 variables over 20 machines: start-up to all Good",
+            10,
+            3,
+            "s",
+            higher_is_better=False,
+            value=scale.get("startup"),
+            source=tag,
+        )
+    )
     rss = scale.get("rss")
-    targets.append(Target("10,000 variables over 20 machines: RSS", 250, 150, "MB", higher_is_better=False,
-                          value=rss / 1e6 if rss else None, source=tag))
+    targets.append(
+        Target(
+            "10,000 variables over 20 machines: RSS",
+            250,
+            150,
+            "MB",
+            higher_is_better=False,
+            value=rss / 1e6 if rss else None,
+            source=tag,
+        )
+    )
 
     # 7-8. jobs
     jobs = r.details.get("jobs", {})
-    targets.append(Target("100 KB job, inbox commit → DELIVERED, p50", 500, 150, "ms", higher_is_better=False,
-                          value=jobs.get("small_p50"), source=f"{jobs.get('small_count', 0)} jobs"))
+    targets.append(
+        Target(
+            "100 KB job, inbox commit → DELIVERED, p50",
+            500,
+            150,
+            "ms",
+            higher_is_better=False,
+            value=jobs.get("small_p50"),
+            source=f"{jobs.get('small_count', 0)} jobs",
+        )
+    )
     large, raw = jobs.get("large_seconds"), jobs.get("raw_seconds")
     targets.append(Target(
         f"{(jobs.get('large_size') or 0) / 1e6:.0f} MB job relative to the raw aioftp copy", 0.5, 0.8, "×",
@@ -150,11 +186,29 @@ def judge_13(ctx: Context) -> list[Target]:
     # 6-7. scale, tighter than issue 7's
     scale = r.details.get("scale", {})
     tag = f"{scale.get('machines', '?')} machines × {scale.get('per_machine', '?')}"
-    targets.append(Target("10,000 variables over 20 machines: start-up to all Good", 4, 2, "s",
-                          higher_is_better=False, value=scale.get("startup"), source=tag))
+    targets.append(
+        Target(
+            "10,000 variables over 20 machines: start-up to all Good",
+            4,
+            2,
+            "s",
+            higher_is_better=False,
+            value=scale.get("startup"),
+            source=tag,
+        )
+    )
     rss = scale.get("rss")
-    targets.append(Target("10,000 variables over 20 machines: RSS", 180, 120, "MB", higher_is_better=False,
-                          value=rss / 1e6 if rss else None, source=tag))
+    targets.append(
+        Target(
+            "10,000 variables over 20 machines: RSS",
+            180,
+            120,
+            "MB",
+            higher_is_better=False,
+            value=rss / 1e6 if rss else None,
+            source=tag,
+        )
+    )
     return targets
 
 
@@ -165,8 +219,11 @@ def _sound(step: dict[str, Any]) -> bool:
 
 def _caveats(gateway: dict[str, Any] | None, nodered: dict[str, Any] | None) -> str:
     """What went wrong in the steps a peer target compares (an expired subscription, a restart)."""
-    parts = [f"{who}: {'; '.join(step['notes'])}" for who, step in (("gateway", gateway), ("Node-RED", nodered))
-             if step and step.get("notes")]
+    parts = [
+        f"{who}: {'; '.join(step['notes'])}"
+        for who, step in (("gateway", gateway), ("Node-RED", nodered))
+        if step and step.get("notes")
+    ]
     return f" ({'; '.join(parts)})" if parts else ""
 
 

@@ -85,14 +85,23 @@ def configure_access(config: Config, tree: VariableTree) -> None:
         },
     )
     if not tree.access.enabled:
-        log.warning("access.enabled is false: no role is checked; every client may change what the mappings "
-                    "allow")
+        log.warning(
+            "access.enabled is false: no role is checked; every client may change what the mappings allow"
+        )
     elif access.is_enabled(gw.users):
-        log.info("access control on: %d user(s), roles %s, anonymous OPC UA logins: %s",
-                 len(gw.users), " < ".join(gw.roles), access.anonymous)
+        log.info(
+            "access control on: %d user(s), roles %s, anonymous OPC UA logins: %s",
+            len(gw.users),
+            " < ".join(gw.roles),
+            access.anonymous,
+        )
     else:
-        log.info("no users: OPC UA clients are anonymous, with role %s (access.anonymous); writes and commands "
-                 "that mappings open to MQTT or COPYDATA act as %s", access.anonymous, gw.roles[-1])
+        log.info(
+            "no users: OPC UA clients are anonymous, with role %s (access.anonymous); writes and commands "
+            "that mappings open to MQTT or COPYDATA act as %s",
+            access.anonymous,
+            gw.roles[-1],
+        )
 
 
 def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None = None) -> list[Sink]:
@@ -155,7 +164,9 @@ class Gateway:
         self.alarms = build_alarms(config, self.tree)
         self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms)
         self.sources: list[Source] = [create_source(m, mappings[n]) for n, m in self.tree.machines.items()]
-        self.jobs = build_jobs(config, self.tree)  # before the sinks start: it adds Jobs/ variables and methods
+        self.jobs = build_jobs(
+            config, self.tree
+        )  # before the sinks start: it adds Jobs/ variables and methods
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
 

@@ -28,7 +28,9 @@ class SqliteFile:
     schema: ClassVar[str]
     schema_version: ClassVar[int]
     error: ClassVar[type[GatewayError]]
-    synchronous: ClassVar[str] = "FULL"  # or "NORMAL": durable across a crash of the process, not of the power
+    synchronous: ClassVar[str] = (
+        "FULL"  # or "NORMAL": durable across a crash of the process, not of the power
+    )
 
     def __init__(self, path: Path, *, busy_timeout: float = 10.0) -> None:
         self.path = Path(path)

@@ -62,7 +62,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="total changes per second across the noise variables (default 1000; 'max': as fast as possible)",
     )  # fmt: skip
     noise.add_argument(
-        "--noise-per-folder", type=int, default=200, metavar="K", help="noise variables per folder (default 200)"
+        "--noise-per-folder",
+        type=int,
+        default=200,
+        metavar="K",
+        help="noise variables per folder (default 200)",
     )
     noise.add_argument(
         "--noise-mapping", type=Path, default=None, metavar="FILE",
@@ -195,7 +199,9 @@ def _noise_banner(sim: Simulator, args: argparse.Namespace) -> list[str]:
     assert sim.noise is not None
     spec = sim.noise.spec
     rate = "as fast as possible" if math.isinf(spec.rate) else f"{spec.rate:g} changes/s"
-    lines = [f"  noise    {spec.variables} Doubles under Objects/PLC/Tasks/Noise, {rate} (value = sequence number)"]
+    lines = [
+        f"  noise    {spec.variables} Doubles under Objects/PLC/Tasks/Noise, {rate} (value = sequence number)"
+    ]
     if args.noise_mapping is not None:
         lines.append(f"           gateway mapping written to {args.noise_mapping}")
     return lines

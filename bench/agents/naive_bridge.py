@@ -30,7 +30,9 @@ PER_FOLDER = 200
 
 
 class Handler:
-    def __init__(self, targets: dict[ua.NodeId, Any], topics: dict[ua.NodeId, str], mqtt: paho.Client) -> None:
+    def __init__(
+        self, targets: dict[ua.NodeId, Any], topics: dict[ua.NodeId, str], mqtt: paho.Client
+    ) -> None:
         self.targets = targets
         self.topics = topics
         self.mqtt = mqtt
@@ -39,7 +41,9 @@ class Handler:
     async def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
         await self.targets[node.nodeid].write_value(val)
         ts = data.monitored_item.Value.SourceTimestamp
-        payload = json.dumps({"value": val, "ts": ts.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z", "quality": "good"})
+        payload = json.dumps(
+            {"value": val, "ts": ts.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z", "quality": "good"}
+        )
         self.mqtt.publish(self.topics[node.nodeid], payload, qos=1).wait_for_publish()
         self.handled += 1
 
@@ -58,7 +62,9 @@ async def main(args: argparse.Namespace) -> None:
         if i % PER_FOLDER == 0:
             name = f"g{i // PER_FOLDER:03d}"
             folder = await root.add_folder(ua.NodeId(name, ns), ua.QualifiedName(name, ns))
-        mirrors.append(await folder.add_variable(ua.NodeId(f"v{i:05d}", ns), ua.QualifiedName(f"v{i:05d}", ns), 0.0))
+        mirrors.append(
+            await folder.add_variable(ua.NodeId(f"v{i:05d}", ns), ua.QualifiedName(f"v{i:05d}", ns), 0.0)
+        )
     await server.start()
 
     mqtt = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"naive-{uuid.uuid4().hex[:8]}")
@@ -76,7 +82,9 @@ async def main(args: argparse.Namespace) -> None:
         dict(zip(source_ids, mirrors)), {nid: f"naive/v{i:05d}" for i, nid in enumerate(source_ids)}, mqtt
     )
     subscription = await client.create_subscription(args.interval, handler)
-    await subscription.subscribe_data_change([client.get_node(nid) for nid in source_ids], queuesize=args.queue)
+    await subscription.subscribe_data_change(
+        [client.get_node(nid) for nid in source_ids], queuesize=args.queue
+    )
 
     def snap(request: dict[str, Any]) -> dict[str, Any]:
         return {"handled": handler.handled}

@@ -57,7 +57,13 @@ class Counter:
 
     def snap(self, request: dict[str, Any]) -> dict[str, Any]:
         latencies, self.latencies = self.latencies, []
-        return {"count": self.count, "good": self.good, "timeouts": self.timeouts, "errors": self.errors, "latency": percentiles(latencies)}
+        return {
+            "count": self.count,
+            "good": self.good,
+            "timeouts": self.timeouts,
+            "errors": self.errors,
+            "latency": percentiles(latencies),
+        }
 
     def values(self, request: dict[str, Any]) -> dict[str, Any]:
         return {"last": self.last}
@@ -115,7 +121,9 @@ async def main(args: argparse.Namespace) -> None:
                     ItemToMonitor=ua.ReadValueId(NodeId=node_id, AttributeId=ua.AttributeIds.Value),
                     MonitoringMode=ua.MonitoringMode.Reporting,
                     RequestedParameters=ua.MonitoringParameters(
-                        ClientHandle=start + k, SamplingInterval=args.interval, QueueSize=args.queue,
+                        ClientHandle=start + k,
+                        SamplingInterval=args.interval,
+                        QueueSize=args.queue,
                         DiscardOldest=True,
                     ),
                 )

@@ -82,8 +82,11 @@ async def serve(handlers: dict[str, Handler], ready: dict[str, Any] | None = Non
         emit({"ok": True, **answer, **process_stats()})
 
 
-def serve_in_thread(handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]], on_stop: Callable[[], None],
-                    ready: dict[str, Any] | None = None) -> threading.Thread:
+def serve_in_thread(
+    handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]],
+    on_stop: Callable[[], None],
+    ready: dict[str, Any] | None = None,
+) -> threading.Thread:
     """The same protocol for agents whose main thread belongs to a library's network loop (paho)."""
 
     def run() -> None:

@@ -51,7 +51,9 @@ class Writer:
             stamp = datetime.now(UTC)
             for _ in range(due):
                 seq += 1
-                dv = ua.DataValue(ua.Variant(float(seq), double), SourceTimestamp=stamp, ServerTimestamp=stamp)
+                dv = ua.DataValue(
+                    ua.Variant(float(seq), double), SourceTimestamp=stamp, ServerTimestamp=stamp
+                )
                 await write(ids[(seq - 1) % n], dv)
             self.written = seq
             await asyncio.sleep(0)

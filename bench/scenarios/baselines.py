@@ -37,8 +37,11 @@ async def run(ctx: Context) -> None:
     if notify and qos0:
         ctx.ceilings["lower"] = min(notify, qos0)
         ctx.results.add(
-            "baseline.lower_ceiling", SECTION, "lower raw ceiling: min(asyncua notifications, paho QoS 0)",
-            ctx.ceilings["lower"], "msg/s",
+            "baseline.lower_ceiling",
+            SECTION,
+            "lower raw ceiling: min(asyncua notifications, paho QoS 0)",
+            ctx.ceilings["lower"],
+            "msg/s",
         )
 
 
@@ -46,14 +49,23 @@ async def asyncua_ceiling(ctx: Context) -> None:
     s, r = ctx.settings, ctx.results
     ctx.log("asyncua: building 10,000 variables, writing flat out")
     server = await Agent.start(
-        "raw-opcua", "bench.agents.raw_opcua", ["--variables", str(RAW_VARIABLES), "--port", str(free_port())],
+        "raw-opcua",
+        "bench.agents.raw_opcua",
+        ["--variables", str(RAW_VARIABLES), "--port", str(free_port())],
         ctx.workdir,
     )
     try:
         build = server.ready["build_seconds"]
         ctx.ceilings["asyncua_build_10k"] = build
-        r.add("baseline.asyncua.build_10k", SECTION, "asyncua: build 10,000 variables (hierarchical)", build, "s",
-              baseline=2.0, baseline_label=ISSUE)
+        r.add(
+            "baseline.asyncua.build_10k",
+            SECTION,
+            "asyncua: build 10,000 variables (hierarchical)",
+            build,
+            "s",
+            baseline=2.0,
+            baseline_label=ISSUE,
+        )
         rates = []
         await server.ask("burst", seconds=0.5)  # warm-up
         for _ in range(s.repeats):
@@ -61,11 +73,24 @@ async def asyncua_ceiling(ctx: Context) -> None:
             rates.append(answer["writes"] / answer["elapsed"])
         ctx.ceilings["asyncua_writes"] = statistics.median(rates)
         ctx.ceilings["asyncua_rss_10k"] = (await server.ask("snap"))["rss"]
-        r.add("baseline.asyncua.writes", SECTION, "asyncua: write_attribute_value, no subscriber",
-              ctx.ceilings["asyncua_writes"], "writes/s", baseline=217_000, baseline_label=ISSUE)
-        ids = ids_file(ctx.workdir / "raw-ids.txt", server.ready["uri"], [f"v{i:05d}" for i in range(RAW_VARIABLES)])
-        sub = await Agent.start("raw-opcua-sub", "bench.agents.opcua_sub",
-                                ["--endpoint", server.ready["endpoint"], "--ids", str(ids)], ctx.workdir)
+        r.add(
+            "baseline.asyncua.writes",
+            SECTION,
+            "asyncua: write_attribute_value, no subscriber",
+            ctx.ceilings["asyncua_writes"],
+            "writes/s",
+            baseline=217_000,
+            baseline_label=ISSUE,
+        )
+        ids = ids_file(
+            ctx.workdir / "raw-ids.txt", server.ready["uri"], [f"v{i:05d}" for i in range(RAW_VARIABLES)]
+        )
+        sub = await Agent.start(
+            "raw-opcua-sub",
+            "bench.agents.opcua_sub",
+            ["--endpoint", server.ready["endpoint"], "--ids", str(ids)],
+            ctx.workdir,
+        )
         best: dict[str, float] = {}
         try:
             for rate in NOTIFY_RATES_QUICK if s.quick else NOTIFY_RATES:
@@ -85,9 +110,15 @@ async def asyncua_ceiling(ctx: Context) -> None:
             await sub.stop()
         ctx.results.details.setdefault("baselines", {})["asyncua_notify_by_rate"] = best
         ctx.ceilings["asyncua_notify"] = max(best.values())
-        r.add("baseline.asyncua.notify", SECTION,
-              "asyncua: notifications to one client (queue 1, 100 ms, 10k vars, best writer rate)",
-              ctx.ceilings["asyncua_notify"], "notif/s", baseline=22_000, baseline_label=ISSUE)
+        r.add(
+            "baseline.asyncua.notify",
+            SECTION,
+            "asyncua: notifications to one client (queue 1, 100 ms, 10k vars, best writer rate)",
+            ctx.ceilings["asyncua_notify"],
+            "notif/s",
+            baseline=22_000,
+            baseline_label=ISSUE,
+        )
     finally:
         await server.stop()
 
@@ -98,10 +129,18 @@ async def paho_ceiling(ctx: Context) -> None:
     for qos in (0, 1):
         ctx.log(f"paho → Mosquitto → paho, QoS {qos}, 80-byte payloads, flat out")
         async with Mosquitto(ctx.workdir) as broker:
-            sub = await Agent.start(f"raw-mqtt-sub-q{qos}", "bench.agents.mqtt_sub",
-                                    ["--port", str(broker.port), "--topic", "raw/#", "--qos", str(qos)], ctx.workdir)
-            pub = await Agent.start(f"raw-mqtt-pub-q{qos}", "bench.agents.paho_pub",
-                                    ["--port", str(broker.port), "--qos", str(qos)], ctx.workdir)
+            sub = await Agent.start(
+                f"raw-mqtt-sub-q{qos}",
+                "bench.agents.mqtt_sub",
+                ["--port", str(broker.port), "--topic", "raw/#", "--qos", str(qos)],
+                ctx.workdir,
+            )
+            pub = await Agent.start(
+                f"raw-mqtt-pub-q{qos}",
+                "bench.agents.paho_pub",
+                ["--port", str(broker.port), "--qos", str(qos)],
+                ctx.workdir,
+            )
             try:
                 step = s.window / 2
                 total = s.warmup + s.repeats * step + 0.5
@@ -118,17 +157,28 @@ async def paho_ceiling(ctx: Context) -> None:
         rates = [(b["count"] - a["count"]) / (b["mono"] - a["mono"]) for a, b in itertools.pairwise(snaps)]
         ctx.ceilings[f"paho_qos{qos}"] = statistics.median(rates)
         latency = snaps[-1]["latency"]
-        ctx.results.details.setdefault("baselines", {})[f"paho_qos{qos}"] = {"rates": rates, "latency_ms": latency}
-        r.add(f"baseline.paho.qos{qos}", SECTION, f"paho → Mosquitto → paho, QoS {qos} (80 B)",
-              ctx.ceilings[f"paho_qos{qos}"], "msg/s", baseline=reference[qos], baseline_label=ISSUE)
+        ctx.results.details.setdefault("baselines", {})[f"paho_qos{qos}"] = {
+            "rates": rates,
+            "latency_ms": latency,
+        }
+        r.add(
+            f"baseline.paho.qos{qos}",
+            SECTION,
+            f"paho → Mosquitto → paho, QoS {qos} (80 B)",
+            ctx.ceilings[f"paho_qos{qos}"],
+            "msg/s",
+            baseline=reference[qos],
+            baseline_label=ISSUE,
+        )
 
 
 async def noise_ceiling(ctx: Context) -> None:
     """The simulator's noise writer alone: it must not be what limits the mirror figures."""
     s, r = ctx.settings, ctx.results
     ctx.log("simulator noise mode: 10,000 variables, flat out and at 10,000/s")
-    sim = await Agent.start("noise-ceiling-sim", "bench.agents.simulator", ["--variables", str(RAW_VARIABLES)],
-                            ctx.workdir)
+    sim = await Agent.start(
+        "noise-ceiling-sim", "bench.agents.simulator", ["--variables", str(RAW_VARIABLES)], ctx.workdir
+    )
     try:
         achieved = {}
         for rate in ("max", 10_000):
@@ -137,10 +187,23 @@ async def noise_ceiling(ctx: Context) -> None:
             achieved[rate] = (await sim.ask("snap"))["achieved"]
             await sim.ask("rate", rate=0)
         ctx.ceilings["noise_max"] = achieved["max"]
-        r.add("baseline.noise.max", SECTION, "simulator noise: changes written, flat out, no subscriber",
-              achieved["max"], "changes/s", baseline=ctx.ceilings.get("asyncua_writes"),
-              baseline_label="raw asyncua writes")
-        r.add("baseline.noise.r10000", SECTION, "simulator noise: set to 10,000/s, achieved",
-              achieved[10_000], "changes/s", baseline=10_000, baseline_label="set rate")
+        r.add(
+            "baseline.noise.max",
+            SECTION,
+            "simulator noise: changes written, flat out, no subscriber",
+            achieved["max"],
+            "changes/s",
+            baseline=ctx.ceilings.get("asyncua_writes"),
+            baseline_label="raw asyncua writes",
+        )
+        r.add(
+            "baseline.noise.r10000",
+            SECTION,
+            "simulator noise: set to 10,000/s, achieved",
+            achieved[10_000],
+            "changes/s",
+            baseline=10_000,
+            baseline_label="set rate",
+        )
     finally:
         await sim.stop()

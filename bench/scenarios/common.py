@@ -37,8 +37,15 @@ def noise_topic(machine: str, path: str, prefix: str = "cnc") -> str:
     return f"{prefix}/{machine}/{path.lower()}"
 
 
-def write_gateway(folder: Path, mappings: dict[str, str], *, mqtt_port: int | None, mqtt: dict[str, Any] | None = None,
-                  inbox: dict[str, Any] | None = None, opcua_port: int | None = None) -> tuple[Path, str]:
+def write_gateway(
+    folder: Path,
+    mappings: dict[str, str],
+    *,
+    mqtt_port: int | None,
+    mqtt: dict[str, Any] | None = None,
+    inbox: dict[str, Any] | None = None,
+    opcua_port: int | None = None,
+) -> tuple[Path, str]:
     """A gateway file and its mapping files in `folder`; returns (gateway file, OPC UA endpoint)."""
     folder.mkdir(parents=True, exist_ok=True)
     names = []

@@ -60,7 +60,9 @@ async def run(ctx: Context) -> None:
     store = folder / "store"
     details: dict[str, Any] = {"small_count": s.jobs_small, "large_size": s.jobs_large_size}
     r.details["jobs"] = details
-    ctx.log(f"jobs: generating {s.jobs_small} programs of {s.jobs_small_size:,} B and one of {s.jobs_large_size:,} B")
+    ctx.log(
+        f"jobs: generating {s.jobs_small} programs of {s.jobs_small_size:,} B and one of {s.jobs_large_size:,} B"
+    )
     small = [laser_program(s.jobs_small_size, seed=k + 1, number=2000 + k) for k in range(s.jobs_small + 1)]
     large_file = folder / "R9999.nc"  # the raw copies' name; the gateway gets O9999.nc, O9998.nc, ...
     folder.mkdir(parents=True, exist_ok=True)
@@ -68,19 +70,25 @@ async def run(ctx: Context) -> None:
     details["large_size"] = large_file.stat().st_size
     agents: list[Agent] = []
     try:
-        sim = await Agent.start("jobs-sim", "bench.agents.simulator", ["--variables", "1", "--store", str(store)],
-                                ctx.workdir)
+        sim = await Agent.start(
+            "jobs-sim", "bench.agents.simulator", ["--variables", "1", "--store", str(store)], ctx.workdir
+        )
         agents.append(sim)
         inbox = {"accounts": [{"user": USER, "password_hash": hash_password(PASSWORD, n=2**10)}]}
-        config, _ = write_gateway(folder / "gateway", {MACHINE: mapping(sim.ready["endpoint"], sim.ready["ftp_port"])},
-                                  mqtt_port=None, inbox=inbox)
+        config, _ = write_gateway(
+            folder / "gateway",
+            {MACHINE: mapping(sim.ready["endpoint"], sim.ready["ftp_port"])},
+            mqtt_port=None,
+            inbox=inbox,
+        )
         inbox_port = _inbox_port(config)
         gw = await Agent.start("jobs-gateway", "bench.agents.gateway", ["--config", str(config)], ctx.workdir)
         agents.append(gw)
         programs = store / "DATA" / "Programs"
         queue = folder / "gateway" / "state" / "jobs" / "queue.sqlite3"
-        relay = await Agent.start("jobs-relay", "bench.agents.ftp_relay", ["--root", str(folder / "relay")],
-                                  ctx.workdir)
+        relay = await Agent.start(
+            "jobs-relay", "bench.agents.ftp_relay", ["--root", str(folder / "relay")], ctx.workdir
+        )
         agents.append(relay)
 
         # --- latency: 100 KB, one at a time ---------------------------------------------------------
@@ -107,8 +115,10 @@ async def run(ctx: Context) -> None:
         }
         details["small_p50"] = details["small"]["latency_ms"]["p50"]
         details["small_p99"] = details["small"]["latency_ms"]["p99"]
-        ctx.log(f"  100 KB: p50 {details['small_p50']:.0f} ms, p99 {details['small_p99']:.0f} ms "
-                f"({len(latencies)} delivered)")
+        ctx.log(
+            f"  100 KB: p50 {details['small_p50']:.0f} ms, p99 {details['small_p99']:.0f} ms "
+            f"({len(latencies)} delivered)"
+        )
 
         # --- a raw transfer of one small program: the floor of the latency -------------------------
         raw_small = []
@@ -135,8 +145,14 @@ async def run(ctx: Context) -> None:
                 replied = time.time()
             await _arrival(programs / name, details["large_size"], timeout=600)
             done = (await _delivered(queue, [name], timeout=60))[name]
-            runs.append({"seconds": done - started, "upload": uploaded - started, "rename_reply": replied - uploaded,
-                         **_transitions(queue, name, started)})
+            runs.append(
+                {
+                    "seconds": done - started,
+                    "upload": uploaded - started,
+                    "rename_reply": replied - uploaded,
+                    **_transitions(queue, name, started),
+                }
+            )
             ctx.log(f"  gateway: {runs[-1]['seconds']:.2f} s {runs[-1]}")
             raw.append(await _raw_copy(relay, large_file, None, sim.ready["ftp_port"]))
             ctx.log(f"  raw aioftp copy: {raw[-1]:.2f} s")
@@ -149,21 +165,56 @@ async def run(ctx: Context) -> None:
         for agent in reversed(agents):
             await agent.stop()
     details["validation"] = _validation(ctx, large_file)
-    r.add("jobs.small.p50", SECTION, f"{s.jobs_small_size // 1000} KB job, RNTO → DELIVERED, p50",
-          details.get("small_p50"), "ms", baseline=details.get("raw_small_ms"), baseline_label="raw aioftp copy")
-    r.add("jobs.small.p99", SECTION, f"{s.jobs_small_size // 1000} KB job, RNTO → DELIVERED, p99",
-          details.get("small_p99"), "ms", baseline=details.get("raw_small_ms"), baseline_label="raw aioftp copy")
+    r.add(
+        "jobs.small.p50",
+        SECTION,
+        f"{s.jobs_small_size // 1000} KB job, RNTO → DELIVERED, p50",
+        details.get("small_p50"),
+        "ms",
+        baseline=details.get("raw_small_ms"),
+        baseline_label="raw aioftp copy",
+    )
+    r.add(
+        "jobs.small.p99",
+        SECTION,
+        f"{s.jobs_small_size // 1000} KB job, RNTO → DELIVERED, p99",
+        details.get("small_p99"),
+        "ms",
+        baseline=details.get("raw_small_ms"),
+        baseline_label="raw aioftp copy",
+    )
     large = details.get("large_seconds")
     size = (details.get("large_size") or 0) / 1e6
-    r.add("jobs.large.seconds", SECTION, f"{size:.0f} MB job, first byte → DELIVERED", large, "s",
-          baseline=details.get("raw_seconds"), baseline_label="raw aioftp copy")
+    r.add(
+        "jobs.large.seconds",
+        SECTION,
+        f"{size:.0f} MB job, first byte → DELIVERED",
+        large,
+        "s",
+        baseline=details.get("raw_seconds"),
+        baseline_label="raw aioftp copy",
+    )
     if large and details.get("raw_seconds"):
-        r.add("jobs.large.throughput", SECTION, f"{size:.0f} MB job throughput", size / large, "MB/s",
-              baseline=size / details["raw_seconds"], baseline_label="raw aioftp copy")
+        r.add(
+            "jobs.large.throughput",
+            SECTION,
+            f"{size:.0f} MB job throughput",
+            size / large,
+            "MB/s",
+            baseline=size / details["raw_seconds"],
+            baseline_label="raw aioftp copy",
+        )
     validation = details["validation"]
-    r.add("jobs.validation.throughput", SECTION, f"G-code validation of the {size:.0f} MB program (laser-sim rules)",
-          validation["mb_per_s"], "MB/s", baseline=size / details["raw_seconds"] if details.get("raw_seconds") else None,
-          baseline_label="raw aioftp copy", note=f"{validation['cpu_seconds']:.1f} s CPU")
+    r.add(
+        "jobs.validation.throughput",
+        SECTION,
+        f"G-code validation of the {size:.0f} MB program (laser-sim rules)",
+        validation["mb_per_s"],
+        "MB/s",
+        baseline=size / details["raw_seconds"] if details.get("raw_seconds") else None,
+        baseline_label="raw aioftp copy",
+        note=f"{validation['cpu_seconds']:.1f} s CPU",
+    )
 
 
 def _validation(ctx: Context, path: Path) -> dict[str, Any]:
@@ -174,7 +225,11 @@ def _validation(ctx: Context, path: Path) -> dict[str, Any]:
     started = time.process_time()
     verdict = validate_program(data, path.name, rules)
     seconds = time.process_time() - started
-    out: dict[str, Any] = {"accepted": verdict.accepted, "cpu_seconds": seconds, "mb_per_s": len(data) / seconds / 1e6}
+    out: dict[str, Any] = {
+        "accepted": verdict.accepted,
+        "cpu_seconds": seconds,
+        "mb_per_s": len(data) / seconds / 1e6,
+    }
     if ctx.settings.profile:
         from pyinstrument import Profiler
 
@@ -223,16 +278,23 @@ async def _delivered(queue: Path, names: list[str], timeout: float) -> dict[str,
     deadline = time.monotonic() + timeout
     while True:
         rows = _read(queue, "SELECT filename, state, delivered_at FROM jobs")
-        found = {row["filename"]: datetime.fromisoformat(row["delivered_at"]).timestamp()
-                 for row in rows if row["state"] == "DELIVERED" and row["delivered_at"]}
+        found = {
+            row["filename"]: datetime.fromisoformat(row["delivered_at"]).timestamp()
+            for row in rows
+            if row["state"] == "DELIVERED" and row["delivered_at"]
+        }
         if all(n in found for n in names) or time.monotonic() > deadline:
             return found
         await asyncio.sleep(0.1)
 
 
 def _transitions(queue: Path, name: str, started: float) -> dict[str, float]:
-    rows = _read(queue, "SELECT t.state, t.ts FROM transitions t JOIN jobs j ON j.seq = t.seq "
-                        "WHERE j.filename = ? ORDER BY t.id", (name,))
+    rows = _read(
+        queue,
+        "SELECT t.state, t.ts FROM transitions t JOIN jobs j ON j.seq = t.seq "
+        "WHERE j.filename = ? ORDER BY t.id",
+        (name,),
+    )
     return {row["state"]: round(datetime.fromisoformat(row["ts"]).timestamp() - started, 3) for row in rows}
 
 
@@ -243,6 +305,13 @@ async def _raw_copy(relay: Agent, path: Path, data: bytes | None, store_port: in
     started = time.perf_counter()
     async with aioftp.Client.context("127.0.0.1", relay.ready["port"], "bench", "bench") as client:
         await client.upload(path, path.name, write_into=True)
-    await relay.ask("relay", name=path.name, port=store_port, user=STORE_USER, password=STORE_PASSWORD,
-                    folder="/DATA/Programs", timeout=300)
+    await relay.ask(
+        "relay",
+        name=path.name,
+        port=store_port,
+        user=STORE_USER,
+        password=STORE_PASSWORD,
+        folder="/DATA/Programs",
+        timeout=300,
+    )
     return time.perf_counter() - started

@@ -55,7 +55,9 @@ class Step:
     opcua_latency: dict[str, Any] = field(default_factory=dict)
     cpu: float = 0.0  # gateway CPU, % of one core
     source_cpu: float = 0.0  # the simulator's (opcua source)
-    others_cpu: dict[str, float] = field(default_factory=dict)  # subscribers and broker: who else used the cores
+    others_cpu: dict[str, float] = field(
+        default_factory=dict
+    )  # subscribers and broker: who else used the cores
     backlog: list[dict[str, int]] = field(default_factory=list)
     growing: bool = False
     coalesced_opcua: float = 0.0  # /s: intermediate values the OPC UA sink skipped (latest-value mode)
@@ -108,7 +110,8 @@ async def run(ctx: Context) -> None:
                     ctx.log(f"FAILED: {exc}")
                     continue
                 ctx.results.details.setdefault("mirror", {})[name] = {
-                    "steps": [st.as_dict() for st in steps], "final": final,
+                    "steps": [st.as_dict() for st in steps],
+                    "final": final,
                 }
                 report(ctx, source, n, qos, steps, final)
 
@@ -123,14 +126,21 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
             sim: Agent | None = None
             endpoint = "opc.tcp://127.0.0.1:1"  # never contacted: the injector replaces the source
             if source == "opcua":
-                sim = await Agent.start(f"sim-{folder.name}", "bench.agents.simulator",
-                                        ["--variables", str(n)], ctx.workdir)
+                sim = await Agent.start(
+                    f"sim-{folder.name}", "bench.agents.simulator", ["--variables", str(n)], ctx.workdir
+                )
                 agents.append(sim)
                 endpoint = sim.ready["endpoint"]
             mapping = noise_mapping(spec, endpoint, machine=MACHINE)
-            config, gw_endpoint = write_gateway(folder, {MACHINE: mapping}, mqtt_port=broker.port, mqtt={"qos": qos})
-            gw = await Agent.start(f"gw-{folder.name}", "bench.agents.gateway",
-                                   ["--config", str(config), *(["--inject"] if sim is None else [])], ctx.workdir)
+            config, gw_endpoint = write_gateway(
+                folder, {MACHINE: mapping}, mqtt_port=broker.port, mqtt={"qos": qos}
+            )
+            gw = await Agent.start(
+                f"gw-{folder.name}",
+                "bench.agents.gateway",
+                ["--config", str(config), *(["--inject"] if sim is None else [])],
+                ctx.workdir,
+            )
             agents.append(gw)
             if sim is not None:
                 await _wait_good(gw, n)
@@ -150,8 +160,17 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
             broker_meter = Meter(broker.pid) if broker.pid else None
             steps = []
             for rate in s.mirror_rates:
-                step = await measure(ctx, driver, gw, mqtt_sub, opcua_sub, rate, n, broker=broker_meter,
-                                     profile_as=f"{source}-q{qos}-n{n}" if s.profile and rate == s.mirror_rates[-1] else None)
+                step = await measure(
+                    ctx,
+                    driver,
+                    gw,
+                    mqtt_sub,
+                    opcua_sub,
+                    rate,
+                    n,
+                    broker=broker_meter,
+                    profile_as=f"{source}-q{qos}-n{n}" if s.profile and rate == s.mirror_rates[-1] else None,
+                )
                 steps.append(step)
                 ctx.log(
                     f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  in {step.received:8,.0f}/s  "
@@ -168,7 +187,9 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
             for agent in reversed(agents):
                 last = await agent.stop()
                 if agent.name.startswith("gw-") and last is not None:
-                    ctx.results.details.setdefault("mirror_gateway_peak_rss", {})[folder.name] = last.get("maxrss")
+                    ctx.results.details.setdefault("mirror_gateway_peak_rss", {})[folder.name] = last.get(
+                        "maxrss"
+                    )
 
 
 async def _wait_good(gw: Agent, n: int, timeout: float = 60.0) -> None:
@@ -206,8 +227,18 @@ def _hub_in(snap: dict[str, Any]) -> int:
     return int(sub.get("delivered", 0)) + int(sub.get("backlog", 0)) + int(sub.get("coalesced", 0))
 
 
-async def measure(ctx: Context, driver: Agent, gw: Agent, mqtt_sub: Agent, opcua_sub: Agent, rate: float, n: int,
-                  *, profile_as: str | None = None, broker: Meter | None = None) -> Step:
+async def measure(
+    ctx: Context,
+    driver: Agent,
+    gw: Agent,
+    mqtt_sub: Agent,
+    opcua_sub: Agent,
+    rate: float,
+    n: int,
+    *,
+    profile_as: str | None = None,
+    broker: Meter | None = None,
+) -> Step:
     s = ctx.settings
     await driver.ask("rate", rate="max" if math.isinf(rate) else rate)
     await asyncio.sleep(s.warmup)
@@ -283,8 +314,9 @@ async def drain(driver: Agent, mqtt_sub: Agent, timeout: float = 20.0) -> None:
         await asyncio.sleep(0.1)
 
 
-async def final_values(driver: Agent, gw: Agent, mqtt_sub: Agent, opcua_sub: Agent, n: int,
-                       source: str, timeout: float = 60.0) -> dict[str, Any]:
+async def final_values(
+    driver: Agent, gw: Agent, mqtt_sub: Agent, opcua_sub: Agent, n: int, source: str, timeout: float = 60.0
+) -> dict[str, Any]:
     """After the last step: does every variable end at the source's last value, at both subscribers?
 
     Polled until both subscribers have every last value or the deadline passes: after a
@@ -321,8 +353,10 @@ def _ms(value: float | None) -> str:
     return "—" if value is None else f"{value:.0f} ms"
 
 
-SECTION = {"opcua": "Mirror: simulator over OPC UA → gateway → MQTT + OPC UA subscribers",
-           "inproc": "Sinks alone: in-process source → gateway sinks → MQTT + OPC UA subscribers"}
+SECTION = {
+    "opcua": "Mirror: simulator over OPC UA → gateway → MQTT + OPC UA subscribers",
+    "inproc": "Sinks alone: in-process source → gateway sinks → MQTT + OPC UA subscribers",
+}
 
 
 def report(ctx: Context, source: str, n: int, qos: int, steps: list[Step], final: dict[str, Any]) -> None:
@@ -333,27 +367,78 @@ def report(ctx: Context, source: str, n: int, qos: int, steps: list[Step], final
     for st in steps:
         key = f"{base}.{rate_key(st.rate)}"
         what = f"{tag} @{rate_label(st.rate)}"
-        r.add(f"{key}.mqtt_rate", section, f"{what}: MQTT delivered", st.mqtt, "changes/s",
-              baseline=st.received, baseline_label="into the gateway",
-              note="sustained" if st.sustained else "NOT sustained")
+        r.add(
+            f"{key}.mqtt_rate",
+            section,
+            f"{what}: MQTT delivered",
+            st.mqtt,
+            "changes/s",
+            baseline=st.received,
+            baseline_label="into the gateway",
+            note="sustained" if st.sustained else "NOT sustained",
+        )
         if math.isfinite(st.rate):
-            r.add(f"{key}.received", section, f"{what}: into the gateway", st.received, "changes/s",
-                  baseline=st.offered, baseline_label="source wrote")
+            r.add(
+                f"{key}.received",
+                section,
+                f"{what}: into the gateway",
+                st.received,
+                "changes/s",
+                baseline=st.offered,
+                baseline_label="source wrote",
+            )
         else:
-            r.add(f"{key}.received", section, f"{what}: into the gateway", st.received, "changes/s",
-                  baseline=st.offered, baseline_label="source wrote flat out")
-        r.add(f"{key}.opcua_rate", section, f"{what}: OPC UA notifications", st.opcua, "notif/s",
-              baseline=st.opcua_expected, baseline_label="queue-1 limit")
+            r.add(
+                f"{key}.received",
+                section,
+                f"{what}: into the gateway",
+                st.received,
+                "changes/s",
+                baseline=st.offered,
+                baseline_label="source wrote flat out",
+            )
+        r.add(
+            f"{key}.opcua_rate",
+            section,
+            f"{what}: OPC UA notifications",
+            st.opcua,
+            "notif/s",
+            baseline=st.opcua_expected,
+            baseline_label="queue-1 limit",
+        )
         r.add(f"{key}.p50", section, f"{what}: latency p50", st.latency.get("p50"), "ms")
         r.add(f"{key}.p99", section, f"{what}: latency p99", st.latency.get("p99"), "ms")
-        r.add(f"{key}.p99_median", section, f"{what}: latency p99, median of 1-s windows", st.p99_median, "ms")
+        r.add(
+            f"{key}.p99_median", section, f"{what}: latency p99, median of 1-s windows", st.p99_median, "ms"
+        )
         r.add(f"{key}.max", section, f"{what}: latency max", st.latency.get("max"), "ms")
-        r.add(f"{key}.cpu", section, f"{what}: gateway CPU", st.cpu, "%",
-              note=f"backlog {st.backlog[0]['mqtt']}→{st.backlog[-1]['mqtt']}" + (" GROWS" if st.growing else ""))
+        r.add(
+            f"{key}.cpu",
+            section,
+            f"{what}: gateway CPU",
+            st.cpu,
+            "%",
+            note=f"backlog {st.backlog[0]['mqtt']}→{st.backlog[-1]['mqtt']}"
+            + (" GROWS" if st.growing else ""),
+        )
     peak = ctx.results.details.get("mirror_gateway_peak_rss", {}).get(f"mirror-{source}-q{qos}-n{n}")
     r.add(f"{base}.peak_rss", section, f"{tag}: gateway peak RSS", peak / 1e6 if peak else None, "MB")
-    r.add(f"{base}.final_mqtt", section, f"{tag}: last values right at MQTT", final["mqtt_match"], "vars",
-          baseline=final["variables"], baseline_label="variables",
-          note=f"after {final['settled_after']:.1f} s" if final.get("settled_after") is not None else "")
-    r.add(f"{base}.final_opcua", section, f"{tag}: last values right at OPC UA", final["opcua_match"], "vars",
-          baseline=final["variables"], baseline_label="variables")
+    r.add(
+        f"{base}.final_mqtt",
+        section,
+        f"{tag}: last values right at MQTT",
+        final["mqtt_match"],
+        "vars",
+        baseline=final["variables"],
+        baseline_label="variables",
+        note=f"after {final['settled_after']:.1f} s" if final.get("settled_after") is not None else "",
+    )
+    r.add(
+        f"{base}.final_opcua",
+        section,
+        f"{tag}: last values right at OPC UA",
+        final["opcua_match"],
+        "vars",
+        baseline=final["variables"],
+        baseline_label="variables",
+    )

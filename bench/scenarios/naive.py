@@ -29,10 +29,15 @@ async def run(ctx: Context) -> None:
     steps: list[dict[str, Any]] = []
     async with Mosquitto(ctx.workdir) as broker:
         try:
-            sim = await Agent.start("naive-sim", "bench.agents.simulator", ["--variables", str(N)], ctx.workdir)
+            sim = await Agent.start(
+                "naive-sim", "bench.agents.simulator", ["--variables", str(N)], ctx.workdir
+            )
             agents.append(sim)
-            source_ids = ids_file(folder / "source.txt", "urn:cnc-simulator:plc",
-                                  [f"::Noise:g{i // 200:03d}.v{i:05d}" for i in range(N)])
+            source_ids = ids_file(
+                folder / "source.txt",
+                "urn:cnc-simulator:plc",
+                [f"::Noise:g{i // 200:03d}.v{i:05d}" for i in range(N)],
+            )
             bridge = await Agent.start(
                 "naive-bridge", "bench.agents.naive_bridge",
                 ["--source", sim.ready["endpoint"], "--ids", str(source_ids), "--port", str(free_port()),
@@ -40,8 +45,12 @@ async def run(ctx: Context) -> None:
             )  # fmt: skip
             agents.append(bridge)
             mirror_ids = ids_file(folder / "mirror.txt", bridge.ready["uri"], [f"v{i:05d}" for i in range(N)])
-            mqtt_sub = await Agent.start("naive-mqtt-sub", "bench.agents.mqtt_sub",
-                                         ["--port", str(broker.port), "--topic", "naive/#", "--qos", "1"], ctx.workdir)
+            mqtt_sub = await Agent.start(
+                "naive-mqtt-sub",
+                "bench.agents.mqtt_sub",
+                ["--port", str(broker.port), "--topic", "naive/#", "--qos", "1"],
+                ctx.workdir,
+            )
             agents.append(mqtt_sub)
             opcua_sub = await Agent.start(
                 "naive-opcua-sub", "bench.agents.opcua_sub",
@@ -52,9 +61,11 @@ async def run(ctx: Context) -> None:
             for rate in s.naive_rates:
                 step = await measure(ctx, sim, bridge, mqtt_sub, opcua_sub, rate)
                 steps.append(step)
-                ctx.log(f"  {rate_label(rate):>9}: offered {step['offered']:8,.0f}/s  mqtt {step['mqtt']:8,.0f}/s  "
-                        f"opcua {step['opcua']:8,.0f}/s  p99 {step['latency'].get('p99') or 0:.0f} ms  "
-                        f"cpu {step['cpu']:.0f}%")
+                ctx.log(
+                    f"  {rate_label(rate):>9}: offered {step['offered']:8,.0f}/s  mqtt {step['mqtt']:8,.0f}/s  "
+                    f"opcua {step['opcua']:8,.0f}/s  p99 {step['latency'].get('p99') or 0:.0f} ms  "
+                    f"cpu {step['cpu']:.0f}%"
+                )
                 await sim.ask("rate", rate=0)
                 await asyncio.sleep(1.0)
         finally:
@@ -63,8 +74,15 @@ async def run(ctx: Context) -> None:
     for step in steps:
         key = f"naive.{rate_key(step['rate'])}"
         what = f"N={N:,} @{rate_label(step['rate'])}"
-        r.add(f"{key}.mqtt_rate", SECTION, f"{what}: MQTT delivered", step["mqtt"], "changes/s",
-              baseline=step["offered"], baseline_label="source wrote")
+        r.add(
+            f"{key}.mqtt_rate",
+            SECTION,
+            f"{what}: MQTT delivered",
+            step["mqtt"],
+            "changes/s",
+            baseline=step["offered"],
+            baseline_label="source wrote",
+        )
         r.add(f"{key}.opcua_rate", SECTION, f"{what}: OPC UA notifications", step["opcua"], "notif/s")
         r.add(f"{key}.p99", SECTION, f"{what}: latency p99", step["latency"].get("p99"), "ms")
         r.add(f"{key}.cpu", SECTION, f"{what}: bridge CPU", step["cpu"], "%")
@@ -72,11 +90,20 @@ async def run(ctx: Context) -> None:
     gateway_rate, qos = _gateway_rate(ctx)
     ctx.results.details["naive"] = {
         "steps": [{**st, "rate": None if math.isinf(st["rate"]) else st["rate"]} for st in steps],
-        "naive_rate": naive_rate, "gateway_rate": gateway_rate, "gateway_qos": qos,
+        "naive_rate": naive_rate,
+        "gateway_rate": gateway_rate,
+        "gateway_qos": qos,
     }
     if naive_rate:
-        r.add("naive.vs_gateway", SECTION, f"gateway flat out (N={N:,}, MQTT QoS {qos}) vs naive bridge flat out",
-              gateway_rate, "changes/s", baseline=naive_rate, baseline_label="naive bridge")
+        r.add(
+            "naive.vs_gateway",
+            SECTION,
+            f"gateway flat out (N={N:,}, MQTT QoS {qos}) vs naive bridge flat out",
+            gateway_rate,
+            "changes/s",
+            baseline=naive_rate,
+            baseline_label="naive bridge",
+        )
 
 
 def _gateway_rate(ctx: Context) -> tuple[float | None, int | None]:
@@ -89,8 +116,9 @@ def _gateway_rate(ctx: Context) -> tuple[float | None, int | None]:
     return None, None
 
 
-async def measure(ctx: Context, sim: Agent, bridge: Agent, mqtt_sub: Agent, opcua_sub: Agent,
-                  rate: float) -> dict[str, Any]:
+async def measure(
+    ctx: Context, sim: Agent, bridge: Agent, mqtt_sub: Agent, opcua_sub: Agent, rate: float
+) -> dict[str, Any]:
     s = ctx.settings
     await sim.ask("rate", rate="max" if math.isinf(rate) else rate)
     await asyncio.sleep(s.warmup)

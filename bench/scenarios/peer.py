@@ -48,7 +48,9 @@ QOS = 0
 INTERVAL_MS = 10.0  # Node-RED's publishing interval (and its items' sampling interval)
 MACHINE = "noise"
 SIM_NAMESPACE = 2  # simulator/README.md: urn:cnc-simulator:plc is namespace index 2
-EXPIRED = "has expired"  # asyncua's log line when a subscription outlived its lifetime without publish requests
+EXPIRED = (
+    "has expired"  # asyncua's log line when a subscription outlived its lifetime without publish requests
+)
 PARTIES = {"gateway": "cnc-gateway", "nodered": "Node-RED"}
 
 
@@ -73,18 +75,34 @@ class PeerStep:
 class Party:
     """One of the two: how to start it (returning its pid) and stop it, and the topics it publishes."""
 
-    def __init__(self, name: str, prefix: str, topics: list[str], start: Callable[[], Awaitable[int]],
-                 stop: Callable[[], Awaitable[None]], alive: Callable[[], None] = lambda: None) -> None:
+    def __init__(
+        self,
+        name: str,
+        prefix: str,
+        topics: list[str],
+        start: Callable[[], Awaitable[int]],
+        stop: Callable[[], Awaitable[None]],
+        alive: Callable[[], None] = lambda: None,
+    ) -> None:
         self.name, self.prefix, self.topics = name, prefix, topics
         self.start, self.stop, self.alive = start, stop, alive
 
 
 async def run(ctx: Context) -> None:
-    versions = installed_versions()  # before anything starts: a clear error when make bench did not install it
-    ctx.log(f"peer: Node-RED {versions['node-red']}, node-red-contrib-opcua {versions['node-red-contrib-opcua']}, "
-            f"Node.js {versions['node']}; N = {N:,}, MQTT QoS {QOS} JSON")
-    details: dict[str, Any] = {"versions": versions, "variables": N, "qos": QOS, "interval_ms": INTERVAL_MS,
-                               "parties": {}}
+    versions = (
+        installed_versions()
+    )  # before anything starts: a clear error when make bench did not install it
+    ctx.log(
+        f"peer: Node-RED {versions['node-red']}, node-red-contrib-opcua {versions['node-red-contrib-opcua']}, "
+        f"Node.js {versions['node']}; N = {N:,}, MQTT QoS {QOS} JSON"
+    )
+    details: dict[str, Any] = {
+        "versions": versions,
+        "variables": N,
+        "qos": QOS,
+        "interval_ms": INTERVAL_MS,
+        "parties": {},
+    }
     ctx.results.details["peer"] = details
     for name, label in PARTIES.items():
         ctx.log(f"{label}:")
@@ -102,9 +120,15 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
     folder.mkdir(parents=True)
     out: dict[str, Any] = {"steps": [], "restarts": 0}
     async with Mosquitto(ctx.workdir) as broker, contextlib.AsyncExitStack() as stack:
-        sim = await Agent.start(f"peer-sim-{name}", "bench.agents.simulator", ["--variables", str(N)], ctx.workdir)
+        sim = await Agent.start(
+            f"peer-sim-{name}", "bench.agents.simulator", ["--variables", str(N)], ctx.workdir
+        )
         stack.push_async_callback(sim.stop)
-        party = _gateway(ctx, folder, sim, broker.port) if name == "gateway" else _nodered(folder, sim, broker.port)
+        party = (
+            _gateway(ctx, folder, sim, broker.port)
+            if name == "gateway"
+            else _nodered(folder, sim, broker.port)
+        )
         sub = await Agent.start(f"peer-mqtt-sub-{name}", "bench.agents.mqtt_sub",
                                 ["--port", str(broker.port), "--topic", f"{party.prefix}#", "--qos", str(QOS)],
                                 ctx.workdir)  # fmt: skip
@@ -139,19 +163,24 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
                 await drain(sim, sub)
             step.notes = notes
             out["steps"].append(step.as_dict())
-            ctx.log(f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  delivered {step.delivered:8,.0f} msg/s  "
-                    f"cpu {step.cpu:3.0f}% ({_num(step.cpu_per_1000)} ms/1,000 msgs)  p50/p99 "
-                    f"{_num(step.latency.get('p50'))}/{_num(step.latency.get('p99'))} ms  rss {step.rss / 1e6:4.0f} MB"
-                    f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else ""))
+            ctx.log(
+                f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  delivered {step.delivered:8,.0f} msg/s  "
+                f"cpu {step.cpu:3.0f}% ({_num(step.cpu_per_1000)} ms/1,000 msgs)  p50/p99 "
+                f"{_num(step.latency.get('p50'))}/{_num(step.latency.get('p99'))} ms  rss {step.rss / 1e6:4.0f} MB"
+                f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else "")
+            )
             await drain(sim, sub)
             restart = restart or (name == "nodered" and _expired(sim) > seen_expired)  # in the pause
         # Node-RED with an expired subscription will not catch up (the gateway's driver resubscribes by itself)
         last_expired = seen_expired
-        out["final"] = await final_values(sim, sub, party,
-                                          gave_up=lambda: name == "nodered" and _expired(sim) > last_expired)
+        out["final"] = await final_values(
+            sim, sub, party, gave_up=lambda: name == "nodered" and _expired(sim) > last_expired
+        )
         out["expired"] = _expired(sim)
-        ctx.log(f"  last values right at MQTT: {out['final']['match']:,} of {N:,} "
-                f"(after {out['final']['settled_after']:.1f} s); subscriptions expired: {out['expired']}")
+        ctx.log(
+            f"  last values right at MQTT: {out['final']['match']:,} of {N:,} "
+            f"(after {out['final']['settled_after']:.1f} s); subscriptions expired: {out['expired']}"
+        )
     return out
 
 
@@ -162,7 +191,9 @@ def _gateway(ctx: Context, folder: Path, sim: Agent, broker_port: int) -> Party:
     agent: list[Agent] = []
 
     async def start() -> int:
-        agent[:] = [await Agent.start("peer-gateway", "bench.agents.gateway", ["--config", str(config)], ctx.workdir)]
+        agent[:] = [
+            await Agent.start("peer-gateway", "bench.agents.gateway", ["--config", str(config)], ctx.workdir)
+        ]
         return agent[0].pid
 
     async def stop() -> None:
@@ -177,7 +208,9 @@ def _nodered(folder: Path, sim: Agent, broker_port: int) -> Party:
     spec = NoiseSpec(N)
     ids = [f"ns={SIM_NAMESPACE};s={spec.node_id(i)}" for i in range(N)]
     prefix = "peer/noise/"
-    nodes = flow(sim.ready["endpoint"], ids, broker_port, interval_ms=INTERVAL_MS, qos=QOS, topic_prefix=prefix)
+    nodes = flow(
+        sim.ready["endpoint"], ids, broker_port, interval_ms=INTERVAL_MS, qos=QOS, topic_prefix=prefix
+    )
     # bench/nodered.py's function node: the part of the node id after its last ':' with '.' → '/'
     topics = [prefix + spec.node_id(i).rsplit(":", 1)[1].replace(".", "/", 1) for i in range(N)]
     running: list[NodeRed] = []
@@ -232,8 +265,10 @@ async def _publishing(party: Party, sub: Agent, timeout: float = 120.0) -> int:
             if not missing:
                 return pid
         if loop.time() > deadline:
-            raise BenchError(f"{PARTIES[party.name]} published {count - before} messages in {timeout:g} s, "
-                             f"not every one of the {N:,} variables")
+            raise BenchError(
+                f"{PARTIES[party.name]} published {count - before} messages in {timeout:g} s, "
+                f"not every one of the {N:,} variables"
+            )
         await asyncio.sleep(0.2)
 
 
@@ -271,8 +306,9 @@ async def measure(ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Par
     return step
 
 
-async def final_values(sim: Agent, sub: Agent, party: Party, *, gave_up: Callable[[], bool],
-                       timeout: float = 30.0) -> dict[str, Any]:
+async def final_values(
+    sim: Agent, sub: Agent, party: Party, *, gave_up: Callable[[], bool], timeout: float = 30.0
+) -> dict[str, Any]:
     """After the last step: does every topic end at the last value the simulator wrote to its variable?
     Polled until it does, or the deadline passes, or the party's subscription has expired (a second later)."""
     written = int((await sim.ask("snap"))["written"])
@@ -289,7 +325,12 @@ async def final_values(sim: Agent, sub: Agent, party: Party, *, gave_up: Callabl
         if match == N or now - started > timeout or (expired_at is not None and now - expired_at >= 1.0):
             break
         await asyncio.sleep(0.5)
-    return {"written": written, "match": match, "variables": N, "settled_after": round(loop.time() - started, 1)}
+    return {
+        "written": written,
+        "match": match,
+        "variables": N,
+        "settled_after": round(loop.time() - started, 1),
+    }
 
 
 def _num(value: float | None) -> str:
@@ -298,9 +339,11 @@ def _num(value: float | None) -> str:
 
 def section(details: dict[str, Any]) -> str:
     v = details.get("versions", {})
-    return (f"Peer: cnc-gateway vs Node-RED {v.get('node-red', '?')} + node-red-contrib-opcua "
-            f"{v.get('node-red-contrib-opcua', '?')} (multiple subscribe, {INTERVAL_MS:g} ms), "
-            f"same load, N={N:,}, MQTT QoS {QOS} JSON")
+    return (
+        f"Peer: cnc-gateway vs Node-RED {v.get('node-red', '?')} + node-red-contrib-opcua "
+        f"{v.get('node-red-contrib-opcua', '?')} (multiple subscribe, {INTERVAL_MS:g} ms), "
+        f"same load, N={N:,}, MQTT QoS {QOS} JSON"
+    )
 
 
 def report(ctx: Context, details: dict[str, Any]) -> None:
@@ -316,22 +359,61 @@ def report(ctx: Context, details: dict[str, Any]) -> None:
         rate = math.inf if rate_or_none is None else rate_or_none
         key, what = f"peer.{rate_key(rate)}", f"@{rate_label(rate)}"
         notes = [f"source wrote {st.get('offered', 0):,.0f}/s vs {other.get('offered', 0):,.0f}/s"]
-        notes += [f"{who}: {'; '.join(step['notes'])}" for who, step in (("gateway", st), ("Node-RED", other))
-                  if step.get("notes")]
-        r.add(f"{key}.delivered", sec, f"{what}: MQTT delivered", st.get("delivered"), "msgs/s",
-              baseline=other.get("delivered"), baseline_label="Node-RED", note="; ".join(notes))
-        r.add(f"{key}.cpu_per_1000", sec, f"{what}: CPU per 1,000 msgs", st.get("cpu_per_1000"), "ms",
-              baseline=other.get("cpu_per_1000"), baseline_label="Node-RED",
-              note=f"{st.get('cpu', 0):.0f} % vs {other.get('cpu', 0):.0f} % of a core")
+        notes += [
+            f"{who}: {'; '.join(step['notes'])}"
+            for who, step in (("gateway", st), ("Node-RED", other))
+            if step.get("notes")
+        ]
+        r.add(
+            f"{key}.delivered",
+            sec,
+            f"{what}: MQTT delivered",
+            st.get("delivered"),
+            "msgs/s",
+            baseline=other.get("delivered"),
+            baseline_label="Node-RED",
+            note="; ".join(notes),
+        )
+        r.add(
+            f"{key}.cpu_per_1000",
+            sec,
+            f"{what}: CPU per 1,000 msgs",
+            st.get("cpu_per_1000"),
+            "ms",
+            baseline=other.get("cpu_per_1000"),
+            baseline_label="Node-RED",
+            note=f"{st.get('cpu', 0):.0f} % vs {other.get('cpu', 0):.0f} % of a core",
+        )
         for q in ("p50", "p99"):
-            r.add(f"{key}.{q}", sec, f"{what}: latency {q}", (st.get("latency") or {}).get(q), "ms",
-                  baseline=(other.get("latency") or {}).get(q), baseline_label="Node-RED")
-        r.add(f"{key}.rss", sec, f"{what}: RSS", st["rss"] / 1e6 if st.get("rss") else None, "MB",
-              baseline=other["rss"] / 1e6 if other.get("rss") else None, baseline_label="Node-RED")
-    r.add("peer.final", sec, "last values right at MQTT after the last step", _final(gateway), "vars",
-          baseline=_final(nodered), baseline_label="Node-RED",
-          note=f"of {N:,}; subscriptions expired: gateway {gateway.get('expired', '—')}, Node-RED "
-               f"{nodered.get('expired', '—')} (Node-RED restarted {nodered.get('restarts', 0)}×)")
+            r.add(
+                f"{key}.{q}",
+                sec,
+                f"{what}: latency {q}",
+                (st.get("latency") or {}).get(q),
+                "ms",
+                baseline=(other.get("latency") or {}).get(q),
+                baseline_label="Node-RED",
+            )
+        r.add(
+            f"{key}.rss",
+            sec,
+            f"{what}: RSS",
+            st["rss"] / 1e6 if st.get("rss") else None,
+            "MB",
+            baseline=other["rss"] / 1e6 if other.get("rss") else None,
+            baseline_label="Node-RED",
+        )
+    r.add(
+        "peer.final",
+        sec,
+        "last values right at MQTT after the last step",
+        _final(gateway),
+        "vars",
+        baseline=_final(nodered),
+        baseline_label="Node-RED",
+        note=f"of {N:,}; subscriptions expired: gateway {gateway.get('expired', '—')}, Node-RED "
+        f"{nodered.get('expired', '—')} (Node-RED restarted {nodered.get('restarts', 0)}×)",
+    )
 
 
 def _final(party: dict[str, Any]) -> float | None:

@@ -37,26 +37,50 @@ async def run(ctx: Context) -> None:
     details: dict[str, object] = {"machines": machines, "per_machine": per, "variables": total}
     ctx.results.details["scale"] = details
     async with Mosquitto(ctx.workdir) as broker:
-        sim = await Agent.start("scale-sim", "bench.agents.simulator", ["--variables", str(total)], ctx.workdir)
+        sim = await Agent.start(
+            "scale-sim", "bench.agents.simulator", ["--variables", str(total)], ctx.workdir
+        )
         agents = [sim]
         proc = None
         try:
             mappings = {
-                f"m{k:02d}": noise_mapping(spec, sim.ready["endpoint"], machine=f"m{k:02d}", first=first, count=count,
-                                           publishing_interval=100, queue_size=1)
+                f"m{k:02d}": noise_mapping(
+                    spec,
+                    sim.ready["endpoint"],
+                    machine=f"m{k:02d}",
+                    first=first,
+                    count=count,
+                    publishing_interval=100,
+                    queue_size=1,
+                )
                 for k, (first, count) in enumerate(split_machines(spec, machines))
             }
             config, gw_endpoint = write_gateway(folder, mappings, mqtt_port=broker.port)
-            sub = await Agent.start("scale-mqtt-sub", "bench.agents.mqtt_sub",
-                                    ["--port", str(broker.port), "--topic", "cnc/+/noise/#", "--qos", "1",
-                                     "--expect", str(total)], ctx.workdir)
+            sub = await Agent.start(
+                "scale-mqtt-sub",
+                "bench.agents.mqtt_sub",
+                [
+                    "--port",
+                    str(broker.port),
+                    "--topic",
+                    "cnc/+/noise/#",
+                    "--qos",
+                    "1",
+                    "--expect",
+                    str(total),
+                ],
+                ctx.workdir,
+            )
             agents.append(sub)
             log = (ctx.workdir / "scale-gateway.log").open("ab")
             exe = Path(sys.executable).with_name("cnc-gateway")
-            command = [str(exe)] if exe.exists() else [sys.executable, "-c", "from gateway.cli import main; main()"]
+            command = (
+                [str(exe)] if exe.exists() else [sys.executable, "-c", "from gateway.cli import main; main()"]
+            )
             started = time.time()
-            proc = await asyncio.create_subprocess_exec(*command, "run", str(config), stdout=log, stderr=log,
-                                                        env=child_env(), cwd=str(ROOT))
+            proc = await asyncio.create_subprocess_exec(
+                *command, "run", str(config), stdout=log, stderr=log, env=child_env(), cwd=str(ROOT)
+            )
             meter = Meter(proc.pid)
             deadline = time.monotonic() + 120
             while True:
@@ -64,8 +88,10 @@ async def run(ctx: Context) -> None:
                 if snap["all_good_at"] is not None:
                     break
                 if proc.returncode is not None or time.monotonic() > deadline:
-                    raise RuntimeError(f"only {snap['good']} of {total} variables Good "
-                                       f"(see {ctx.workdir / 'scale-gateway.log'})")
+                    raise RuntimeError(
+                        f"only {snap['good']} of {total} variables Good "
+                        f"(see {ctx.workdir / 'scale-gateway.log'})"
+                    )
                 meter.rss()
                 await asyncio.sleep(0.05)
             startup = snap["all_good_at"] - started
@@ -73,8 +99,12 @@ async def run(ctx: Context) -> None:
             ctx.log(f"  all {total:,} Good at MQTT after {startup:.2f} s")
             paths = [p for k in range(machines) for p in gateway_ids(f"m{k:02d}", noise_paths(k * per, per))]
             ids = ids_file(folder / "ids.txt", GATEWAY_URI, paths)
-            opcua = await Agent.start("scale-opcua-sub", "bench.agents.opcua_sub",
-                                      ["--endpoint", gw_endpoint, "--ids", str(ids)], ctx.workdir)
+            opcua = await Agent.start(
+                "scale-opcua-sub",
+                "bench.agents.opcua_sub",
+                ["--endpoint", gw_endpoint, "--ids", str(ids)],
+                ctx.workdir,
+            )
             agents.append(opcua)
             await asyncio.sleep(1.0)
             details["opcua_good"] = (await opcua.ask("snap"))["good"]
@@ -94,8 +124,10 @@ async def run(ctx: Context) -> None:
                     "mqtt": (m1["count"] - m0["count"]) / (m1["mono"] - m0["mono"]),
                     "set": rate,
                 }
-                ctx.log(f"  {label:>5}: gateway CPU {phases[label]['cpu']:5.1f} %, source wrote "
-                        f"{phases[label]['offered']:8,.0f}/s, MQTT got {phases[label]['mqtt']:8,.0f}/s")
+                ctx.log(
+                    f"  {label:>5}: gateway CPU {phases[label]['cpu']:5.1f} %, source wrote "
+                    f"{phases[label]['offered']:8,.0f}/s, MQTT got {phases[label]['mqtt']:8,.0f}/s"
+                )
             await sim.ask("rate", rate=0)
             details["phases"] = phases
             details["peak_rss"] = meter.peak_rss
@@ -111,14 +143,41 @@ async def run(ctx: Context) -> None:
             for agent in reversed(agents):
                 await agent.stop()
     tag = f"{machines} × {per}"
-    r.add("scale.startup", SECTION, f"{tag}: process start → every variable Good (MQTT)", details.get("startup"), "s",
-          baseline=ctx.ceilings.get("asyncua_build_10k"), baseline_label="raw asyncua build of 10k vars")
-    r.add("scale.opcua_good", SECTION, f"{tag}: Good at an OPC UA subscriber after start-up",
-          details.get("opcua_good"), "vars", baseline=total, baseline_label="variables")
+    r.add(
+        "scale.startup",
+        SECTION,
+        f"{tag}: process start → every variable Good (MQTT)",
+        details.get("startup"),
+        "s",
+        baseline=ctx.ceilings.get("asyncua_build_10k"),
+        baseline_label="raw asyncua build of 10k vars",
+    )
+    r.add(
+        "scale.opcua_good",
+        SECTION,
+        f"{tag}: Good at an OPC UA subscriber after start-up",
+        details.get("opcua_good"),
+        "vars",
+        baseline=total,
+        baseline_label="variables",
+    )
     rss = details.get("rss")
     raw_rss = ctx.ceilings.get("asyncua_rss_10k")
-    r.add("scale.rss", SECTION, f"{tag}: gateway RSS once settled", rss / 1e6 if rss else None, "MB",
-          baseline=raw_rss / 1e6 if raw_rss else None, baseline_label="raw asyncua server, 10k vars")
+    r.add(
+        "scale.rss",
+        SECTION,
+        f"{tag}: gateway RSS once settled",
+        rss / 1e6 if rss else None,
+        "MB",
+        baseline=raw_rss / 1e6 if raw_rss else None,
+        baseline_label="raw asyncua server, 10k vars",
+    )
     for label, phase in (details.get("phases") or {}).items():
-        r.add(f"scale.cpu.{label.replace(' ', '')}", SECTION, f"{tag}: gateway CPU, {label}", phase["cpu"], "%",
-              note=f"source {phase['offered']:,.0f}/s, MQTT {phase['mqtt']:,.0f}/s" if phase["set"] else "")
+        r.add(
+            f"scale.cpu.{label.replace(' ', '')}",
+            SECTION,
+            f"{tag}: gateway CPU, {label}",
+            phase["cpu"],
+            "%",
+            note=f"source {phase['offered']:,.0f}/s, MQTT {phase['mqtt']:,.0f}/s" if phase["set"] else "",
+        )

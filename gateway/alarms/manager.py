@@ -136,7 +136,9 @@ class AlarmManager:
                 return
             confirm = self.config.confirm
             ts = reading.ts
-            gone = [replace(r, cleared_at=max(ts, r.raised_at), quality=Quality.GOOD, reason="") for r in cleared]
+            gone = [
+                replace(r, cleared_at=max(ts, r.raised_at), quality=Quality.GOOD, reason="") for r in cleared
+            ]
             severities = [self.config.severity_of(e.severity_class) for e in raised]
             numbers: list[int] = []
             if raised or gone:
@@ -157,15 +159,23 @@ class AlarmManager:
             self.quality, self.reason = Quality.GOOD, ""
             for number, entry, severity in zip(numbers, raised, severities):
                 record = AlarmRecord(
-                    occurrence=number, machine=self.name, id=entry.id, text=entry.text, severity=severity,
-                    severity_class=entry.severity_class, raised_at=ts, parameters=dict(entry.parameters),
+                    occurrence=number,
+                    machine=self.name,
+                    id=entry.id,
+                    text=entry.text,
+                    severity=severity,
+                    severity_class=entry.severity_class,
+                    raised_at=ts,
+                    parameters=dict(entry.parameters),
                 )
                 changes.append(self._put(Kind.RAISED, record, ts))
             if was_uncertain:
                 now = utcnow()
                 for record in list(self.records.values()):
                     if record.quality is not Quality.GOOD:
-                        changes.append(self._put(Kind.QUALITY, replace(record, quality=Quality.GOOD, reason=""), now))
+                        changes.append(
+                            self._put(Kind.QUALITY, replace(record, quality=Quality.GOOD, reason=""), now)
+                        )
             for change in changes:
                 if change.kind is Kind.RAISED:
                     log.warning("%s: alarm %s raised: %s", self.name, change.record.id, change.record.text)
@@ -183,8 +193,12 @@ class AlarmManager:
             for r in list(self.records.values())
         ]
         if changes:
-            log.info("%s: %d alarm(s) kept as they were while the controller is away: %s",
-                     self.name, len(changes), reason)
+            log.info(
+                "%s: %d alarm(s) kept as they were while the controller is away: %s",
+                self.name,
+                len(changes),
+                reason,
+            )
         await self._emit(changes)
 
     # --- acknowledge and confirm -----------------------------------------------------------------
@@ -242,13 +256,23 @@ class AlarmManager:
         async with self._lock:
             record = self._get(occurrence)
             if record.acked:
-                raise AlreadyAcknowledged(f"alarm {record.id} (occurrence {occurrence}) is already acknowledged")
+                raise AlreadyAcknowledged(
+                    f"alarm {record.id} (occurrence {occurrence}) is already acknowledged"
+                )
             now, user = utcnow(), who(ctx)
             new = replace(record, acked_at=now, acked_by=user, ack_comment=comment)
             retained = new.retained(self.config.confirm)
             if not await self._mark(self.store.acknowledge, occurrence, now, user, comment, retained):
-                raise AlreadyAcknowledged(f"alarm {record.id} (occurrence {occurrence}) is already acknowledged")
-            log.info("%s: alarm %s acknowledged by %s%s", self.name, record.id, user, f": {comment}" if comment else "")
+                raise AlreadyAcknowledged(
+                    f"alarm {record.id} (occurrence {occurrence}) is already acknowledged"
+                )
+            log.info(
+                "%s: alarm %s acknowledged by %s%s",
+                self.name,
+                record.id,
+                user,
+                f": {comment}" if comment else "",
+            )
             await self._emit([self._put(Kind.ACKNOWLEDGED, new, now, user, comment)])
             return new
 
@@ -287,7 +311,9 @@ class AlarmManager:
 
     # --- state and telling others ----------------------------------------------------------------
 
-    def _put(self, kind: Kind, record: AlarmRecord, ts: datetime, user: str = "", comment: str = "") -> AlarmChange:
+    def _put(
+        self, kind: Kind, record: AlarmRecord, ts: datetime, user: str = "", comment: str = ""
+    ) -> AlarmChange:
         retained = record.retained(self.config.confirm)
         if retained:
             self.records[record.occurrence] = record

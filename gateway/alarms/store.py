@@ -124,8 +124,15 @@ class AlarmStore(SqliteFile):
                 cur = db.execute(
                     "INSERT INTO occurrences (machine, alarm_id, text, severity, class, parameters, raised_at) "
                     "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    (machine, entry.id, entry.text, severity, entry.severity_class,
-                     json.dumps(dict(entry.parameters), default=str), stamp),
+                    (
+                        machine,
+                        entry.id,
+                        entry.text,
+                        severity,
+                        entry.severity_class,
+                        json.dumps(dict(entry.parameters), default=str),
+                        stamp,
+                    ),
                 )
                 number = int(cur.lastrowid or 0)
                 db.execute(
@@ -203,6 +210,10 @@ class AlarmStore(SqliteFile):
         """One occurrence's transitions, in order: kind, ts, user, comment."""
         with self._lock:
             rows = self.db.execute(
-                "SELECT kind, ts, user, comment FROM transitions WHERE occurrence = ? ORDER BY id", (occurrence,)
+                "SELECT kind, ts, user, comment FROM transitions WHERE occurrence = ? ORDER BY id",
+                (occurrence,),
             ).fetchall()
-        return [{"kind": r["kind"], "ts": parse_iso(r["ts"]), "user": r["user"], "comment": r["comment"]} for r in rows]
+        return [
+            {"kind": r["kind"], "ts": parse_iso(r["ts"]), "user": r["user"], "comment": r["comment"]}
+            for r in rows
+        ]

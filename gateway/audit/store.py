@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from gateway.errors import GatewayError
@@ -49,12 +49,12 @@ def audit_path(state_dir: Path) -> Path:
 
 
 def iso(ts: datetime) -> str:
-    ts = ts if ts.tzinfo else ts.replace(tzinfo=timezone.utc)
-    return ts.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    ts = ts if ts.tzinfo else ts.replace(tzinfo=UTC)
+    return ts.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def parse_iso(text: str) -> datetime:
-    return datetime.strptime(text, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=timezone.utc)
+    return datetime.strptime(text, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=UTC)
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,8 +86,18 @@ class AuditStore(SqliteFile):
         """One transaction for the whole batch."""
         rows = [
             (
-                iso(e.time), e.kind, e.machine, e.target, e.origin, e.user, e.role, e.old, e.new, e.status,
-                e.reason, round(e.duration * 1000.0, 3),
+                iso(e.time),
+                e.kind,
+                e.machine,
+                e.target,
+                e.origin,
+                e.user,
+                e.role,
+                e.old,
+                e.new,
+                e.status,
+                e.reason,
+                round(e.duration * 1000.0, 3),
             )
             for e in entries
         ]
@@ -101,7 +111,7 @@ class AuditStore(SqliteFile):
         """Delete entries older than `days` days (0: keep everything). Returns how many went."""
         if days <= 0:
             return 0
-        cutoff = (now or datetime.now(timezone.utc)) - timedelta(days=days)
+        cutoff = (now or datetime.now(UTC)) - timedelta(days=days)
         with self._write() as db:
             cur = db.execute("DELETE FROM audit WHERE ts < ?", (iso(cutoff),))
         return cur.rowcount

@@ -18,8 +18,8 @@ import threading
 from pathlib import Path
 from typing import Self
 
-from gateway.model.audit import AuditEntry
 from gateway.audit.store import AuditStore
+from gateway.model.audit import AuditEntry
 
 log = logging.getLogger("gateway.audit")
 
@@ -69,7 +69,9 @@ class AuditTrail:
     def record(self, entry: AuditEntry) -> None:
         """Log the entry and queue it for the table; never blocks."""
         # A refused role is what an administrator looks for; other refusals (range, type) are routine.
-        log.log(logging.WARNING if entry.status == "BadUserAccessDenied" else logging.INFO, "%s", entry.describe())
+        log.log(
+            logging.WARNING if entry.status == "BadUserAccessDenied" else logging.INFO, "%s", entry.describe()
+        )
         if self._thread is None:
             return
         try:

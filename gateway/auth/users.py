@@ -71,8 +71,13 @@ class UserDirectory:
         """The user's identity, or None (refused). Blocking: one scrypt check (~50 ms) unless locked out."""
         wait = self.limiter.locked(address)
         if wait > 0:
-            log.info("%s: login as %r from %s refused unchecked: locked out for %.0f s more",
-                     via, name[:64], address, wait)
+            log.info(
+                "%s: login as %r from %s refused unchecked: locked out for %.0f s more",
+                via,
+                name[:64],
+                address,
+                wait,
+            )
             return None
         known = self._users.get(name)
         encoded, role = known if known is not None else (_dummy_hash(), None)
@@ -81,10 +86,18 @@ class UserDirectory:
             return Identity(name, role)
         why = "wrong password" if known is not None else "unknown user"
         if self.limiter.failed(address):
-            log.warning("%s: login as %r from %s refused (%s); %d failures within %.0f s: "
-                        "refusing every login from %s for %.0f s",
-                        via, name[:64], address, why, self.limiter.failures, self.limiter.window, address,
-                        self.limiter.lockout)
+            log.warning(
+                "%s: login as %r from %s refused (%s); %d failures within %.0f s: "
+                "refusing every login from %s for %.0f s",
+                via,
+                name[:64],
+                address,
+                why,
+                self.limiter.failures,
+                self.limiter.window,
+                address,
+                self.limiter.lockout,
+            )
         else:
             log.warning("%s: login as %r from %s refused (%s)", via, name[:64], address, why)
         return None

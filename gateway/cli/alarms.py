@@ -28,12 +28,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("alarms", help="the alarm history kept in the state directory")
     alarms = p.add_subparsers(dest="alarms_command", metavar="ACTION", required=True)
     q = alarms.add_parser("list", help="alarm occurrences, newest first")
-    q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
-                   help="gateway or mapping file(s) the gateway runs with (to find its state directory)")
+    q.add_argument(
+        "-c",
+        "--config",
+        type=Path,
+        action="append",
+        metavar="FILE",
+        help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
+    )
     q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
     q.add_argument("--machine", default=None)
-    q.add_argument("--since", default=None, type=since_arg, metavar="WHEN",
-                   help=f"{SINCE_HELP} (default: everything)")
+    q.add_argument(
+        "--since", default=None, type=since_arg, metavar="WHEN", help=f"{SINCE_HELP} (default: everything)"
+    )
     q.add_argument("--active", action="store_true", help="only alarms that are still active")
     q.add_argument("--limit", type=int, default=200)
     q.add_argument("--json", action="store_true")
@@ -82,10 +89,18 @@ def print_table(records: list[AlarmRecord], out: TextIO) -> None:
         acked = f"{_when(r.acked_at)} {r.acked_by}" if r.acked else "-"
         if r.confirmed:
             acked += " (confirmed)"
-        rows.append((
-            str(r.occurrence), r.machine, r.id, str(r.severity), _when(r.raised_at),
-            "active" if r.active else _when(r.cleared_at), acked, r.text,
-        ))
+        rows.append(
+            (
+                str(r.occurrence),
+                r.machine,
+                r.id,
+                str(r.severity),
+                _when(r.raised_at),
+                "active" if r.active else _when(r.cleared_at),
+                acked,
+                r.text,
+            )
+        )
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]
     for row in rows:
         print("  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[-1], file=out)

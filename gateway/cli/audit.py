@@ -14,18 +14,27 @@ from pathlib import Path
 from gateway.audit.store import AuditStore, AuditStoreError, audit_path, iso
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
-from gateway.model.audit import AuditEntry
 from gateway.cli.state_dir import resolve_state_dir
+from gateway.model.audit import AuditEntry
 
 KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("audit", help="the audit trail: every write, method call and alarm acknowledge/confirm, who, what, and the result")
+    p = sub.add_parser(
+        "audit",
+        help="the audit trail: every write, method call and alarm acknowledge/confirm, who, what, and the result",
+    )
     audit = p.add_subparsers(dest="audit_command", metavar="ACTION", required=True)
     q = audit.add_parser("list", help="audit entries, newest first")
-    q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
-                   help="gateway or mapping file(s) the gateway runs with (to find its state directory)")
+    q.add_argument(
+        "-c",
+        "--config",
+        type=Path,
+        action="append",
+        metavar="FILE",
+        help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
+    )
     q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
     q.add_argument("--machine", default=None)
     q.add_argument("--user", default=None, help="entries of this user only")
@@ -71,8 +80,17 @@ def as_line(e: AuditEntry) -> str:
 def as_json(e: AuditEntry) -> str:
     return json.dumps(
         {
-            "time": iso(e.time), "kind": e.kind, "machine": e.machine, "target": e.target, "origin": e.origin,
-            "user": e.user, "role": e.role, "old": e.old, "new": e.new, "status": e.status, "reason": e.reason,
+            "time": iso(e.time),
+            "kind": e.kind,
+            "machine": e.machine,
+            "target": e.target,
+            "origin": e.origin,
+            "user": e.user,
+            "role": e.role,
+            "old": e.old,
+            "new": e.new,
+            "status": e.status,
+            "reason": e.reason,
             "duration_ms": round(e.duration * 1000, 3),
         },
         ensure_ascii=False,

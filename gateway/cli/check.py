@@ -50,15 +50,24 @@ def print_config(config: Config, out: TextIO) -> None:
         print_tree(mapping, out, default_role)
         print_commands(mapping, out)
         print_copydata(mapping, out, (gw.access.copydata_role or "none: refused") if enabled else None)
-    print(f"OK: {len(config.machines)} machine(s), {sum(len(m.variables) for m in config.machines)} variables", file=out)
+    print(
+        f"OK: {len(config.machines)} machine(s), {sum(len(m.variables) for m in config.machines)} variables",
+        file=out,
+    )
     if enabled:
         print(f"access control on: {len(gw.users)} user(s), roles {' < '.join(gw.roles)}", file=out)
     elif not gw.access.checks_roles():
-        print("access control off (access.enabled: false): no role is checked; anonymous OPC UA clients may "
-              "change what the mappings allow", file=out)
+        print(
+            "access control off (access.enabled: false): no role is checked; anonymous OPC UA clients may "
+            "change what the mappings allow",
+            file=out,
+        )
     else:
-        print(f"no users: OPC UA clients are anonymous, with role {gw.access.anonymous} (access.anonymous); "
-              f"writes and commands the mappings open to MQTT or COPYDATA act as {gw.roles[-1]}", file=out)
+        print(
+            f"no users: OPC UA clients are anonymous, with role {gw.access.anonymous} (access.anonymous); "
+            f"writes and commands the mappings open to MQTT or COPYDATA act as {gw.roles[-1]}",
+            file=out,
+        )
 
 
 def print_tree(mapping: MachineMapping, out: TextIO, default_role: str | None = None) -> None:
@@ -68,7 +77,9 @@ def print_tree(mapping: MachineMapping, out: TextIO, default_role: str | None = 
     is on: each writable variable then shows the lowest role that may write it.
     """
     driver = mapping.driver
-    print(f"{mapping.machine}  [{driver.type} {driver.endpoint}]  {len(mapping.variables)} variables", file=out)
+    print(
+        f"{mapping.machine}  [{driver.type} {driver.endpoint}]  {len(mapping.variables)} variables", file=out
+    )
     root: dict[str, Any] = {}
     for var in mapping.variables:
         folder = root
@@ -103,7 +114,9 @@ def _rows(folder: dict[str, Any], depth: int, rows: list[tuple[str, str]], write
             extras.append(f"deadband {var.deadband}")
         if var.copydata is not None:
             extras.append(f"copydata {var.copydata.id}")
-        rows.append((f"{indent}{name}", f"{var.type!s:<10}{var.unit or '-':<8}{var.access:<11}{', '.join(extras)}"))
+        rows.append(
+            (f"{indent}{name}", f"{var.type!s:<10}{var.unit or '-':<8}{var.access:<11}{', '.join(extras)}")
+        )
 
 
 def print_commands(mapping: MachineMapping, out: TextIO) -> None:
@@ -129,7 +142,9 @@ def _allowed(spec: CommandSpec) -> str:
         return "any state"
     labels = [_label(cond, v) for v in cond.values]
     if cond.negated:
-        return f"{cond.path} is " + (f"not {labels[0]}" if len(labels) == 1 else f"none of {', '.join(labels)}")
+        return f"{cond.path} is " + (
+            f"not {labels[0]}" if len(labels) == 1 else f"none of {', '.join(labels)}"
+        )
     return f"{cond.path} is {' or '.join(labels)}"
 
 

@@ -52,13 +52,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sim-ftp-port", type=int, default=2122, help="simulator FTP port (default 2122)")
     p.add_argument("--inbox-port", type=int, default=2121, help="FTP job inbox port (default 2121)")
     p.add_argument("--inbox-host", default="127.0.0.1", help="FTP job inbox address (default 127.0.0.1)")
-    p.add_argument("--copydata-port", type=int, default=5020,
-                   help="port of the mapping's COPYDATA tcp-server target (default 5020)")
+    p.add_argument(
+        "--copydata-port",
+        type=int,
+        default=5020,
+        help="port of the mapping's COPYDATA tcp-server target (default 5020)",
+    )
     p.add_argument("--speed", type=float, default=1.0, help="simulator speed factor (default 1)")
     p.add_argument("--state-dir", type=Path, default=Path("state/demo"))
     p.add_argument("--mqtt-host", default="127.0.0.1", help="MQTT broker (default 127.0.0.1)")
-    p.add_argument("--mqtt-port", type=int, default=1883, help="MQTT broker port (default 1883); when nothing "
-                   "answers there, the demo starts an embedded broker on it")
+    p.add_argument(
+        "--mqtt-port",
+        type=int,
+        default=1883,
+        help="MQTT broker port (default 1883); when nothing "
+        "answers there, the demo starts an embedded broker on it",
+    )
     p.add_argument("--no-mqtt", action="store_true", help="do not publish to MQTT")
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
@@ -90,7 +99,9 @@ def handle(args: argparse.Namespace) -> int:
     mapping = base.machines[0]
     endpoint = f"opc.tcp://127.0.0.1:{args.sim_opcua_port}"
     mapping = mapping.model_copy(update={"driver": mapping.driver.model_copy(update={"endpoint": endpoint})})
-    if mapping.mqtt is None:  # the demo lets MQTT write the readwrite variables (Feed/Override…) and run commands
+    if (
+        mapping.mqtt is None
+    ):  # the demo lets MQTT write the readwrite variables (Feed/Override…) and run commands
         mapping = mapping.model_copy(update={"mqtt": MachineMqtt(writable=True, commands=True)})
     mapping = demo_jobs(mapping, args)
     mapping = demo_copydata(mapping, args)
@@ -143,7 +154,9 @@ def demo_jobs(mapping: MachineMapping, args: argparse.Namespace) -> MachineMappi
 def demo_inbox(mapping: MachineMapping, args: argparse.Namespace) -> InboxConfig:
     """The FTP inbox with one account for the demo machine; its password from the environment or the default."""
     password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
-    account = FtpAccount(user=DEMO_INBOX_USER, password_hash=hash_password(password), machines=[mapping.machine])
+    account = FtpAccount(
+        user=DEMO_INBOX_USER, password_hash=hash_password(password), machines=[mapping.machine]
+    )
     return InboxConfig(host=args.inbox_host, port=args.inbox_port, accounts=[account])
 
 
@@ -219,7 +232,9 @@ class SimulatorSwitch:
 
         args = self.args
         self.store.mkdir(parents=True, exist_ok=True)
-        sim = Simulator(opcua_port=args.sim_opcua_port, ftp_port=args.sim_ftp_port, speed=args.speed, store=self.store)
+        sim = Simulator(
+            opcua_port=args.sim_opcua_port, ftp_port=args.sim_ftp_port, speed=args.speed, store=self.store
+        )
         await sim.__aenter__()
         self._sim = sim
         log.info("simulator running (OPC UA %d, FTP %d)", args.sim_opcua_port, args.sim_ftp_port)
@@ -269,8 +284,11 @@ def print_banner(
         f"  OPC UA server    {endpoint.replace('0.0.0.0', '127.0.0.1')}  (None, Basic256Sha256, Aes128/Aes256 "
         f"endpoints; trust a client by moving its certificate from {args.state_dir}/pki/rejected/ to trusted/)",
         "  OPC UA users     viewer, operator, engineer; "
-        + (f"password from {DEMO_PASSWORD_ENV}" if os.environ.get(DEMO_PASSWORD_ENV)
-           else f"password: the user name ({DEMO_PASSWORD_ENV} changes it)")
+        + (
+            f"password from {DEMO_PASSWORD_ENV}"
+            if os.environ.get(DEMO_PASSWORD_ENV)
+            else f"password: the user name ({DEMO_PASSWORD_ENV} changes it)"
+        )
         + "; anonymous clients are viewers",
         f"  browse           Objects/Machines/{mapping.machine}/Axes/X/Position, Feed/Override (operators write), Status/...",
         f"  node ids         ns=2;s={mapping.machine}/Axes/X/Position",
@@ -297,7 +315,9 @@ def print_banner(
         ]
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     if not external:
-        lines.append("  outage drill     press Enter (or kill -USR1 <pid>) to stop the simulator, again to restart it")
+        lines.append(
+            "  outage drill     press Enter (or kill -USR1 <pid>) to stop the simulator, again to restart it"
+        )
     lines += ["  stop             Ctrl-C", ""]
     print("\n".join(lines), flush=True)
 

@@ -29,8 +29,8 @@ from typing import Any
 
 from gateway.errors import RequestError
 from gateway.model.audit import AuditEntry
-from gateway.model.sample import Sample, utcnow
 from gateway.model.context import WriteContext
+from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import Machine, VariableNode
 
 log = logging.getLogger("gateway.demo")
@@ -109,7 +109,9 @@ class DemoDriver:
     def _audited(self, entry: AuditEntry) -> None:
         if entry.machine != self.machine.name or (entry.origin == ORIGIN and entry.user == ORIGIN):
             return
-        if entry.time < self._resumed_at:  # arrived before the driver took the machine back: part of what ended
+        if (
+            entry.time < self._resumed_at
+        ):  # arrived before the driver took the machine back: part of what ended
             return
         if (entry.kind == "call" and entry.target.startswith(COMMANDS)) or (
             entry.kind == "write" and entry.target.startswith(CONTROL)
@@ -149,8 +151,11 @@ class DemoDriver:
         if not self.aside:
             self.aside = True
             self.theirs = False
-            log.info("demo: %s on %s: the demo driver steps aside until that program has ended",
-                     what, self.machine.name)
+            log.info(
+                "demo: %s on %s: the demo driver steps aside until that program has ended",
+                what,
+                self.machine.name,
+            )
 
     # --- acting ------------------------------------------------------------------------------
 

@@ -14,7 +14,9 @@ from gateway.logconfig import configure
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("discover", help="browse a controller's OPC UA server and print a starting mapping file")
+    p = sub.add_parser(
+        "discover", help="browse a controller's OPC UA server and print a starting mapping file"
+    )
     p.add_argument("endpoint", help="opc.tcp://host:port of the controller")
     p.add_argument("--machine", default="my-machine", help="machine name for the generated file")
     p.add_argument("--user", default=None)

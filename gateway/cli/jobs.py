@@ -29,14 +29,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     jobs = p.add_subparsers(dest="jobs_command", metavar="ACTION", required=True)
 
     def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
-                       help="gateway or mapping file(s) the gateway runs with (to find its state directory)")
+        q.add_argument(
+            "-c",
+            "--config",
+            type=Path,
+            action="append",
+            metavar="FILE",
+            help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
+        )
         q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
 
     q = jobs.add_parser("list", help="recent jobs, newest first")
     common(q)
     q.add_argument("--machine", default=None)
-    q.add_argument("--state", action="append", choices=[s.value for s in JobState], type=str.upper, default=None)
+    q.add_argument(
+        "--state", action="append", choices=[s.value for s in JobState], type=str.upper, default=None
+    )
     q.add_argument("--limit", type=int, default=30)
     q.add_argument("--json", action="store_true")
     q.set_defaults(handler=handle_list)
@@ -73,7 +81,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--user", default=os.environ.get("CNC_INBOX_USER"), help="inbox login (or CNC_INBOX_USER)")
     q.add_argument("--password", default=None, help=f"or set {PASSWORD_ENV}; asked for when missing")
     q.add_argument("--priority", type=int, default=None)
-    q.add_argument("--tls", action="store_true", help="implicit FTPS (default: when the config has inbox.tls)")
+    q.add_argument(
+        "--tls", action="store_true", help="implicit FTPS (default: when the config has inbox.tls)"
+    )
     q.add_argument("--insecure", action="store_true", help="with --tls: do not check the certificate")
     q.add_argument("--timeout", type=float, default=30.0)
     q.set_defaults(handler=handle_submit)
@@ -133,10 +143,18 @@ def print_table(jobs: list[Job], out: TextIO) -> None:
         return
     rows = [("JOB", "MACHINE", "STATE", "FILE", "SIZE", "RECEIVED", "TRIES", "REASON")]
     for j in jobs:
-        rows.append((
-            j.id, j.machine, j.state.value, j.filename, _size(j.size),
-            j.received_at.astimezone().strftime("%Y-%m-%d %H:%M:%S"), str(j.attempts), _short(j.reason, 60),
-        ))
+        rows.append(
+            (
+                j.id,
+                j.machine,
+                j.state.value,
+                j.filename,
+                _size(j.size),
+                j.received_at.astimezone().strftime("%Y-%m-%d %H:%M:%S"),
+                str(j.attempts),
+                _short(j.reason, 60),
+            )
+        )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
     for row in rows:
         print("  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[-1], file=out)
@@ -154,30 +172,53 @@ def handle_show(args: argparse.Namespace) -> int:
     if args.json:
         record = job.as_dict()
         record["history"] = [
-            {"state": t.state.value, "previous": t.previous.value if t.previous else None, "reason": t.reason,
-             "ts": t.ts.isoformat()} for t in history
+            {
+                "state": t.state.value,
+                "previous": t.previous.value if t.previous else None,
+                "reason": t.reason,
+                "ts": t.ts.isoformat(),
+            }
+            for t in history
         ]
         print(json.dumps(record, indent=2))
         return 0
     fields: list[tuple[str, Any]] = [
-        ("job", job.id), ("machine", job.machine), ("state", job.state.value), ("reason", job.reason),
-        ("file", job.filename), ("size", f"{job.size} bytes"), ("sha256", job.sha256), ("from", f"{job.user} ({job.origin})"),
-        ("priority", job.priority), ("attempts", job.attempts),
+        ("job", job.id),
+        ("machine", job.machine),
+        ("state", job.state.value),
+        ("reason", job.reason),
+        ("file", job.filename),
+        ("size", f"{job.size} bytes"),
+        ("sha256", job.sha256),
+        ("from", f"{job.user} ({job.origin})"),
+        ("priority", job.priority),
+        ("attempts", job.attempts),
         ("received", job.received_at.astimezone().isoformat(timespec="seconds")),
     ]
     if job.program_name:
         fields.append(("program", job.program_name))
     if job.estimate:
         seconds = job.estimate.get("seconds")
-        fields.append(("estimate", f"{seconds:.1f} s" if isinstance(seconds, (int, float)) else "not estimated"))
+        fields.append(
+            ("estimate", f"{seconds:.1f} s" if isinstance(seconds, (int, float)) else "not estimated")
+        )
         extents = job.estimate.get("extents")
         if extents:
-            fields.append((
-                "extents",
-                "X {min_x:g}..{max_x:g}  Y {min_y:g}..{max_y:g}  Z {min_z:g}..{max_z:g}".format(**extents),
-            ))
+            fields.append(
+                (
+                    "extents",
+                    "X {min_x:g}..{max_x:g}  Y {min_y:g}..{max_y:g}  Z {min_z:g}..{max_z:g}".format(
+                        **extents
+                    ),
+                )
+            )
     if job.delivered_at:
-        fields.append(("delivered", f"{job.delivered_name} at {job.delivered_at.astimezone().isoformat(timespec='seconds')}"))
+        fields.append(
+            (
+                "delivered",
+                f"{job.delivered_name} at {job.delivered_at.astimezone().isoformat(timespec='seconds')}",
+            )
+        )
     for warning in job.warnings:
         fields.append(("warning", warning))
     for key, value in fields:
@@ -237,7 +278,9 @@ def handle_submit(args: argparse.Namespace) -> int:
         return 2
     config = load_config(args)
     inbox = config.gateway.inbox if config is not None else None
-    host = args.host or (inbox.host if inbox is not None and inbox.host not in ("0.0.0.0", "::") else "127.0.0.1")
+    host = args.host or (
+        inbox.host if inbox is not None and inbox.host not in ("0.0.0.0", "::") else "127.0.0.1"
+    )
     port = args.port or (inbox.port if inbox is not None else 2121)
     tls = args.tls or (inbox is not None and inbox.tls is not None)
     user = args.user or input("inbox user: ")
@@ -246,8 +289,18 @@ def handle_submit(args: argparse.Namespace) -> int:
     progress = Progress(args.file.stat().st_size, sys.stderr)
     try:
         ok, reply = upload(
-            host, port, user, password, args.machine, args.file, name,
-            priority=args.priority, tls=tls, verify=not args.insecure, timeout=args.timeout, progress=progress,
+            host,
+            port,
+            user,
+            password,
+            args.machine,
+            args.file,
+            name,
+            priority=args.priority,
+            tls=tls,
+            verify=not args.insecure,
+            timeout=args.timeout,
+            progress=progress,
         )
     except UploadFailed as exc:
         progress.done()
@@ -284,8 +337,10 @@ class Progress:
         share = sent / self.total if self.total else 1.0
         filled = int(share * width)
         rate = sent / elapsed if elapsed > 0 else 0.0
-        return (f"[{'#' * filled}{' ' * (width - filled)}] {share * 100:5.1f}%  "
-                f"{sent / 1e6:.1f}/{self.total / 1e6:.1f} MB  {rate / 1e6:.1f} MB/s")
+        return (
+            f"[{'#' * filled}{' ' * (width - filled)}] {share * 100:5.1f}%  "
+            f"{sent / 1e6:.1f}/{self.total / 1e6:.1f} MB  {rate / 1e6:.1f} MB/s"
+        )
 
     def done(self) -> None:
         if self._shown:

@@ -7,10 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from gateway import __version__
-from gateway.cli import check, demo, discover, jobs, passwords, programs, run, schema
-from gateway.cli import frames
-from gateway.cli import audit
-from gateway.cli import alarms
+from gateway.cli import alarms, audit, check, demo, discover, frames, jobs, passwords, programs, run, schema
 
 COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms)
 

@@ -10,8 +10,12 @@ from gateway.auth.passwords import hash_password
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("hash-password", help="print the hash of a password, for users and inbox accounts (password_hash)")
-    p.add_argument("--stdin", action="store_true", help="read the password from the first line of standard input")
+    p = sub.add_parser(
+        "hash-password", help="print the hash of a password, for users and inbox accounts (password_hash)"
+    )
+    p.add_argument(
+        "--stdin", action="store_true", help="read the password from the first line of standard input"
+    )
     p.set_defaults(handler=handle)
 
 

@@ -25,17 +25,17 @@ import sqlite3
 import sys
 import time
 from collections.abc import Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gateway.model.audit import AuditEntry, as_text
 from gateway.audit.store import AuditStore, audit_path
 from gateway.cli.check import report_config_error
 from gateway.cli.state_dir import resolve_state_dir
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import load
 from gateway.errors import ConfigError, DeliveryError
+from gateway.model.audit import AuditEntry, as_text
 
 if TYPE_CHECKING:
     from gateway.jobs.delivery.transport import OpenStore
@@ -47,14 +47,25 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
     def common(q: argparse.ArgumentParser) -> None:
         q.add_argument("machine")
-        q.add_argument("-c", "--config", type=Path, action="append", metavar="FILE",
-                       help="gateway or mapping file(s) (default: mappings/laser-sim.yaml, the demo's)")
+        q.add_argument(
+            "-c",
+            "--config",
+            type=Path,
+            action="append",
+            metavar="FILE",
+            help="gateway or mapping file(s) (default: mappings/laser-sim.yaml, the demo's)",
+        )
 
     def audited(q: argparse.ArgumentParser) -> None:
-        q.add_argument("--user", default=None,
-                       help="who makes the change, for the audit trail (default: the OS user)")
-        q.add_argument("--state-dir", type=Path, default=None,
-                       help="the gateway's state directory, whose audit trail records the change")
+        q.add_argument(
+            "--user", default=None, help="who makes the change, for the audit trail (default: the OS user)"
+        )
+        q.add_argument(
+            "--state-dir",
+            type=Path,
+            default=None,
+            help="the gateway's state directory, whose audit trail records the change",
+        )
 
     q = actions.add_parser("list", help="programs in the controller's program folder")
     common(q)
@@ -93,11 +104,17 @@ def jobs_config(args: argparse.Namespace) -> JobsConfig:
     for mapping in config.machines:
         if mapping.machine == args.machine:
             if mapping.jobs is None:
-                print(f"error: {args.machine} has no jobs section (no program store configured)", file=sys.stderr)
+                print(
+                    f"error: {args.machine} has no jobs section (no program store configured)",
+                    file=sys.stderr,
+                )
                 raise SystemExit(2)
             return mapping.jobs
     names = ", ".join(m.machine for m in config.machines)
-    print(f"error: no machine {args.machine!r} in {', '.join(map(str, files))} (there: {names})", file=sys.stderr)
+    print(
+        f"error: no machine {args.machine!r} in {', '.join(map(str, files))} (there: {names})",
+        file=sys.stderr,
+    )
     raise SystemExit(2)
 
 
@@ -136,13 +153,23 @@ class Audit:
         except (sqlite3.Error, OSError) as exc:
             print(f"error: cannot open the audit trail {self.path} ({exc}); nothing changed", file=sys.stderr)
             raise SystemExit(2) from None
-        self.time = datetime.now(timezone.utc)
+        self.time = datetime.now(UTC)
         self.started = time.monotonic()
 
     def record(self, arguments: Sequence[Any], status: str = "Good", reason: str = "") -> None:
         entry = AuditEntry(
-            self.time, "call", self.machine, self.target, "cli", self.user, None, None,
-            as_text(list(arguments)), status, reason, time.monotonic() - self.started,
+            self.time,
+            "call",
+            self.machine,
+            self.target,
+            "cli",
+            self.user,
+            None,
+            None,
+            as_text(list(arguments)),
+            status,
+            reason,
+            time.monotonic() - self.started,
         )
         try:
             self.store.insert([entry])

@@ -17,7 +17,9 @@ log = logging.getLogger("gateway")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("run", help="run the gateway (a gateway file, or one or more mapping files with defaults)")
+    p = sub.add_parser(
+        "run", help="run the gateway (a gateway file, or one or more mapping files with defaults)"
+    )
     p.add_argument("files", nargs="+", type=Path, metavar="FILE")
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default=None)
     p.set_defaults(handler=handle)
@@ -48,5 +50,7 @@ async def _serve(config: Config) -> None:
             endpoint = getattr(sink, "endpoint", None)
             if endpoint:
                 log.info("%s serving on %s", sink.name, endpoint)
-        log.info("mirroring %s", ", ".join(f"{m.machine} ({len(m.variables)} variables)" for m in config.machines))
+        log.info(
+            "mirroring %s", ", ".join(f"{m.machine} ({len(m.variables)} variables)" for m in config.machines)
+        )
         await gw.run()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 import re
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhdw])\s*$")
 _SECONDS = {"s": 1, "m": 60, "h": 3600, "d": 86400, "w": 604800}
@@ -22,7 +22,7 @@ HELP = "90s, 15m, 2h, 7d, 2w, today, or an ISO-8601 date/time (local time unless
 
 def parse_since(text: str, now: datetime | None = None) -> datetime:
     """The point in time `text` names (aware); ValueError says which forms are accepted."""
-    now = now or datetime.now(timezone.utc)
+    now = now or datetime.now(UTC)
     m = _DURATION.match(text)
     if m:
         return now - timedelta(seconds=float(m.group(1)) * _SECONDS[m.group(2)])

@@ -24,7 +24,9 @@ class UploadFailed(Exception):
 class ImplicitFTPS(ftplib.FTP_TLS):
     """FTPS with TLS from the first byte (ftplib only does AUTH TLS by itself)."""
 
-    def connect(self, host: str = "", port: int = 0, timeout: float = -999, source_address: Any = None) -> str:
+    def connect(
+        self, host: str = "", port: int = 0, timeout: float = -999, source_address: Any = None
+    ) -> str:
         if host:
             self.host = host
         if port > 0:

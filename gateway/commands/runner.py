@@ -110,7 +110,8 @@ class CommandRunner:
         sample = node.sample
         if not sample.good:
             raise CallError(
-                f"{self.name}: {check.path} is not known ({sample.reason or sample.status})", status=sample.status
+                f"{self.name}: {check.path} is not known ({sample.reason or sample.status})",
+                status=sample.status,
             )
         if not check.holds(sample.value):
             raise InvalidState(

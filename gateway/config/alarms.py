@@ -44,7 +44,8 @@ class ArraySource(Strict):
         default=None, description="Integer array variable with the controller's severity classes"
     )
     parameters: dict[str, str] = Field(
-        default_factory=dict, description="Further parallel arrays, by parameter name: {Axis: ActiveAlarms/Axes}"
+        default_factory=dict,
+        description="Further parallel arrays, by parameter name: {Axis: ActiveAlarms/Axes}",
     )
 
     @field_validator("parameters")
@@ -69,7 +70,9 @@ class AlarmsConfig(Strict):
         description="Controller severity class -> OPC UA severity (1 lowest .. 1000 highest)",
     )
     default_severity: int = Field(
-        default=500, ge=SEVERITY_MIN, le=SEVERITY_MAX,
+        default=500,
+        ge=SEVERITY_MIN,
+        le=SEVERITY_MAX,
         description="Severity of classes the map does not list, and of every alarm without a severities array",
     )
     acknowledge_role: str = Field(
@@ -108,7 +111,9 @@ def alarms_issues(alarms: AlarmsConfig, variables: Sequence[Any]) -> list[tuple[
         (("source", "texts"), source.texts, "texts"),
         (("source", "severities"), source.severities, "severities"),
     ]
-    wanted += [(("source", "parameters", name), path, "parameter") for name, path in source.parameters.items()]
+    wanted += [
+        (("source", "parameters", name), path, "parameter") for name, path in source.parameters.items()
+    ]
     issues: list[tuple[tuple[str | int, ...], str]] = []
     for loc, path, role in wanted:
         if path is None:

@@ -63,7 +63,9 @@ class Condition(Strict):
 
     path: str = Field(description="The variable tested, e.g. Machine/State")
     equals: Scalar | None = Field(default=None, description="Holds when the value equals this")
-    in_: list[Scalar] | None = Field(default=None, alias="in", description="Holds when the value is one of these")
+    in_: list[Scalar] | None = Field(
+        default=None, alias="in", description="Holds when the value is one of these"
+    )
     not_: Value | None = Field(
         default=None, alias="not", description="Holds when the value is not this (or none of these)"
     )
@@ -73,7 +75,9 @@ class Condition(Strict):
 
     @model_validator(mode="after")
     def _one_test(self) -> Condition:
-        given = [k for k, v in (("equals", self.equals), ("in", self.in_), ("not", self.not_)) if v is not None]
+        given = [
+            k for k, v in (("equals", self.equals), ("in", self.in_), ("not", self.not_)) if v is not None
+        ]
         if len(given) != 1:
             raise ValueError(
                 "a condition needs exactly one of equals, in or not"
@@ -115,7 +119,9 @@ class CommandArgument(Strict):
     @classmethod
     def _name(cls, name: str) -> str:
         if not ARG_RE.match(name):
-            raise ValueError(f"argument name {name!r} must be letters, digits and '_', not starting with a digit")
+            raise ValueError(
+                f"argument name {name!r} must be letters, digits and '_', not starting with a digit"
+            )
         return name
 
 
@@ -127,9 +133,12 @@ class CommandSpec(Strict):
     allowed: Condition | None = Field(
         default=None, description="Guard: the command is refused (BadInvalidState) unless this holds"
     )
-    writes: list[WriteStep] = Field(min_length=1, description="Carried out in order; the first refusal ends the command")
+    writes: list[WriteStep] = Field(
+        min_length=1, description="Carried out in order; the first refusal ends the command"
+    )
     done: Condition | None = Field(
-        default=None, description="Completion: the command succeeds once this holds; without it, once the writes are accepted"
+        default=None,
+        description="Completion: the command succeeds once this holds; without it, once the writes are accepted",
     )
     timeout: float = Field(default=10.0, gt=0, le=MAX_TIMEOUT, description="Seconds for the whole command")
     role: str = Field(default="operator", description="Lowest role that may run it")
@@ -152,8 +161,10 @@ class CommandSpec(Strict):
 
 def check_command_name(name: str) -> str:
     if not NAME_RE.match(name):
-        raise ValueError(f"command name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', "
-                         "starting with a letter")
+        raise ValueError(
+            f"command name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', "
+            "starting with a letter"
+        )
     if name in RESERVED_NAMES:
         raise ValueError(f"{name!r} is reserved for MQTT write requests and answers")
     return name
@@ -173,15 +184,22 @@ def placeholders(text: str) -> list[str]:
         if field is None:
             continue
         if not ARG_RE.match(field) or spec or conversion:
-            raise ValueError(f"{{{field}{'!' + conversion if conversion else ''}{':' + spec if spec else ''}}} "
-                             "is not a plain {argument} reference")
+            raise ValueError(
+                f"{{{field}{'!' + conversion if conversion else ''}{':' + spec if spec else ''}}} "
+                "is not a plain {argument} reference"
+            )
         names.append(field)
     return names
 
 
 def whole_reference(value: Any) -> str | None:
     """The argument name when `value` is exactly "{name}" (the typed argument itself), else None."""
-    if isinstance(value, str) and value.startswith("{") and value.endswith("}") and not value.startswith("{{"):
+    if (
+        isinstance(value, str)
+        and value.startswith("{")
+        and value.endswith("}")
+        and not value.startswith("{{")
+    ):
         inner = value[1:-1]
         if ARG_RE.match(inner):
             return inner
@@ -290,7 +308,9 @@ def located_errors(issues: Sequence[tuple[Loc, str]]) -> None:
         "MachineMapping",
         [
             InitErrorDetails(
-                type=PydanticCustomError("value_error", "{message}", {"message": message}), loc=loc, input=None
+                type=PydanticCustomError("value_error", "{message}", {"message": message}),
+                loc=loc,
+                input=None,
             )
             for loc, message in issues
         ],

@@ -17,8 +17,8 @@ from gateway.config.access import (
     check_roles,
     check_users,
 )
-from gateway.config.jobs import InboxConfig
 from gateway.config.base import Strict
+from gateway.config.jobs import InboxConfig
 from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
 from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
@@ -63,21 +63,29 @@ class GatewayConfig(Strict):
     """Gateway-wide settings. A mapping file run on its own gets these defaults."""
 
     opcua: OpcUaServerConfig = OpcUaServerConfig()
-    state_dir: str = Field(default="state", description="Where the gateway keeps its state; relative to this file")
+    state_dir: str = Field(
+        default="state", description="Where the gateway keeps its state; relative to this file"
+    )
     machines: list[str] = Field(default_factory=list, description="Mapping files, relative to this file")
     log_level: Literal["debug", "info", "warning", "error"] = "info"
     inbox: InboxConfig = Field(
         default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
     )
-    mqtt: MqttConfig | None = Field(default=None, description="The MQTT broker to publish to; absent: no MQTT")
+    mqtt: MqttConfig | None = Field(
+        default=None, description="The MQTT broker to publish to; absent: no MQTT"
+    )
     # --- users, roles and access control (gateway/config/access.py) ---
     roles: list[str] = Field(
-        default_factory=lambda: list(DEFAULT_ROLES), min_length=1,
+        default_factory=lambda: list(DEFAULT_ROLES),
+        min_length=1,
         description="Roles, lowest first; each may do what the ones before it may",
     )
-    users: list[UserConfig] = Field(default_factory=list, description="OPC UA logins, with scrypt password hashes")
+    users: list[UserConfig] = Field(
+        default_factory=list, description="OPC UA logins, with scrypt password hashes"
+    )
     access: AccessConfig = Field(
-        default_factory=AccessConfig, validate_default=True,  # its default roles must exist too
+        default_factory=AccessConfig,
+        validate_default=True,  # its default roles must exist too
         description="Role enforcement, anonymous logins, roles of MQTT, COPYDATA and job writers",
     )
 

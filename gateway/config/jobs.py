@@ -40,10 +40,13 @@ class ControllerFtp(Strict):
     host: str = Field(min_length=1, description="Controller address")
     port: Port = 21
     user: str = Field(default="anonymous", min_length=1)
-    password: SecretStr | None = Field(default=None, description="Use ${NAME} to take it from the environment")
+    password: SecretStr | None = Field(
+        default=None, description="Use ${NAME} to take it from the environment"
+    )
     folder: str = Field(default="/DATA/Programs", description="Where programs go on the controller")
     passive: Literal["auto", "epsv", "pasv"] = Field(
-        default="auto", description="Passive mode command: auto tries EPSV, then PASV (active mode is not supported)"
+        default="auto",
+        description="Passive mode command: auto tries EPSV, then PASV (active mode is not supported)",
     )
     tls: Literal["none", "implicit", "explicit"] = Field(
         default="none", description="FTPS: implicit (TLS from the first byte) or explicit (AUTH TLS)"
@@ -54,14 +57,20 @@ class ControllerFtp(Strict):
         default="temp-rename",
         description="temp-rename: upload under a temporary name, then rename (atomic); direct: for stores without RNFR/RNTO",
     )
-    temp_suffix: str = Field(default=".tmp", min_length=1, description="Suffix of the temporary name on the controller")
-    rate_limit: Size | None = Field(default=None, description="Upload speed limit in bytes per second (slow controllers)")
+    temp_suffix: str = Field(
+        default=".tmp", min_length=1, description="Suffix of the temporary name on the controller"
+    )
+    rate_limit: Size | None = Field(
+        default=None, description="Upload speed limit in bytes per second (slow controllers)"
+    )
 
     @field_validator("folder")
     @classmethod
     def _folder(cls, folder: str) -> str:
         if not folder.startswith("/"):
-            raise ValueError(f"folder {folder!r} must be an absolute path on the controller, e.g. /DATA/Programs")
+            raise ValueError(
+                f"folder {folder!r} must be an absolute path on the controller, e.g. /DATA/Programs"
+            )
         if any(part == ".." for part in folder.split("/")) or "\\" in folder:
             raise ValueError(f"folder {folder!r} must not contain '..' or backslashes")
         return folder.rstrip("/") or "/"
@@ -96,17 +105,23 @@ class ReadyCondition(Strict):
 class AutoStart(Strict):
     """What happens on the machine after a program is delivered."""
 
-    select: str | None = Field(default=None, description="String variable the program is written to, to select it")
+    select: str | None = Field(
+        default=None, description="String variable the program is written to, to select it"
+    )
     select_value: Literal["name", "path", "program"] = Field(
         default="name",
         description="What is written to select: the file name, its full path on the controller, or the program "
         "name the validator found (O-number)",
     )
-    start: str | None = Field(default=None, description="Boolean variable written true to start the selected program")
+    start: str | None = Field(
+        default=None, description="Boolean variable written true to start the selected program"
+    )
     ready: ReadyCondition | None = Field(
         default=None, description="Wait for this before selecting; without it, select and start at once"
     )
-    ready_timeout: float = Field(default=3600.0, gt=0, description="Seconds to wait for ready before giving up")
+    ready_timeout: float = Field(
+        default=3600.0, gt=0, description="Seconds to wait for ready before giving up"
+    )
     confirm_timeout: float = Field(
         default=15.0, gt=0, description="Seconds for the machine to leave the ready state after start"
     )
@@ -133,10 +148,13 @@ class JobsConfig(Strict):
         description="The same content arriving while an earlier copy still waits: skip the new one, "
         "or replace (cancel) the waiting one",
     )
-    max_attempts: int = Field(default=5, ge=1, le=1000, description="Delivery attempts before a job is FAILED")
+    max_attempts: int = Field(
+        default=5, ge=1, le=1000, description="Delivery attempts before a job is FAILED"
+    )
     retry: Retry = Retry()
     verify: Literal["size", "hash"] = Field(
-        default="size", description="After delivery, compare the size (SIZE or a listing), or download it back and hash"
+        default="size",
+        description="After delivery, compare the size (SIZE or a listing), or download it back and hash",
     )
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
     mqtt_retained_jobs: int = Field(
@@ -159,9 +177,15 @@ class FtpAccount(Strict):
     """One inbox login: a user, its secret, and the machines it may send programs to."""
 
     user: str = Field(description="Login name")
-    password_hash: str | None = Field(default=None, description="scrypt hash from `cnc-gateway hash-password`")
-    password_env: str | None = Field(default=None, description="Name of an environment variable holding the password")
-    machines: list[str] = Field(default_factory=lambda: ["*"], description="Machines it may write to; * for all")
+    password_hash: str | None = Field(
+        default=None, description="scrypt hash from `cnc-gateway hash-password`"
+    )
+    password_env: str | None = Field(
+        default=None, description="Name of an environment variable holding the password"
+    )
+    machines: list[str] = Field(
+        default_factory=lambda: ["*"], description="Machines it may write to; * for all"
+    )
 
     @field_validator("user")
     @classmethod
@@ -223,7 +247,9 @@ class PortRange(Strict):
 class InboxTls(Strict):
     """Implicit FTPS (TLS from the first byte, usually port 990). Files are relative to the state directory."""
 
-    cert: str = Field(default="inbox-cert.pem", description="PEM certificate (chain), relative to the state directory")
+    cert: str = Field(
+        default="inbox-cert.pem", description="PEM certificate (chain), relative to the state directory"
+    )
     key: str = Field(default="inbox-key.pem", description="PEM private key, relative to the state directory")
 
 
@@ -245,14 +271,17 @@ class InboxConfig(Strict):
     max_file_size: Size = Field(default=ByteSize(64 * 1024 * 1024), description="Largest program accepted")
     max_files_per_session: int = Field(default=200, ge=1, description="Uploads allowed per login session")
     max_connections: int = Field(default=32, ge=1, description="Simultaneous FTP sessions")
-    idle_timeout: float = Field(default=300.0, gt=0, description="Seconds without a command before a session is closed")
+    idle_timeout: float = Field(
+        default=300.0, gt=0, description="Seconds without a command before a session is closed"
+    )
     transfer_timeout: float = Field(default=60.0, gt=0, description="Seconds a data transfer may stall")
     temp_suffixes: list[str] = Field(
         default_factory=lambda: [".part", ".tmp", ".filepart"],
         description="Uploads with these suffixes (or in a machine's tmp/ folder) wait for a rename to become jobs",
     )
     reply_within: float = Field(
-        default=10.0, gt=0,
+        default=10.0,
+        gt=0,
         description="Seconds to wait for validation before the upload is answered; longer checks finish in the background",
     )
     tls: InboxTls | None = Field(default=None, description="Serve implicit FTPS instead of plain FTP")

@@ -183,8 +183,7 @@ def issues_from(exc: ValidationError, located: Located) -> list[ConfigIssue]:
 def _message(err: Mapping[str, Any]) -> str:
     kind = err["type"]
     msg = str(err["msg"])
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, ") :]
+    msg = msg.removeprefix("Value error, ")
     if kind == "extra_forbidden":
         return "unknown key (check the spelling; see mappings/mapping.schema.json for the keys allowed)"
     if kind == "missing":
@@ -228,7 +227,9 @@ def load_mapping(
     every role the mapping names must be one of them."""
     located = read_yaml(path, environ)
     if not isinstance(located.data, dict):
-        raise ConfigError([ConfigIssue(str(path), 1, "", "a mapping file must be a YAML mapping with a 'machine' key")])
+        raise ConfigError(
+            [ConfigIssue(str(path), 1, "", "a mapping file must be a YAML mapping with a 'machine' key")]
+        )
     issues: list[ConfigIssue] = []
     mapping: MachineMapping | None = None
     try:
@@ -344,7 +345,9 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
                 raise ConfigError(exc.issues) from None
             base_dir = path.parent.resolve()
             if not gateway.machines:
-                issues.append(ConfigIssue(str(path), located.line(("machines",)), "machines", "lists no mapping files"))
+                issues.append(
+                    ConfigIssue(str(path), located.line(("machines",)), "machines", "lists no mapping files")
+                )
             mapping_files.extend(base_dir / m for m in gateway.machines)
         else:
             mapping_files.append(path)
@@ -358,7 +361,12 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
             continue
         if mapping.machine in seen:
             issues.append(
-                ConfigIssue(str(file), None, "machine", f"machine {mapping.machine!r} is already defined in {seen[mapping.machine]}")
+                ConfigIssue(
+                    str(file),
+                    None,
+                    "machine",
+                    f"machine {mapping.machine!r} is already defined in {seen[mapping.machine]}",
+                )
             )
             continue
         seen[mapping.machine] = file

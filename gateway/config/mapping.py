@@ -52,7 +52,9 @@ def check_path(path: str) -> str:
 def _require_numeric(value: Any, info: ValidationInfo) -> None:
     upstream = info.data.get("type")
     if value is not None and upstream is not None and not upstream.is_numeric:
-        raise ValueError(f"{info.field_name} is only allowed on numeric variables, and this one is {upstream}")
+        raise ValueError(
+            f"{info.field_name} is only allowed on numeric variables, and this one is {upstream}"
+        )
 
 
 class Scale(Strict):
@@ -85,28 +87,39 @@ class EURange(Strict):
 class VariableSpec(Strict):
     """One mapped variable: where it lives on the controller and how it looks upstream."""
 
-    path: Annotated[str, Field(description="Tree path, e.g. Axes/X/Position: OPC UA browse path and MQTT topic")]
-    source: Annotated[str, Field(min_length=1, description="Driver address, e.g. ns=2;s=::AsGlobalPV:gAxis[0].ActPos")]
+    path: Annotated[
+        str, Field(description="Tree path, e.g. Axes/X/Position: OPC UA browse path and MQTT topic")
+    ]
+    source: Annotated[
+        str, Field(min_length=1, description="Driver address, e.g. ns=2;s=::AsGlobalPV:gAxis[0].ActPos")
+    ]
     type: TypeField
     source_type: TypeField | None = Field(
-        default=None, description="The controller's own type, when scaling changes it (e.g. Int32 counts to Double mm)"
+        default=None,
+        description="The controller's own type, when scaling changes it (e.g. Int32 counts to Double mm)",
     )
     unit: str = ""
     access: Literal["read", "readwrite"] = "read"
     scale: Scale | None = None
     range: EURange | None = None
     deadband: float | str | None = Field(
-        default=None, description="Absolute change below which updates are dropped, or a percentage of range: '0.5%'"
+        default=None,
+        description="Absolute change below which updates are dropped, or a percentage of range: '0.5%'",
     )
     description: str = ""
-    sampling_interval: float | None = Field(default=None, ge=0, description="Milliseconds; default from defaults")
+    sampling_interval: float | None = Field(
+        default=None, ge=0, description="Milliseconds; default from defaults"
+    )
     queue_size: int | None = Field(default=None, ge=1, le=10000)
-    mqtt: VariableMqtt | None = Field(default=None, description="How this variable appears in MQTT (topic, QoS, writes)")
+    mqtt: VariableMqtt | None = Field(
+        default=None, description="How this variable appears in MQTT (topic, QoS, writes)"
+    )
     copydata: VariableCopydata | None = Field(
         default=None, description="This variable's id in COPYDATA frames for nesting software: {id: 12}"
     )
     role: str | None = Field(
-        default=None, description="Lowest role that may write it (access: readwrite); default: defaults.write_role"
+        default=None,
+        description="Lowest role that may write it (access: readwrite); default: defaults.write_role",
     )
 
     @field_validator("path")
@@ -120,7 +133,9 @@ class VariableSpec(Strict):
         upstream = info.data.get("type")
         if value is not None and upstream is not None:
             if value.array != upstream.array:
-                raise ValueError(f"source_type {value} and type {upstream} must both be arrays or both scalars")
+                raise ValueError(
+                    f"source_type {value} and type {upstream} must both be arrays or both scalars"
+                )
             if value.is_numeric != upstream.is_numeric:
                 raise ValueError(f"source_type {value} and type {upstream} must both be numeric or both not")
         return value
@@ -227,7 +242,8 @@ class OpcUaDriver(Strict):
     username: str | None = None
     password: SecretStr | None = None
     security: str = Field(
-        default="None", description="asyncua security string, e.g. Basic256Sha256,SignAndEncrypt,cert.pem,key.pem"
+        default="None",
+        description="asyncua security string, e.g. Basic256Sha256,SignAndEncrypt,cert.pem,key.pem",
     )
     timeout: float = Field(default=5.0, gt=0, description="Seconds per request")
     publishing_interval: float = Field(default=100.0, gt=0, description="Milliseconds")
@@ -244,8 +260,9 @@ class VariableDefaults(Strict):
     sampling_interval: float = Field(default=100.0, ge=0, description="Milliseconds")
     queue_size: int = Field(default=1, ge=1, le=10000)
     write_role: str | None = Field(
-        default=None, description="Lowest role that may write this machine's variables; default: the gateway's "
-        "access.default_write_role"
+        default=None,
+        description="Lowest role that may write this machine's variables; default: the gateway's "
+        "access.default_write_role",
     )
 
     @field_validator("write_role")
@@ -262,9 +279,12 @@ class MachineMapping(Strict):
     driver: OpcUaDriver
     defaults: VariableDefaults = VariableDefaults()
     variables: list[VariableSpec] = Field(min_length=1)
-    mqtt: MachineMqtt | None = Field(default=None, description="This machine's MQTT defaults (QoS, retain, writes)")
+    mqtt: MachineMqtt | None = Field(
+        default=None, description="This machine's MQTT defaults (QoS, retain, writes)"
+    )
     jobs: JobsConfig | None = Field(
-        default=None, description="The FTP job queue: program store on the controller, checks, retries, auto-start"
+        default=None,
+        description="The FTP job queue: program store on the controller, checks, retries, auto-start",
     )
     copydata: MachineCopydata | None = Field(
         default=None, description="COPYDATA targets: where this machine's frames for nesting software go"
@@ -273,7 +293,8 @@ class MachineMapping(Strict):
         default=None, description="Where the machine's active alarms come from, and how severe each class is"
     )
     commands: dict[CommandName, CommandSpec] | None = Field(
-        default=None, description="Named commands (start, stop, select-program, ...): writes, guard, completion, timeout"
+        default=None,
+        description="Named commands (start, stop, select-program, ...): writes, guard, completion, timeout",
     )
 
     @field_validator("machine")
@@ -376,6 +397,9 @@ def tree_conflicts(paths: list[str]) -> list[tuple[int, str]]:
             folder = "/".join(segments[:cut])
             if folder in first:
                 problems.append(
-                    (index, f"path {path!r} uses {folder!r} as a folder, but variables[{first[folder]}] is a variable")
+                    (
+                        index,
+                        f"path {path!r} uses {folder!r} as a folder, but variables[{first[folder]}] is a variable",
+                    )
                 )
     return problems

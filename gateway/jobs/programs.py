@@ -14,7 +14,7 @@ the backups folder), so this module does not import the service.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -63,10 +63,14 @@ def _name(value: Any) -> str:
 class SubmitProgram(Protocol):
     """Queues a program for a machine as if it had been uploaded (JobService.submit_bytes)."""
 
-    async def __call__(self, machine: str, filename: str, data: bytes, *, user: str, origin: str) -> UploadReply: ...
+    async def __call__(
+        self, machine: str, filename: str, data: bytes, *, user: str, origin: str
+    ) -> UploadReply: ...
 
 
-def program_methods(machine: str, *, store: OpenStore | None, submit: SubmitProgram, backups: Path) -> list[Method]:
+def program_methods(
+    machine: str, *, store: OpenStore | None, submit: SubmitProgram, backups: Path
+) -> list[Method]:
     """The methods for one machine: `store` opens its program store (None: Put only), `submit` queues a
     program, `backups` is the folder Backup copies programs into."""
     methods = _store_methods(store, backups) if store is not None else []
@@ -98,7 +102,7 @@ def _store_methods(store: OpenStore, backups: Path) -> list[Method]:
     async def backup(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
         name = _name(args[0])
         data = await fetch(name)
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         backups.mkdir(parents=True, exist_ok=True)
         target = backups / f"{stamp}-{name}"
         target.write_bytes(data)
@@ -115,16 +119,25 @@ def _store_methods(store: OpenStore, backups: Path) -> list[Method]:
 
     return [
         Method(
-            OBJECT, "List", "The programs in the controller's program folder, with their sizes in bytes",
-            (), (Argument("Names", TypeSpec.parse("String[]")), Argument("Sizes", TypeSpec.parse("UInt64[]"))),
+            OBJECT,
+            "List",
+            "The programs in the controller's program folder, with their sizes in bytes",
+            (),
+            (Argument("Names", TypeSpec.parse("String[]")), Argument("Sizes", TypeSpec.parse("UInt64[]"))),
             listing,
         ),
         Method(OBJECT, "Get", "A program's text", (NAME,), (Argument("Content", STRING),), get),
         Method(
-            OBJECT, "Backup", "Copy a program into the gateway's backups folder; returns the file's path",
-            (NAME,), (Argument("Path", STRING),), backup,
+            OBJECT,
+            "Backup",
+            "Copy a program into the gateway's backups folder; returns the file's path",
+            (NAME,),
+            (Argument("Path", STRING),),
+            backup,
         ),
-        Method(OBJECT, "Delete", "Delete a program from the controller", (NAME,), (), delete, role="operator"),
+        Method(
+            OBJECT, "Delete", "Delete a program from the controller", (NAME,), (), delete, role="operator"
+        ),
     ]
 
 
@@ -142,7 +155,9 @@ def _put_method(machine: str, submit: SubmitProgram) -> Method:
 
     job = Argument("JobId", STRING, "The job that will deliver it")
     return Method(
-        OBJECT, "Put", "Queue a program for delivery: validated and delivered like an inbox upload",
+        OBJECT,
+        "Put",
+        "Queue a program for delivery: validated and delivered like an inbox upload",
         (NAME, Argument("Content", STRING, "The program text")),
         (job, Argument("Message", STRING, "queued, or why it was rejected")),
         put,

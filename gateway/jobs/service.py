@@ -86,11 +86,15 @@ def summarize(verdict: Verdict) -> str:
 class JobService:
     """The job queue of every machine that has a `jobs:` section."""
 
-    def __init__(self, config: Config, tree: VariableTree, *, environ: Mapping[str, str] | None = None) -> None:
+    def __init__(
+        self, config: Config, tree: VariableTree, *, environ: Mapping[str, str] | None = None
+    ) -> None:
         self.config = config
         self.tree = tree
         self.environ = environ
-        self.machines: dict[str, JobsConfig] = {m.machine: m.jobs for m in config.machines if m.jobs is not None}
+        self.machines: dict[str, JobsConfig] = {
+            m.machine: m.jobs for m in config.machines if m.jobs is not None
+        }
         state = config.state_dir
         self.spool = Spool(state / "jobs" / "spool")
         self.rejected_dir = state / "rejected"
@@ -106,7 +110,13 @@ class JobService:
             if jobs.auto is not None:
                 self.autostarters[name] = AutoStarter(machine, jobs.auto, jobs.controller.folder)
             self.workers[name] = DeliveryWorker(
-                name, jobs, self.queue, self.spool, self.publisher, self._q, transport_for(jobs),
+                name,
+                jobs,
+                self.queue,
+                self.spool,
+                self.publisher,
+                self._q,
+                transport_for(jobs),
                 autostart=self.autostarters.get(name),
             )
             methods = program_methods(
@@ -117,7 +127,7 @@ class JobService:
         self.inbox: Inbox | None = None
         self._changed = asyncio.Event()
         self._tasks: set[asyncio.Task[Any]] = set()
-        self._processing: dict[str, int] = {name: 0 for name in self.machines}
+        self._processing: dict[str, int] = dict.fromkeys(self.machines, 0)
         self._rev = 0
         self._transition = 0
         self._opened = False
@@ -160,7 +170,9 @@ class JobService:
     def _build_inbox(self) -> Inbox | None:
         cfg = self.config.gateway.inbox
         if not cfg.enabled:
-            log.info("the FTP inbox is disabled (inbox.enabled: false); jobs arrive only through Programs.Put")
+            log.info(
+                "the FTP inbox is disabled (inbox.enabled: false); jobs arrive only through Programs.Put"
+            )
             return None
         try:
             accounts = Accounts.from_config(cfg, self.machines, self.environ)
@@ -171,8 +183,14 @@ class JobService:
             return None
         tls = tls_context(self.config.state_dir, cfg.tls.cert, cfg.tls.key) if cfg.tls is not None else None
         return Inbox(
-            cfg, root=self.inbox_root, machines=self.machines, accounts=accounts, submit=self.submit, tls=tls,
-            jobs_coming=functools.partial(self.threads.warm, ready), check_upload=self._upload_check,
+            cfg,
+            root=self.inbox_root,
+            machines=self.machines,
+            accounts=accounts,
+            submit=self.submit,
+            tls=tls,
+            jobs_coming=functools.partial(self.threads.warm, ready),
+            check_upload=self._upload_check,
         )
 
     def _upload_check(self, machine: str) -> UploadCheck | None:
@@ -205,9 +223,13 @@ class JobService:
             job = holder.get("job")
             if job is None:
                 return UploadReply(True, "received; still being stored")
-            return UploadReply(True, f"{job.id} received; validation continues (cnc-gateway jobs show {job.id})", job.id)
+            return UploadReply(
+                True, f"{job.id} received; validation continues (cnc-gateway jobs show {job.id})", job.id
+            )
 
-    async def submit_bytes(self, machine: str, filename: str, data: bytes, *, user: str, origin: str) -> UploadReply:
+    async def submit_bytes(
+        self, machine: str, filename: str, data: bytes, *, user: str, origin: str
+    ) -> UploadReply:
         """A program that arrives other than through the inbox (Programs.Put): the same checks, the same queue."""
         try:
             check_file_name(filename)
@@ -224,16 +246,29 @@ class JobService:
         try:
             try:
                 job = await self._q(
-                    self.queue.receive, upload.machine, upload.filename, upload.size, upload.sha256,
-                    user=upload.user, origin=upload.client, priority=upload.priority,
+                    self.queue.receive,
+                    upload.machine,
+                    upload.filename,
+                    upload.size,
+                    upload.sha256,
+                    user=upload.user,
+                    origin=upload.client,
+                    priority=upload.priority,
                 )
             except BaseException:
                 upload.path.unlink(missing_ok=True)
                 raise
             await self.threads.work(os.replace, upload.path, self.spool.received(job))
             holder["job"] = job
-            log.info("%s: %s received %s (%d bytes) from %s@%s", job.machine, job.id, job.filename, job.size,
-                     upload.user, upload.client)
+            log.info(
+                "%s: %s received %s (%d bytes) from %s@%s",
+                job.machine,
+                job.id,
+                job.filename,
+                job.size,
+                upload.user,
+                upload.client,
+            )
             return await self._process(job, upload.check)
         finally:
             self._processing[upload.machine] -= 1
@@ -259,7 +294,9 @@ class JobService:
         if checked is None:
             # Large programs in the validation process: seconds of CPU in a thread would stall the event loop.
             run = self.threads.process if job.size > ISOLATE_ABOVE else self.threads.work
-            checked = await run(validate_file, received, self.spool.program(job), job.filename, rules, job.sha256)
+            checked = await run(
+                validate_file, received, self.spool.program(job), job.filename, rules, job.sha256
+            )
         verdict = checked.verdict
         if not verdict.accepted:
             reason = summarize(verdict)
@@ -297,11 +334,15 @@ class JobService:
         try:
             verdict = await check.verdict(job.filename)
         except Exception:
-            log.exception("%s: %s: the check on arrival failed; validating the stored upload", job.machine, job.id)
+            log.exception(
+                "%s: %s: the check on arrival failed; validating the stored upload", job.machine, job.id
+            )
             return None
         if check.changed:
             return None  # XON/XOFF bytes to strip: validate_file writes the program without them
-        if verdict.accepted and not await self.threads.work(link_durably, self.spool.received(job), self.spool.program(job)):
+        if verdict.accepted and not await self.threads.work(
+            link_durably, self.spool.received(job), self.spool.program(job)
+        ):
             return None
         size, digest = (job.size, job.sha256) if verdict.accepted else (0, "")
         return Checked(verdict, size, digest, os.getpid())
@@ -326,14 +367,18 @@ class JobService:
 
     async def _resume(self) -> None:
         """Jobs an earlier run left between arrival and the queue: finish them, or reject lost ones."""
-        for job in await self.threads.queue(self.queue.list, states=(JobState.RECEIVED,), limit=10_000, newest_first=False):
+        for job in await self.threads.queue(
+            self.queue.list, states=(JobState.RECEIVED,), limit=10_000, newest_first=False
+        ):
             if job.machine not in self.machines:
                 continue
             if self.spool.received(job).is_file():
                 log.info("%s: resuming %s (received before the restart)", job.machine, job.id)
                 self._spawn(self._process(job), f"jobs:resume:{job.id}")
             else:
-                await self._q(self.queue.reject, job.seq, "the upload was lost when the gateway stopped; send it again")
+                await self._q(
+                    self.queue.reject, job.seq, "the upload was lost when the gateway stopped; send it again"
+                )
 
     # --- for the demo ----------------------------------------------------------------------------------
 
@@ -387,7 +432,9 @@ class JobService:
         for name in self.machines:
             await self._summary(name)
         waiting = await self.threads.queue(
-            self.queue.list, states=(JobState.RECEIVED, JobState.QUEUED, JobState.SENDING, JobState.FAILED), limit=1000
+            self.queue.list,
+            states=(JobState.RECEIVED, JobState.QUEUED, JobState.SENDING, JobState.FAILED),
+            limit=1000,
         )
         for job in waiting:
             if job.machine in self.machines:

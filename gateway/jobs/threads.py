@@ -50,11 +50,15 @@ class JobThreads:
 
     async def queue(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         """Run a JobQueue call."""
-        return await asyncio.get_running_loop().run_in_executor(self._queue, functools.partial(fn, *args, **kwargs))
+        return await asyncio.get_running_loop().run_in_executor(
+            self._queue, functools.partial(fn, *args, **kwargs)
+        )
 
     async def work(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         """Run file I/O or a validation."""
-        return await asyncio.get_running_loop().run_in_executor(self._work, functools.partial(fn, *args, **kwargs))
+        return await asyncio.get_running_loop().run_in_executor(
+            self._work, functools.partial(fn, *args, **kwargs)
+        )
 
     def checking(self, fn: Callable[..., T], *args: Any) -> Future[T]:
         """Run `fn(*args)` in the check thread, after every call submitted before it (uploads checked as

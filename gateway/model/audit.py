@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 MAX_TEXT = 200  # characters of one value kept in the trail
@@ -63,8 +63,8 @@ def _plain(value: Any) -> Any:
     if isinstance(value, float):
         return value if math.isfinite(value) else str(value)
     if isinstance(value, datetime):
-        ts = value if value.tzinfo else value.replace(tzinfo=timezone.utc)
-        return ts.astimezone(timezone.utc).isoformat().replace("+00:00", "Z")
+        ts = value if value.tzinfo else value.replace(tzinfo=UTC)
+        return ts.astimezone(UTC).isoformat().replace("+00:00", "Z")
     if isinstance(value, (bytes, bytearray)):
         return f"<{len(value)} bytes>"
     if isinstance(value, (list, tuple)):

@@ -10,7 +10,7 @@ from __future__ import annotations
 class WriteContext:
     """Who is writing or calling, through which sink, with which role (see gateway/model/access.py)."""
 
-    __slots__ = ("origin", "user", "role")
+    __slots__ = ("origin", "role", "user")
 
     def __init__(self, origin: str, user: str | None = None, role: str | None = None) -> None:
         self.origin = origin

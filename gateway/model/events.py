@@ -39,7 +39,7 @@ class Event:
 
 
 class EventSubscription:
-    __slots__ = ("name", "dropped", "_queue", "_event", "_bus")
+    __slots__ = ("_bus", "_event", "_queue", "dropped", "name")
 
     def __init__(self, bus: EventBus, name: str, limit: int) -> None:
         self.name = name

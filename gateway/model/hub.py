@@ -28,7 +28,17 @@ Change = tuple[N, Sample]
 class Subscription(Generic[N]):
     """One sink's view of the change stream."""
 
-    __slots__ = ("name", "every_change", "limit", "coalesced", "delivered", "_latest", "_ordered", "_event", "_hub")
+    __slots__ = (
+        "_event",
+        "_hub",
+        "_latest",
+        "_ordered",
+        "coalesced",
+        "delivered",
+        "every_change",
+        "limit",
+        "name",
+    )
 
     def __init__(
         self, hub: ChangeHub[N], name: str, *, every_change: bool = False, limit: int = 100_000

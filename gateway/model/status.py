@@ -7,7 +7,7 @@ MQTT as topics.
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any, Generic, Protocol, TypeVar
 
 from gateway.model.sample import Sample
@@ -39,21 +39,25 @@ class MachineStatus(Generic[N]):
     def __init__(self, machine: StatusOwner[N], endpoint: str) -> None:
         self.machine = machine
         add = machine.add_internal
-        self.connected_node = add("Status/Connected", "Boolean", "True while the controller connection is up", False)
+        self.connected_node = add(
+            "Status/Connected", "Boolean", "True while the controller connection is up", False
+        )
         self.state_node = add(
             "Status/State", "String", "connected, connecting or disconnected", self.DISCONNECTED
         )
-        self.last_error_node = add("Status/LastError", "String", "The most recent connection or driver error", "")
+        self.last_error_node = add(
+            "Status/LastError", "String", "The most recent connection or driver error", ""
+        )
         self.reconnects_node = add(
             "Status/ReconnectCount", "UInt32", "How many times the connection was re-established", 0
         )
         self.last_change_node = add(
-            "Status/LastChange", "DateTime", "Source time of the latest value change (updated at most once a second)",
-            datetime(1601, 1, 1, tzinfo=timezone.utc),
+            "Status/LastChange",
+            "DateTime",
+            "Source time of the latest value change (updated at most once a second)",
+            datetime(1601, 1, 1, tzinfo=UTC),
         )
-        self.endpoint_node = add(
-            "Status/Endpoint", "String", "The controller address", endpoint
-        )
+        self.endpoint_node = add("Status/Endpoint", "String", "The controller address", endpoint)
         self._ever_connected = False
 
     @property

@@ -63,18 +63,18 @@ class VariableNode:
     """A variable in the tree. Identity-hashed, so sinks can key their caches on it."""
 
     __slots__ = (
-        "machine",
-        "definition",
-        "path",
-        "internal",
-        "sample",
-        "_published",
-        "_gain",
-        "_offset",
         "_deadband",
-        "_scaled",
-        "_round",
+        "_gain",
         "_hold",
+        "_offset",
+        "_published",
+        "_round",
+        "_scaled",
+        "definition",
+        "internal",
+        "machine",
+        "path",
+        "sample",
     )
 
     def __init__(self, machine: Machine, definition: VariableDefinition, *, internal: bool = False) -> None:
@@ -208,7 +208,9 @@ class Machine:
 
     # --- from the source -------------------------------------------------------------------
 
-    def ingest(self, node: VariableNode, raw: Any, source_ts: datetime, status: str = "Good", reason: str = "") -> None:
+    def ingest(
+        self, node: VariableNode, raw: Any, source_ts: datetime, status: str = "Good", reason: str = ""
+    ) -> None:
         """A value (or a bad status) reported by the controller for one variable."""
         if status.startswith("Bad"):
             self._publish_status(node, status, reason, source_ts)
@@ -220,7 +222,10 @@ class Machine:
             value = node.to_engineering(raw)
         except TypeError:
             self._publish_status(
-                node, "BadTypeMismatch", f"controller sent {type(raw).__name__}, mapping says {node.type}", source_ts
+                node,
+                "BadTypeMismatch",
+                f"controller sent {type(raw).__name__}, mapping says {node.type}",
+                source_ts,
             )
             return
         prev = node.sample
@@ -336,8 +341,17 @@ class Machine:
         duration = 0.0 if started is None else time.monotonic() - started
         self.tree.audit(
             AuditEntry(
-                at or utcnow(), kind, self.name, target, ctx.origin, ctx.user, self.tree.access.role_of(ctx),
-                old, new, "Good" if error is None else error.status, "" if error is None else error.reason,
+                at or utcnow(),
+                kind,
+                self.name,
+                target,
+                ctx.origin,
+                ctx.user,
+                self.tree.access.role_of(ctx),
+                old,
+                new,
+                "Good" if error is None else error.status,
+                "" if error is None else error.reason,
                 duration,
             )
         )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from enum import Enum
 from typing import Any
 
@@ -99,8 +99,8 @@ _DEFAULTS: dict[DataType, Any] = {
     DataType.FLOAT: 0.0,
     DataType.DOUBLE: 0.0,
     DataType.STRING: "",
-    DataType.DATETIME: datetime(1601, 1, 1, tzinfo=timezone.utc),
-    **{t: 0 for t in INT_BOUNDS},
+    DataType.DATETIME: datetime(1601, 1, 1, tzinfo=UTC),
+    **dict.fromkeys(INT_BOUNDS, 0),
 }
 
 
@@ -153,13 +153,13 @@ def _coerce_scalar(base: DataType, value: Any) -> Any:
         raise TypeMismatch(f"expected String, got {_kind(value)}")
     if base is DataType.DATETIME:
         if isinstance(value, datetime):
-            return value if value.tzinfo else value.replace(tzinfo=timezone.utc)
+            return value if value.tzinfo else value.replace(tzinfo=UTC)
         if isinstance(value, str):
             try:
                 parsed = datetime.fromisoformat(value.replace("Z", "+00:00"))
             except ValueError:
                 raise TypeMismatch(f"expected an ISO-8601 DateTime, got {value!r}") from None
-            return parsed if parsed.tzinfo else parsed.replace(tzinfo=timezone.utc)
+            return parsed if parsed.tzinfo else parsed.replace(tzinfo=UTC)
         raise TypeMismatch(f"expected DateTime, got {_kind(value)}")
     raise TypeMismatch(f"unsupported type {base}")  # pragma: no cover - enum is exhaustive
 

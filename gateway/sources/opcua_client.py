@@ -74,7 +74,7 @@ _PY_TYPES: dict[DataType, type] = {
     DataType.DOUBLE: float,
     DataType.STRING: str,
     DataType.DATETIME: datetime,
-    **{t: int for t in INT_BOUNDS},
+    **dict.fromkeys(INT_BOUNDS, int),
 }
 
 Lost = Callable[[str, str], None]
@@ -399,7 +399,9 @@ class OpcUaSource:
         elif not outage.down:
             outage.failed(reason, "%s: cannot connect to %s: %s; will keep retrying", name, endpoint, reason)
         else:
-            outage.failed(reason, "%s: still cannot connect to %s: %s", name, endpoint, reason, level=logging.INFO)
+            outage.failed(
+                reason, "%s: still cannot connect to %s: %s", name, endpoint, reason, level=logging.INFO
+            )
         self._last_reason = reason
 
     async def _close(self, *, polite: bool) -> None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import yaml
@@ -414,7 +414,7 @@ def render(
 ) -> str:
     """The mapping file's text: a commented header, the driver settings, one line per variable."""
     paths = assign_paths([f.keys for f in variables])
-    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "# yaml-language-server: $schema=./mapping.schema.json",
         "#",

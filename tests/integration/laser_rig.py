@@ -30,32 +30,45 @@ MACHINE = "laser-sim"
 SPEED = 20.0
 
 
-def laser_mapping(sim_port: int, *, mqtt_commands: bool = True, timeouts: dict[str, float] | None = None) -> MachineMapping:
+def laser_mapping(
+    sim_port: int, *, mqtt_commands: bool = True, timeouts: dict[str, float] | None = None
+) -> MachineMapping:
     mapping = load_mapping(
         ROOT / "mappings" / "laser-sim.yaml",
         environ={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}"},
     )
-    driver = mapping.driver.model_copy(update={
-        "watchdog_interval": 0.3,
-        "reconnect": mapping.driver.reconnect.model_copy(update={"initial": 0.1, "max": 0.5}),
-    })
+    driver = mapping.driver.model_copy(
+        update={
+            "watchdog_interval": 0.3,
+            "reconnect": mapping.driver.reconnect.model_copy(update={"initial": 0.1, "max": 0.5}),
+        }
+    )
     commands = dict(mapping.commands or {})
     for name, seconds in (timeouts or {}).items():
         commands[name] = commands[name].model_copy(update={"timeout": seconds})
-    return mapping.model_copy(update={
-        "driver": driver, "jobs": None, "copydata": None, "commands": commands,
-        "mqtt": MachineMqtt(commands=mqtt_commands),
-    })
+    return mapping.model_copy(
+        update={
+            "driver": driver,
+            "jobs": None,
+            "copydata": None,
+            "commands": commands,
+            "mqtt": MachineMqtt(commands=mqtt_commands),
+        }
+    )
 
 
-def laser_config(state_dir: Path, mapping: MachineMapping, gw_port: int, mqtt: MqttConfig | None = None) -> Config:
-    gateway = GatewayConfig.model_validate({
-        "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"},
-        "state_dir": str(state_dir),
-        "inbox": {"enabled": False},
-        # These tests command the machine as anonymous OPC UA clients: the gateway file opens that explicitly.
-        "access": {"anonymous": "operator"},
-    }).model_copy(update={"mqtt": mqtt})
+def laser_config(
+    state_dir: Path, mapping: MachineMapping, gw_port: int, mqtt: MqttConfig | None = None
+) -> Config:
+    gateway = GatewayConfig.model_validate(
+        {
+            "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"},
+            "state_dir": str(state_dir),
+            "inbox": {"enabled": False},
+            # These tests command the machine as anonymous OPC UA clients: the gateway file opens that explicitly.
+            "access": {"anonymous": "operator"},
+        }
+    ).model_copy(update={"mqtt": mqtt})
     return Config(gateway, (mapping,), state_dir.parent)
 
 
@@ -96,8 +109,11 @@ class LaserRig:
         self.gateway = Gateway(self.config)
         await self.gateway.__aenter__()
         self._run = asyncio.create_task(self.gateway.run(), name="test:gateway")
-        await wait_until(lambda: self.machine.nodes["Machine/State"].sample.good, timeout=15,
-                         message="the gateway to mirror the simulator")
+        await wait_until(
+            lambda: self.machine.nodes["Machine/State"].sample.good,
+            timeout=15,
+            message="the gateway to mirror the simulator",
+        )
 
     async def stop_gateway(self) -> None:
         for client in self.clients:
@@ -123,7 +139,9 @@ class LaserRig:
     async def subscribe_alarms(self, client: Client, source: ua.NodeId | None = None) -> tuple[Any, Events]:
         events = Events()
         sub = await client.create_subscription(20, events)
-        await sub.subscribe_alarms_and_conditions(source or ua.NodeId(ua.ObjectIds.Server), ua.ObjectIds.AlarmConditionType)
+        await sub.subscribe_alarms_and_conditions(
+            source or ua.NodeId(ua.ObjectIds.Server), ua.ObjectIds.AlarmConditionType
+        )
         return sub, events
 
     async def command(self, client: Client, name: str, *args: ua.Variant) -> list[Any]:
@@ -137,7 +155,10 @@ class LaserRig:
 
 @asynccontextmanager
 async def laser_rig(
-    tmp_path: Path, *, mqtt: MqttConfig | None = None, mqtt_commands: bool = True,
+    tmp_path: Path,
+    *,
+    mqtt: MqttConfig | None = None,
+    mqtt_commands: bool = True,
     timeouts: dict[str, float] | None = None,
 ) -> AsyncIterator[LaserRig]:
     sim_ports = (free_port(), free_port())

@@ -36,10 +36,15 @@ async def test_a_tiny_mirror_run_counts_every_change_and_reports_it(tmp_path: Pa
     (step,) = data["steps"]
     assert step["offered"] > 0 and step["received"] > 0 and step["mqtt"] > 0
     assert all(math.isfinite(step[k]) for k in ("offered", "received", "mqtt", "opcua", "cpu"))
-    assert step["latency"]["n"] > 0 and step["latency"]["p50"] <= step["latency"]["p99"] <= step["latency"]["max"]
+    assert (
+        step["latency"]["n"] > 0
+        and step["latency"]["p50"] <= step["latency"]["p99"] <= step["latency"]["max"]
+    )
     final = data["final"]
     assert final["written"] > 0
-    assert final["mqtt_match"] == final["opcua_match"] == 50  # both subscribers end at the source's last values
+    assert (
+        final["mqtt_match"] == final["opcua_match"] == 50
+    )  # both subscribers end at the source's last values
 
     judge(ctx)
     table = render(ctx.results)

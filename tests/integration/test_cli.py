@@ -68,7 +68,9 @@ async def test_run_serves_bad_values_while_the_controller_is_down_and_stops_clea
         f"state_dir: state\ninbox: {{port: {free_port()}}}\nmachines: [{ROOT / 'mappings' / 'laser-sim.yaml'}]\n"
     )
     proc = spawn(
-        "cnc-gateway", "run", str(gateway_file),
+        "cnc-gateway",
+        "run",
+        str(gateway_file),
         env={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}", "LASER_SIM_COPYDATA_PORT": "0"},
     )
     processes.append(proc)
@@ -100,7 +102,9 @@ async def test_run_serves_bad_values_while_the_controller_is_down_and_stops_clea
 def test_run_refuses_a_broken_mapping_without_starting(tmp_path: Path) -> None:
     proc = subprocess.run(
         [str(BIN / "cnc-gateway"), "run", str(ROOT / "tests/corpus/mappings/many-errors.yaml")],
-        capture_output=True, text=True, timeout=60,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert proc.returncode == 2
     assert "6 errors; nothing was started." in proc.stderr
@@ -109,7 +113,9 @@ def test_run_refuses_a_broken_mapping_without_starting(tmp_path: Path) -> None:
 async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_copydata_targets() -> None:
     proc = subprocess.run(
         [str(BIN / "cnc-gateway"), "check", str(ROOT / "mappings/laser-sim.yaml")],
-        capture_output=True, text=True, timeout=60,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
@@ -121,8 +127,22 @@ async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_
         "writes and commands the mappings open to MQTT or COPYDATA act as admin"
     )
     command = next(line for line in lines if line.strip().startswith("select-program"))
-    assert command.split() == ["select-program(name:", "String)", "operator", "Machine/State", "is", "Idle", "or", "Alarm"]
-    assert next(line for line in lines if line.strip().startswith("stop ")).split() == ["stop", "operator", "any", "state"]
+    assert command.split() == [
+        "select-program(name:",
+        "String)",
+        "operator",
+        "Machine/State",
+        "is",
+        "Idle",
+        "or",
+        "Alarm",
+    ]
+    assert next(line for line in lines if line.strip().startswith("stop ")).split() == [
+        "stop",
+        "operator",
+        "any",
+        "state",
+    ]
     nesting = next(line for line in lines if line.strip().startswith("nesting"))
     assert nesting.split()[1] == "tcp-server" and "ids 1-11, 14-16 (14 variables)" in nesting
     assert "connected 100" in nesting and "accepts writes" in nesting
@@ -133,8 +153,18 @@ async def test_demo_runs_the_simulator_and_keeps_a_program_running(
 ) -> None:
     gw_port, sim_port, ftp_port = free_port(), free_port(), free_port()
     proc = spawn(
-        "cnc-gateway", "demo", "--opcua-port", str(gw_port), "--sim-opcua-port", str(sim_port),
-        "--sim-ftp-port", str(ftp_port), "--speed", "20", "--state-dir", str(tmp_path / "state"),
+        "cnc-gateway",
+        "demo",
+        "--opcua-port",
+        str(gw_port),
+        "--sim-opcua-port",
+        str(sim_port),
+        "--sim-ftp-port",
+        str(ftp_port),
+        "--speed",
+        "20",
+        "--state-dir",
+        str(tmp_path / "state"),
         *demo_extra_args(),
     )
     processes.append(proc)
@@ -159,9 +189,13 @@ async def test_demo_runs_the_simulator_and_keeps_a_program_running(
         return None if dv is None else dv.StatusCode
 
     proc.send_signal(signal.SIGUSR1)
-    await wait_until(lambda: _is(position_status(), bad=True), timeout=10, message="X Bad after the simulator stopped")
+    await wait_until(
+        lambda: _is(position_status(), bad=True), timeout=10, message="X Bad after the simulator stopped"
+    )
     proc.send_signal(signal.SIGUSR1)
-    await wait_until(lambda: _is(position_status(), bad=False), timeout=15, message="X Good after it restarted")
+    await wait_until(
+        lambda: _is(position_status(), bad=False), timeout=15, message="X Good after it restarted"
+    )
     code, out, err = stop(proc, signal.SIGTERM)
     assert code == 0, err
     assert "Traceback" not in err
@@ -194,8 +228,18 @@ async def test_discover_writes_a_mapping_that_loads(tmp_path: Path) -> None:
         # in a thread: the simulator shares this event loop and must keep answering
         proc = await asyncio.to_thread(
             subprocess.run,
-            [str(BIN / "cnc-gateway"), "discover", f"opc.tcp://127.0.0.1:{sim_port}", "--machine", "press-3", "-o", str(out)],
-            capture_output=True, text=True, timeout=60,
+            [
+                str(BIN / "cnc-gateway"),
+                "discover",
+                f"opc.tcp://127.0.0.1:{sim_port}",
+                "--machine",
+                "press-3",
+                "-o",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
         )
     assert proc.returncode == 0, proc.stderr
     mapping = load_mapping(out)
@@ -212,7 +256,9 @@ async def test_discover_writes_a_mapping_that_loads(tmp_path: Path) -> None:
 def test_discover_reports_an_unreachable_controller_in_one_line() -> None:
     proc = subprocess.run(
         [str(BIN / "cnc-gateway"), "discover", f"opc.tcp://127.0.0.1:{free_port()}", "--timeout", "2"],
-        capture_output=True, text=True, timeout=60,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert proc.returncode == 1
     assert proc.stderr.startswith("error:") and "Traceback" not in proc.stderr

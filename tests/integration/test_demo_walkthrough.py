@@ -70,7 +70,11 @@ class Watch:
         return [payload for t, payload in self.lines if t == topic]
 
     def events(self, occurrence: int | None = None) -> list[dict[str, Any]]:
-        return [e for e in self.on("cnc/laser-sim/alarms/events") if occurrence is None or e["occurrence"] == occurrence]
+        return [
+            e
+            for e in self.on("cnc/laser-sim/alarms/events")
+            if occurrence is None or e["occurrence"] == occurrence
+        ]
 
 
 def broker_args(argv: list[str], port: int) -> list[str]:
@@ -91,15 +95,32 @@ def broker(tmp_path: Path) -> Iterator[Mosquitto]:
 async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[str]:
     """`cnc-gateway demo` on free ports, publishing to the test broker; yields its OPC UA endpoint."""
     gw_port = free_port()
-    ports = {flag: free_port() for flag in ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port")}
+    ports = {
+        flag: free_port()
+        for flag in ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port")
+    }
     env = {k: v for k, v in os.environ.items() if k != "CNC_DEMO_PASSWORD"}  # the README's passwords
     log = tmp_path / "demo.log"
     with log.open("w") as out:  # a file, not a pipe: nobody reads the demo's log while it runs
         proc = subprocess.Popen(
-            [str(BIN / "cnc-gateway"), "demo", "--opcua-port", str(gw_port), "--mqtt-port", str(broker.port),
-             "--speed", "4", "--state-dir", str(tmp_path / "state"),
-             *(str(a) for pair in ports.items() for a in pair)],
-            cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
+            [
+                str(BIN / "cnc-gateway"),
+                "demo",
+                "--opcua-port",
+                str(gw_port),
+                "--mqtt-port",
+                str(broker.port),
+                "--speed",
+                "4",
+                "--state-dir",
+                str(tmp_path / "state"),
+                *(str(a) for pair in ports.items() for a in pair),
+            ],
+            cwd=ROOT,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
         )
     try:
         yield f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"
@@ -144,17 +165,25 @@ async def test_the_readme_alarm_walkthrough_works_every_time_with_the_driver_run
         await wait_until(_connects(client), timeout=30, interval=0.2, message="the demo's OPC UA server")
         alarms = Alarms()
         subscription = await client.create_subscription(20, alarms)
-        await subscription.subscribe_alarms_and_conditions(ua.NodeId(ua.ObjectIds.Server), ua.ObjectIds.AlarmConditionType)
+        await subscription.subscribe_alarms_and_conditions(
+            ua.NodeId(ua.ObjectIds.Server), ua.ObjectIds.AlarmConditionType
+        )
 
         async def demo_running() -> bool:
-            return await read(client, "Program/Name") == "demo.nc" and await read(client, "Machine/State") == 1
+            return (
+                await read(client, "Program/Name") == "demo.nc" and await read(client, "Machine/State") == 1
+            )
 
         await wait_until(demo_running, timeout=30, interval=0.1, message="the driver to run demo.nc")
         for round_ in range(ROUNDS):
             await follow(steps, watch, client, alarms, broker.port, round_)
             # The walkthrough's program has ended: the driver takes the machine back.
-            await wait_until(demo_running, timeout=15, interval=0.1,
-                             message=f"round {round_}: the driver to start demo.nc again")
+            await wait_until(
+                demo_running,
+                timeout=15,
+                interval=0.1,
+                message=f"round {round_}: the driver to start demo.nc again",
+            )
     finally:
         await client.disconnect()
         watch_proc.terminate()
@@ -174,7 +203,9 @@ def _connects(client: Client) -> Any:
     return attempt
 
 
-async def follow(steps: list[str], watch: Watch, client: Client, alarms: Alarms, port: int, round_: int) -> None:
+async def follow(
+    steps: list[str], watch: Watch, client: Client, alarms: Alarms, port: int, round_: int
+) -> None:
     """One pass through the README's block: every command answered ok, the alarm raised, acknowledged, cleared."""
     occurrence: int | None = None
     comment: list[str] = []
@@ -199,36 +230,52 @@ async def follow(steps: list[str], watch: Watch, client: Client, alarms: Alarms,
             subprocess.run, broker_args(argv, port), capture_output=True, text=True, timeout=30, check=False
         )
         assert done.returncode == 0, done.stderr
-        result = await wait_until(lambda: watch.on(f"{topic}/result")[answered:], timeout=15,
-                                  message=f"round {round_}: the answer to {command}")
+        result = await wait_until(
+            lambda: watch.on(f"{topic}/result")[answered:],
+            timeout=15,
+            message=f"round {round_}: the answer to {command}",
+        )
         assert result[0]["ok"] is True, f"round {round_}: {command}: {result[0]}"
         if command == "start":
             occurrence = await raised(watch, known, round_)
         elif command == "reset":
             assert occurrence is not None
             cleared = await wait_until(
-                lambda: [e for e in watch.events(occurrence) if e["event"] == "cleared"], timeout=10,
+                lambda: [e for e in watch.events(occurrence) if e["event"] == "cleared"],
+                timeout=10,
                 message=f"round {round_}: the alarm cleared by the reset",
             )
             assert cleared[0]["acked"] is True and cleared[0]["active"] is False
-            await wait_until(lambda: watch.on("cnc/laser-sim/alarms/active")[-1:] == [[]], timeout=10,
-                             message=f"round {round_}: an empty alarms/active")
+            await wait_until(
+                lambda: watch.on("cnc/laser-sim/alarms/active")[-1:] == [[]],
+                timeout=10,
+                message=f"round {round_}: an empty alarms/active",
+            )
     assert occurrence is not None and [e["event"] for e in watch.events(occurrence)] == [
-        "raised", "acknowledged", "cleared"
+        "raised",
+        "acknowledged",
+        "cleared",
     ], f"round {round_}: the alarm's events"
 
 
 async def raised(watch: Watch, known: set[int], round_: int) -> int:
     """The soft-limit alarm this round's start raised (a new occurrence), active and listed."""
     event = await wait_until(
-        lambda: next((e for e in watch.events() if e["event"] == "raised" and e["occurrence"] not in known), None),
-        timeout=30, message=f"round {round_}: the soft-limit alarm",
+        lambda: next(
+            (e for e in watch.events() if e["event"] == "raised" and e["occurrence"] not in known), None
+        ),
+        timeout=30,
+        message=f"round {round_}: the soft-limit alarm",
     )
     assert (event["id"], event["text"], event["active"]) == ("1001", SOFT_LIMIT, True)
     occurrence = int(event["occurrence"])
     await wait_until(
-        lambda: any(a["occurrence"] == occurrence and a["active"] for a in (watch.on("cnc/laser-sim/alarms/active") or [[]])[-1]),
-        timeout=10, message=f"round {round_}: the alarm in alarms/active",
+        lambda: any(
+            a["occurrence"] == occurrence and a["active"]
+            for a in (watch.on("cnc/laser-sim/alarms/active") or [[]])[-1]
+        ),
+        timeout=10,
+        message=f"round {round_}: the alarm in alarms/active",
     )
     return occurrence
 
@@ -236,19 +283,24 @@ async def raised(watch: Watch, known: set[int], round_: int) -> int:
 async def acknowledge(client: Client, alarms: Alarms, occurrence: int, watch: Watch, round_: int) -> None:
     """What the walkthrough asks of the OPC UA client: acknowledge the active alarm, as operator."""
     event = await wait_until(
-        lambda: next((e for e in alarms.received if e.NodeId == ua.NodeId(f"laser-sim/Alarms/{occurrence}", 2)), None),
-        timeout=10, message=f"round {round_}: the alarm's OPC UA event",
+        lambda: next(
+            (e for e in alarms.received if e.NodeId == ua.NodeId(f"laser-sim/Alarms/{occurrence}", 2)), None
+        ),
+        timeout=10,
+        message=f"round {round_}: the alarm's OPC UA event",
     )
     assert event.ConditionName == "1001" and getattr(event, "ActiveState/Id") is True
     assert not [e for e in watch.events(occurrence) if e["event"] == "cleared"], (
         f"round {round_}: the alarm was cleared before anyone acknowledged it"
     )
     await client.get_node(event.NodeId).call_method(
-        ACK, ua.Variant(event.EventId, ua.VariantType.ByteString),
+        ACK,
+        ua.Variant(event.EventId, ua.VariantType.ByteString),
         ua.Variant(ua.LocalizedText("walkthrough"), ua.VariantType.LocalizedText),
     )
     acked = await wait_until(
-        lambda: [e for e in watch.events(occurrence) if e["event"] == "acknowledged"], timeout=10,
+        lambda: [e for e in watch.events(occurrence) if e["event"] == "acknowledged"],
+        timeout=10,
         message=f"round {round_}: the acknowledgement on MQTT",
     )
     assert acked[0]["user"] == "operator" and acked[0]["active"] is True

@@ -43,7 +43,9 @@ class Rig:
         return await self.node(path).read_data_value(raise_on_bad_status=False)
 
     async def start_simulator(self) -> None:
-        self.sim = Simulator(opcua_port=self.sim_ports[0], ftp_port=self.sim_ports[1], speed=20.0, store=self.store)
+        self.sim = Simulator(
+            opcua_port=self.sim_ports[0], ftp_port=self.sim_ports[1], speed=20.0, store=self.store
+        )
         await self.sim.__aenter__()
 
     async def stop_simulator(self) -> None:
@@ -61,7 +63,12 @@ def gateway_config(tmp_path: Path, sim_port: int, gw_port: int, mapping_text: st
         mapping_file,
         environ={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}", "LASER_SIM_COPYDATA_PORT": "0"},
     )
-    driver = mapping.driver.model_copy(update={"watchdog_interval": 0.5, "reconnect": mapping.driver.reconnect.model_copy(update={"initial": 0.2, "max": 1.0})})
+    driver = mapping.driver.model_copy(
+        update={
+            "watchdog_interval": 0.5,
+            "reconnect": mapping.driver.reconnect.model_copy(update={"initial": 0.2, "max": 1.0}),
+        }
+    )
     mapping = mapping.model_copy(update={"driver": driver})
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"),
@@ -171,7 +178,9 @@ async def test_a_client_reads_back_what_it_just_wrote(rig: Rig) -> None:
         ("Status/Connected", ua.Variant(False, ua.VariantType.Boolean), "BadNotWritable"),
     ],
 )
-async def test_refused_writes_get_their_status_and_never_reach_the_controller(rig: Rig, path: str, variant: ua.Variant, code: str) -> None:
+async def test_refused_writes_get_their_status_and_never_reach_the_controller(
+    rig: Rig, path: str, variant: ua.Variant, code: str
+) -> None:
     await wait_until(lambda: good(rig, "Feed/Override"), timeout=10, message="override Good")
     assert rig.sim is not None
     before = rig.sim.machine.override
@@ -205,7 +214,9 @@ def with_extra_variable(entry: dict[str, str]) -> str:
     return yaml.safe_dump(data, sort_keys=False)
 
 
-MISSING_NODE = with_extra_variable({"path": "Extra/Missing", "source": "ns=2;s=::AsGlobalPV:gNoSuchThing", "type": "Double"})
+MISSING_NODE = with_extra_variable(
+    {"path": "Extra/Missing", "source": "ns=2;s=::AsGlobalPV:gNoSuchThing", "type": "Double"}
+)
 
 
 @pytest.mark.parametrize("rig", [MISSING_NODE], indirect=True)

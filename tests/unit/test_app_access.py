@@ -17,12 +17,11 @@ from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
 from gateway.errors import AccessDenied
-from gateway.model.reach import reach
 from gateway.model.context import WriteContext
-from gateway.model.tree import VariableTree
-from tests.trees import MappedTree
+from gateway.model.reach import reach
 from gateway.sinks.mqtt.routes import Routes
 from gateway.sinks.mqtt.writes import report_writers
+from tests.trees import MappedTree
 
 ROOT = Path(__file__).resolve().parents[2]
 MACHINE = "laser-sim"
@@ -39,7 +38,9 @@ class Store:
         self.written.append((node.path, raw))
 
 
-def tree_for(gateway: dict[str, Any] | None = None, mqtt: MachineMqtt | None = None) -> tuple[MappedTree, Store]:
+def tree_for(
+    gateway: dict[str, Any] | None = None, mqtt: MachineMqtt | None = None
+) -> tuple[MappedTree, Store]:
     mapping = load_mapping(ROOT / "mappings" / "laser-sim.yaml", environ={})
     mapping = mapping.model_copy(update={"mqtt": mqtt, "jobs": None})
     config = Config(GatewayConfig.model_validate(gateway or {}), (mapping,), ROOT)
@@ -97,13 +98,18 @@ def test_reach_lists_what_a_role_may_change() -> None:
     assert "Machine/Mode" not in operator.writes and "Status/Connected" not in operator.writes
     assert "Commands.start" in operator.calls and operator.acknowledge
     text = operator.describe()
-    assert text.startswith("laser-sim: write Feed/Override, Control/Start, ") and "; call Commands.start, " in text
+    assert (
+        text.startswith("laser-sim: write Feed/Override, Control/Start, ")
+        and "; call Commands.start, " in text
+    )
     assert text.endswith("; acknowledge alarms")
     engineer = reach(tree.machines[MACHINE], "engineer", variables=[], objects=(), alarms=False)
     assert not engineer and engineer.what() == "change nothing"
 
 
-def test_mqtt_says_at_start_up_what_its_requests_may_change_and_as_whom(caplog: pytest.LogCaptureFixture) -> None:
+def test_mqtt_says_at_start_up_what_its_requests_may_change_and_as_whom(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     caplog.set_level(logging.INFO, logger="gateway")
     tree, _ = tree_for(mqtt=MachineMqtt(writable=True, commands=True))
     report_writers(tree, Routes(tree, MqttConfig(), tree.mappings), tree.mappings)

@@ -65,14 +65,18 @@ def test_pip_deprecations_and_other_warnings_are_flagged() -> None:
 def test_a_clean_install_with_this_machines_pip_notes_passes(tmp_path: Path) -> None:
     log = tmp_path / "install.log"
     log.write_text(CLEAN + MACHINE_PIP_CONFIG)
-    done = subprocess.run([sys.executable, str(SCRIPT), str(log)], capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), str(log)], capture_output=True, text=True, check=False
+    )
     assert done.returncode == 0, done.stderr
 
 
 def test_a_warning_fails_the_check_and_is_shown(tmp_path: Path) -> None:
     log = tmp_path / "install.log"
     log.write_text(CLEAN + SETUPTOOLS_WARNING)
-    done = subprocess.run([sys.executable, str(SCRIPT), str(log)], capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), str(log)], capture_output=True, text=True, check=False
+    )
     assert done.returncode == 1
     assert "BuildBackendWarning: Editable installation." in done.stderr
 
@@ -82,7 +86,6 @@ def test_the_editable_install_puts_the_project_root_on_the_path() -> None:
     import gateway
 
     assert Path(gateway.__file__).resolve().parent == ROOT / "gateway"
-    pth = [p for p in map(Path, sys.path) if p.is_dir()
-           for p in p.glob("__editable__.cnc_gateway-*.pth")]
+    pth = [p for p in map(Path, sys.path) if p.is_dir() for p in p.glob("__editable__.cnc_gateway-*.pth")]
     assert pth, "no editable install of cnc-gateway on sys.path"
     assert pth[0].read_text().split() == [str(ROOT)]

@@ -31,8 +31,12 @@ def test_copydata_transports_know_the_port_not_the_emitter(transport: str) -> No
     names = imported(f"gateway.sinks.copydata.{transport}")
     assert "gateway.sinks.copydata.port" in names
     assert not names & {"gateway.sinks.copydata.emitter", "gateway.sinks.copydata.sink"}
-    assert not {n for n in names if n.startswith("gateway.sinks.copydata.") and n.split(".")[3] in
-                {"tcp", "udp", "win32"} - {transport}}  # nor each other (socket wording: socket_errors.py)
+    assert not {
+        n
+        for n in names
+        if n.startswith("gateway.sinks.copydata.")
+        and n.split(".")[3] in {"tcp", "udp", "win32"} - {transport}
+    }  # nor each other (socket wording: socket_errors.py)
 
 
 def test_the_copydata_emitter_imports_no_transport() -> None:

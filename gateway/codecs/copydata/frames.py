@@ -26,7 +26,6 @@ from gateway.codecs.copydata.errors import (
 from gateway.codecs.copydata.frame import Frame, Item
 from gateway.codecs.copydata.layout import DWDATA_MULTI, DWDATA_SINGLE, DWDATA_VALUES, TCP_HEADER, Layout
 
-
 # --- encode ----------------------------------------------------------------------------------
 
 

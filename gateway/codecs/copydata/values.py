@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Sequence
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from gateway.codecs.copydata.errors import (
@@ -31,9 +31,9 @@ from gateway.codecs.copydata.errors import (
 from gateway.codecs.copydata.layout import Layout
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 
-FILETIME_EPOCH = datetime(1601, 1, 1, tzinfo=timezone.utc)
+FILETIME_EPOCH = datetime(1601, 1, 1, tzinfo=UTC)
 _MAX_TICKS = (
-    (datetime.max.replace(tzinfo=timezone.utc) - FILETIME_EPOCH) // timedelta(microseconds=1)
+    (datetime.max.replace(tzinfo=UTC) - FILETIME_EPOCH) // timedelta(microseconds=1)
 ) * 10 + 9
 
 # struct format letter of every fixed-width type; DateTime is its FILETIME.
@@ -106,7 +106,7 @@ def _as_bool(base: DataType, value: Any) -> int:
 def filetime_ticks(value: datetime) -> int:
     """100 ns ticks since 1601-01-01 UTC; naive datetimes are taken as UTC, like the tree does."""
     if value.tzinfo is None:
-        value = value.replace(tzinfo=timezone.utc)
+        value = value.replace(tzinfo=UTC)
     delta = value - FILETIME_EPOCH
     ticks = (delta.days * 86_400 + delta.seconds) * 10_000_000 + delta.microseconds * 10
     if ticks < 0:
@@ -125,7 +125,7 @@ _CANONICAL: dict[DataType, Callable[[DataType, Any], Any]] = {
     DataType.FLOAT: _as_float,
     DataType.DOUBLE: _as_float,
     DataType.DATETIME: _as_ticks,
-    **{t: _as_int for t in INT_BOUNDS},
+    **dict.fromkeys(INT_BOUNDS, _as_int),
 }
 
 

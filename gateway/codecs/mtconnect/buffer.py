@@ -364,7 +364,7 @@ class ObservationBuffer:
         if qualifier is not None and qualifier not in ("HIGH", "LOW"):
             raise ValueRejected(f"condition qualifier must be HIGH or LOW, not {qualifier!r}")
         if element in ("Warning", "Fault") and condition_id is None:
-            condition_id = native_code if native_code else item_id
+            condition_id = native_code or item_id
         if element == "Unavailable":
             native_code = native_severity = qualifier = condition_id = None
             text = ""

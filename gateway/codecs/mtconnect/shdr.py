@@ -284,7 +284,7 @@ def _split_key(key: str) -> tuple[str | None, str]:
 
 
 def _opt(text: str) -> str | None:
-    return text if text else None
+    return text or None
 
 
 @dataclass(slots=True)

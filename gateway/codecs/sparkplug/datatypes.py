@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Iterable
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from enum import IntEnum
 from typing import NoReturn
 
@@ -40,7 +40,7 @@ from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 Scalar = bool | int | float | str | datetime
 Value = Scalar | list[Scalar]
 
-EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 _MS = timedelta(milliseconds=1)
 
 
@@ -133,7 +133,7 @@ _SIGNED_BITS: dict[SparkplugType, int] = {T.Int8: 32, T.Int16: 32, T.Int32: 32, 
 
 # The oneof field each scalar type travels in.
 _FIELD: dict[SparkplugType, str] = {
-    **{t: "int_value" for t in _INT32_TYPES},
+    **dict.fromkeys(_INT32_TYPES, "int_value"),
     T.Int64: "long_value",
     T.UInt64: "long_value",
     T.DateTime: "long_value",
@@ -309,7 +309,7 @@ def to_millis(value: object) -> int:
     if not isinstance(value, datetime):
         raise Unencodable(f"a DateTime needs a datetime, got {_kind(value)}")
     if value.tzinfo is None:
-        value = value.replace(tzinfo=timezone.utc)
+        value = value.replace(tzinfo=UTC)
     return (value - EPOCH) // _MS
 
 

@@ -34,7 +34,9 @@ class AutoStarter:
         self.machine = machine
         self.auto = auto
         self.folder = folder.rstrip("/")
-        self.waiting: Job | None = None  # the job waiting to be started (the demo's driver keeps out of the way)
+        self.waiting: Job | None = (
+            None  # the job waiting to be started (the demo's driver keeps out of the way)
+        )
 
     @property
     def busy(self) -> bool:
@@ -82,8 +84,12 @@ class AutoStarter:
                 except RequestError as exc:
                     if attempt == SELECT_TRIES:
                         return f"not started: {exc.reason} ({exc.status})"
-                    log.info("%s: auto-start of %s refused (%s); waiting for the machine again", self.machine.name,
-                             job.id, exc.reason)
+                    log.info(
+                        "%s: auto-start of %s refused (%s); waiting for the machine again",
+                        self.machine.name,
+                        job.id,
+                        exc.reason,
+                    )
                     await asyncio.sleep(POLL)
                     continue
                 break
@@ -93,7 +99,9 @@ class AutoStarter:
                 return f"selected and started {name}"
             if await self._until(lambda: not self.ready(), auto.confirm_timeout):
                 return f"started {name}"
-            return f"start of {name} sent, but {self._ready_text()} still holds after {auto.confirm_timeout:g} s"
+            return (
+                f"start of {name} sent, but {self._ready_text()} still holds after {auto.confirm_timeout:g} s"
+            )
         finally:
             self.waiting = None
 
@@ -104,7 +112,7 @@ class AutoStarter:
 
 def _same(value: Any, wanted: Any) -> bool:
     if isinstance(wanted, bool) or isinstance(value, bool):
-        return value is wanted or value == wanted and type(value) is type(wanted)
+        return value is wanted or (value == wanted and type(value) is type(wanted))
     if isinstance(wanted, (int, float)) and isinstance(value, (int, float)):
         return float(value) == float(wanted)
     return bool(value == wanted)

@@ -149,10 +149,14 @@ class DeliveryWorker:
             return
         delay = self.config.retry.delay(attempts)
         await self._q(
-            self.queue.send_failed, job.seq, f"attempt {attempts} of {limit} failed: {reason}; next in {delay:g} s",
+            self.queue.send_failed,
+            job.seq,
+            f"attempt {attempts} of {limit} failed: {reason}; next in {delay:g} s",
             retry_at=time.time() + delay,
         )
-        log.info("%s: %s attempt %d failed (%s); retrying in %g s", self.machine, job.id, attempts, reason, delay)
+        log.info(
+            "%s: %s attempt %d failed (%s); retrying in %g s", self.machine, job.id, attempts, reason, delay
+        )
 
     # --- after a crash ----------------------------------------------------------------------------
 
@@ -166,13 +170,22 @@ class DeliveryWorker:
                 if await self.transport.holds(program):
                     found = "found complete on the controller after a restart"
                     job = await self._q(self.queue.delivered, job.seq, program.name, found)
-                    log.info("%s: %s was delivered before the restart; not sending it again", self.machine, job.id)
+                    log.info(
+                        "%s: %s was delivered before the restart; not sending it again", self.machine, job.id
+                    )
                     self.spool.discard(job)
                     return
                 break
             except DeliveryError as exc:
                 delay = self.config.retry.delay(attempt)
-                log.warning("%s: cannot check %s on the controller (%s); again in %g s", self.machine, job.id,
-                            exc.reason, delay)
+                log.warning(
+                    "%s: cannot check %s on the controller (%s); again in %g s",
+                    self.machine,
+                    job.id,
+                    exc.reason,
+                    delay,
+                )
                 await asyncio.sleep(delay)
-        await self._q(self.queue.send_failed, job.seq, "interrupted by a restart; sending again", retry_at=time.time())
+        await self._q(
+            self.queue.send_failed, job.seq, "interrupted by a restart; sending again", retry_at=time.time()
+        )

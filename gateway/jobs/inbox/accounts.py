@@ -67,7 +67,9 @@ class Accounts:
                 if not password:
                     issues.append(
                         ConfigIssue(
-                            "<gateway file>", None, f"inbox.accounts[{index}].password_env",
+                            "<gateway file>",
+                            None,
+                            f"inbox.accounts[{index}].password_env",
                             f"environment variable {acc.password_env} (password of {acc.user!r}) is not set",
                         )
                     )

@@ -117,7 +117,6 @@ class BrowseCommands:
         del connection.data_connection
         return stream
 
-
     # --- folders ---------------------------------------------------------------------------------
 
     @login_required

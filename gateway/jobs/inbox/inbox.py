@@ -121,9 +121,11 @@ class Inbox:
         log.info("FTP inbox listening on %s (folders: %s)", self.url, ", ".join(self.machines))
         if self.config.anonymous:  # an explicit setting; say what it opens
             open_to = [m for m in self.machines if machines_allowed(self.config.anonymous_machines, m)]
-            log.warning("FTP inbox: anonymous logins (any password) may submit programs for %s: validated, "
-                        "queued, delivered, and started where the mapping has jobs.auto (inbox.anonymous)",
-                        ", ".join(open_to) or "no machine")
+            log.warning(
+                "FTP inbox: anonymous logins (any password) may submit programs for %s: validated, "
+                "queued, delivered, and started where the mapping has jobs.auto (inbox.anonymous)",
+                ", ".join(open_to) or "no machine",
+            )
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:

@@ -34,7 +34,9 @@ from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.browse import BrowseCommands, Session, login_required, refusals, session_of
 from gateway.jobs.inbox.paths import InboxPath, resolve
 
-if TYPE_CHECKING:  # only named here; the job service makes them (and the simulator need not import validation)
+if (
+    TYPE_CHECKING
+):  # only named here; the job service makes them (and the simulator need not import validation)
     from gateway.jobs.validation.upload_check import UploadCheck
 
 log = logging.getLogger("gateway.jobs.inbox")
@@ -104,10 +106,14 @@ class _Users(AbstractUserManager):
         super().__init__()
         self.shared = aioftp.User(login="inbox", base_path=root, home_path="/")
 
-    async def get_user(self, login: str) -> tuple[AbstractUserManager.GetUserResponse, aioftp.User | None, str]:
+    async def get_user(
+        self, login: str
+    ) -> tuple[AbstractUserManager.GetUserResponse, aioftp.User | None, str]:
         return AbstractUserManager.GetUserResponse.PASSWORD_REQUIRED, self.shared, "password required"
 
-    async def authenticate(self, user: aioftp.User, password: str) -> bool:  # pragma: no cover - pass_ is ours
+    async def authenticate(
+        self, user: aioftp.User, password: str
+    ) -> bool:  # pragma: no cover - pass_ is ours
         return False
 
 
@@ -167,7 +173,9 @@ class InboxServer(BrowseCommands, aioftp.Server):
         connection.session = Session(f"{connection.client_host}:{connection.client_port}")
         return await super().greeting(connection, rest)
 
-    async def parse_command(self, stream: aioftp.StreamIO, censor_commands: tuple[str] = ("pass",)) -> tuple[str, str]:
+    async def parse_command(
+        self, stream: aioftp.StreamIO, censor_commands: tuple[str] = ("pass",)
+    ) -> tuple[str, str]:
         """Read one command. Idle sessions (no command, no transfer) end; a vanished client ends quietly."""
         connection = self.connections.get(stream)
         idle = self.config.idle_timeout
@@ -364,8 +372,14 @@ class InboxServer(BrowseCommands, aioftp.Server):
         return await self.stor(connection, rest, "ab")
 
     async def _receive(
-        self, connection: Connection, session: Session, place: InboxPath, target: Path, temporary: bool,
-        mode: str, offset: int,
+        self,
+        connection: Connection,
+        session: Session,
+        place: InboxPath,
+        target: Path,
+        temporary: bool,
+        mode: str,
+        offset: int,
     ) -> bool:
         """The data side of STOR/APPE; answers the client itself and never raises."""
         handed_over = False
@@ -375,12 +389,18 @@ class InboxServer(BrowseCommands, aioftp.Server):
             if stream is None:
                 return True
             self._waiting.pop(target, None)  # a new upload, an append or a resume: an earlier check is void
-            check = self.check_upload(place.machine) if self.check_upload and not offset and mode == "wb" else None
+            check = (
+                self.check_upload(place.machine)
+                if self.check_upload and not offset and mode == "wb"
+                else None
+            )
             size, digest = await self._copy(stream, place, target, mode, offset, check)
             if temporary:
                 if check is not None:
                     self._wait(target, _Checked(place.machine, size, digest, _stamp(target), check))
-                connection.response("226", f"stored {place.virtual}; rename it into /{place.machine}/ to submit it")
+                connection.response(
+                    "226", f"stored {place.virtual}; rename it into /{place.machine}/ to submit it"
+                )
                 return True
             # A client killed mid-transfer closes both connections; wait to see the control one survive.
             await asyncio.sleep(COMMIT_GRACE)
@@ -393,13 +413,19 @@ class InboxServer(BrowseCommands, aioftp.Server):
             return True
         except asyncio.CancelledError:
             if not handed_over:
-                log.info("inbox: upload of %s from %s did not complete; discarded", place.virtual, session.client)
+                log.info(
+                    "inbox: upload of %s from %s did not complete; discarded", place.virtual, session.client
+                )
                 connection.response("426", "transfer aborted; nothing was kept")
                 connection.response("226", "abort done")
             return True
         except (ConnectionError, TimeoutError, asyncio.IncompleteReadError) as exc:
-            log.info("inbox: upload of %s from %s failed (%s); discarded", place.virtual, session.client,
-                     type(exc).__name__)
+            log.info(
+                "inbox: upload of %s from %s failed (%s); discarded",
+                place.virtual,
+                session.client,
+                type(exc).__name__,
+            )
             connection.response("426", "the data connection failed; nothing was kept")
             return True
         except OSError as exc:
@@ -419,7 +445,12 @@ class InboxServer(BrowseCommands, aioftp.Server):
             self._waiting.popitem(last=False)
 
     async def _copy(
-        self, stream: aioftp.StreamIO, place: InboxPath, target: Path, mode: str, offset: int,
+        self,
+        stream: aioftp.StreamIO,
+        place: InboxPath,
+        target: Path,
+        mode: str,
+        offset: int,
         check: UploadCheck | None = None,
     ) -> tuple[int, str]:
         """Data connection to file, within the size limit, fed to `check` too; (size, SHA-256) of what arrived."""
@@ -444,7 +475,12 @@ class InboxServer(BrowseCommands, aioftp.Server):
         return size, digest.hexdigest()
 
     async def _commit(
-        self, connection: Connection, place: InboxPath, staged: Path, size: int, digest: str,
+        self,
+        connection: Connection,
+        place: InboxPath,
+        staged: Path,
+        size: int,
+        digest: str,
         check: UploadCheck | None = None,
     ) -> UploadReply:
         session = session_of(connection)

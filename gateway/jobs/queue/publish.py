@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 from collections import OrderedDict
 from collections.abc import Iterable, Mapping
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 from gateway.config.jobs import JobsConfig
@@ -31,7 +31,7 @@ from gateway.jobs.queue.store import Job, JobState, Transition
 from gateway.model.events import Event
 from gateway.model.tree import Machine, VariableNode, VariableTree
 
-NEVER = datetime(1601, 1, 1, tzinfo=timezone.utc)
+NEVER = datetime(1601, 1, 1, tzinfo=UTC)
 PROGRESS_EVERY = 0.5  # s between progress events of one job
 
 
@@ -46,17 +46,30 @@ class JobVariables:
         self.machine = machine
         add = machine.add_internal
         self.queue_length = add("Jobs/QueueLength", "UInt32", "Jobs waiting for delivery or being sent", 0)
-        self.current = add("Jobs/Current", "String", "The job being sent to the controller: id and file name", "")
+        self.current = add(
+            "Jobs/Current", "String", "The job being sent to the controller: id and file name", ""
+        )
         self.progress = add("Jobs/Progress", "Double", "Share of the current job sent, in percent", 0.0)
-        self.last_delivered = add("Jobs/LastDelivered", "String", "The last job delivered: id and file name", "")
-        self.last_delivered_at = add("Jobs/LastDeliveredAt", "DateTime", "When the last job was delivered", NEVER)
-        self.last_failed = add("Jobs/LastFailed", "String", "The last job that failed (dead letter): id and file name", "")
+        self.last_delivered = add(
+            "Jobs/LastDelivered", "String", "The last job delivered: id and file name", ""
+        )
+        self.last_delivered_at = add(
+            "Jobs/LastDeliveredAt", "DateTime", "When the last job was delivered", NEVER
+        )
+        self.last_failed = add(
+            "Jobs/LastFailed", "String", "The last job that failed (dead letter): id and file name", ""
+        )
         self.last_failed_reason = add("Jobs/LastFailedReason", "String", "Why the last failed job failed", "")
-        self.last_rejected = add("Jobs/LastRejected", "String", "The last job refused by validation: id and file name", "")
+        self.last_rejected = add(
+            "Jobs/LastRejected", "String", "The last job refused by validation: id and file name", ""
+        )
         self.last_rejected_reason = add("Jobs/LastRejectedReason", "String", "Why it was refused", "")
         self.failed_count = add("Jobs/FailedCount", "UInt32", "FAILED jobs waiting for a retry or cancel", 0)
         self.estimate = add(
-            "Jobs/LastEstimatedSeconds", "Double", "Estimated run time of the last job delivered, in seconds", 0.0
+            "Jobs/LastEstimatedSeconds",
+            "Double",
+            "Estimated run time of the last job delivered, in seconds",
+            0.0,
         )
 
     def set(self, node: VariableNode, value: Any) -> None:
@@ -72,8 +85,17 @@ class JobPublisher:
         self.keep = {name: jobs.mqtt_retained_jobs for name, jobs in machines.items()}
         self._ended: dict[str, OrderedDict[int, str]] = {name: OrderedDict() for name in self.vars}
 
-    def summary(self, machine: str, *, waiting: int, failed: int, current: Job | None,
-                delivered: Job | None, failed_job: Job | None, rejected: Job | None) -> None:
+    def summary(
+        self,
+        machine: str,
+        *,
+        waiting: int,
+        failed: int,
+        current: Job | None,
+        delivered: Job | None,
+        failed_job: Job | None,
+        rejected: Job | None,
+    ) -> None:
         """The machine's variables from the queue's point of view."""
         v = self.vars[machine]
         v.set(v.queue_length, waiting)

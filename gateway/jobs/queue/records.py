@@ -1,14 +1,14 @@
 """Jobs as the queue stores them: the states, the transitions allowed between them, the records. Pure.
 
-    RECEIVED -> VALIDATED -> QUEUED -> SENDING -> DELIVERED
-         \\-> REJECTED    \\-> REJECTED  \\-> CANCELLED  \\-> QUEUED (retry later) | FAILED
-    FAILED / CANCELLED -> QUEUED (retry from the CLI)
+RECEIVED -> VALIDATED -> QUEUED -> SENDING -> DELIVERED
+     \\-> REJECTED    \\-> REJECTED  \\-> CANCELLED  \\-> QUEUED (retry later) | FAILED
+FAILED / CANCELLED -> QUEUED (retry from the CLI)
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from enum import Enum
 from typing import Any
 
@@ -57,7 +57,7 @@ def parse_job_id(text: str) -> int:
 
 
 def iso_utc(clock: float) -> str:
-    return datetime.fromtimestamp(clock, timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.fromtimestamp(clock, UTC).isoformat(timespec="milliseconds")
 
 
 def parse_ts(text: str | None) -> datetime | None:

@@ -150,7 +150,9 @@ class JobQueue(SqliteFile):
     ) -> Job:
         """Compare-and-set one job's state, with its transition row and a new revision."""
         job = self._get(db, seq)
-        allowed_from = expect if expect is not None else [s for s, targets in ALLOWED.items() if to in targets]
+        allowed_from = (
+            expect if expect is not None else [s for s, targets in ALLOWED.items() if to in targets]
+        )
         if job.state not in allowed_from or to not in ALLOWED[job.state]:
             raise JobError(f"{job.id} is {job.state}, so it cannot become {to}")
         now = self.clock()
@@ -240,7 +242,9 @@ class JobQueue(SqliteFile):
                 reason = f"duplicate of {first.id} ({first.filename}), which is {first.state.value.lower()}"
                 return self._move(db, seq, S.REJECTED, reason, expect=(S.VALIDATED,)), []
             for old in earlier:
-                replaced.append(self._move(db, old.seq, S.CANCELLED, f"replaced by {job.id}", expect=(S.QUEUED,)))
+                replaced.append(
+                    self._move(db, old.seq, S.CANCELLED, f"replaced by {job.id}", expect=(S.QUEUED,))
+                )
             return self._move(db, seq, S.QUEUED, "", expect=(S.VALIDATED,), next_attempt_at=None), replaced
 
     def head(self, machine: str) -> Job | None:
@@ -262,8 +266,14 @@ class JobQueue(SqliteFile):
     def delivered(self, seq: int, name: str, reason: str = "") -> Job:
         with self._write() as db:
             return self._move(
-                db, seq, S.DELIVERED, reason, expect=(S.SENDING,), delivered_name=name,
-                delivered_at=iso_utc(self.clock()), next_attempt_at=None,
+                db,
+                seq,
+                S.DELIVERED,
+                reason,
+                expect=(S.SENDING,),
+                delivered_name=name,
+                delivered_at=iso_utc(self.clock()),
+                next_attempt_at=None,
             )
 
     def send_failed(self, seq: int, reason: str, *, retry_at: float | None) -> Job:
@@ -292,13 +302,17 @@ class JobQueue(SqliteFile):
             if job.state not in (S.FAILED, S.CANCELLED):
                 raise JobError(f"{job.id} is {job.state}; only FAILED or CANCELLED jobs can be retried")
             reason = f"retry requested{' by ' + by if by else ''}"
-            return self._move(db, seq, S.QUEUED, reason, expect=(S.FAILED, S.CANCELLED), attempts=0, next_attempt_at=None)
+            return self._move(
+                db, seq, S.QUEUED, reason, expect=(S.FAILED, S.CANCELLED), attempts=0, next_attempt_at=None
+            )
 
     def cancel(self, seq: int, by: str = "") -> Job:
         with self._write() as db:
             job = self._get(db, seq)
             if job.state is S.SENDING:
-                raise JobError(f"{job.id} is being sent right now; delete the program on the controller afterwards")
+                raise JobError(
+                    f"{job.id} is being sent right now; delete the program on the controller afterwards"
+                )
             if job.state in TERMINAL:
                 raise JobError(f"{job.id} is already {job.state}")
             reason = f"cancelled{' by ' + by if by else ''}"
@@ -321,7 +335,12 @@ class JobQueue(SqliteFile):
 
     # Below this method, `list` in annotations would name it: they say builtins.list.
     def list(
-        self, *, machine: str | None = None, states: Sequence[JobState] = (), limit: int = 50, newest_first: bool = True
+        self,
+        *,
+        machine: str | None = None,
+        states: Sequence[JobState] = (),
+        limit: int = 50,
+        newest_first: bool = True,
     ) -> builtins.list[Job]:
         where, args = self._filter(machine, states)
         order = "DESC" if newest_first else "ASC"

@@ -103,7 +103,12 @@ class ProgramCheck:
     @property
     def changed(self) -> bool:
         """Whether the program to deliver differs from the bytes fed (XON/XOFF bytes stripped)."""
-        return self.scanner.stripped > 0 and self._scan and self.nuls.first is None and self.size <= self.rules.max_size
+        return (
+            self.scanner.stripped > 0
+            and self._scan
+            and self.nuls.first is None
+            and self.size <= self.rules.max_size
+        )
 
     def feed(self, data: bytes) -> None:
         if not data:
@@ -163,7 +168,9 @@ class ProgramCheck:
         _markers(parsed, rules, rejections, warnings)
         if not reading.any_words:
             rejections.append(
-                Rejection("empty", "the program has no blocks with codes, only comments, markers or blank lines")
+                Rejection(
+                    "empty", "the program has no blocks with codes, only comments, markers or blank lines"
+                )
             )
         else:
             _end_code(reading, rules, rejections)

@@ -260,4 +260,3 @@ class Emitter:
             frames = self.snapshot()
             for channel in self.channels:
                 channel.offer(frames)
-

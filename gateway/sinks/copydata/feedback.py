@@ -25,8 +25,8 @@ from typing import Any
 
 from gateway.codecs.copydata import CopydataError, Frame, Layout, VariableTable
 from gateway.errors import RequestError
-from gateway.model.events import Event
 from gateway.model.context import WriteContext
+from gateway.model.events import Event
 from gateway.model.reach import reach
 from gateway.model.tree import Machine, VariableNode
 from gateway.sinks.copydata.status import CopydataStatus
@@ -85,12 +85,19 @@ class Feedback:
         access = self.machine.tree.access
         role = access.role_of(WriteContext(ORIGIN))
         if access.enabled and role is None:
-            log.info("copydata %s: accept_writes is on, but its writes are refused: they have no role "
-                     "(the gateway file's access.copydata_role)", self.name)
+            log.info(
+                "copydata %s: accept_writes is on, but its writes are refused: they have no role "
+                "(the gateway file's access.copydata_role)",
+                self.name,
+            )
             return
         opened = reach(self.machine, role, variables=self.by_id.values(), objects=(), alarms=False)
-        log.info("copydata %s: replies act as %s and may %s", self.name,
-                 role or "no role (access.enabled is false)", opened.what())
+        log.info(
+            "copydata %s: replies act as %s and may %s",
+            self.name,
+            role or "no role (access.enabled is false)",
+            opened.what(),
+        )
 
     async def handle(self, frame: Frame, peer: str) -> dict[str, Any]:
         """Decode, (write,) publish; returns the published document."""

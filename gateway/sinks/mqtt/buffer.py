@@ -32,7 +32,7 @@ log = logging.getLogger(__name__)
 class Message:
     """One MQTT publication, with what store-and-forward needs to know about it."""
 
-    __slots__ = ("seq", "topic", "payload", "qos", "retain", "machine", "latest_only", "stored")
+    __slots__ = ("latest_only", "machine", "payload", "qos", "retain", "seq", "stored", "topic")
 
     def __init__(
         self,

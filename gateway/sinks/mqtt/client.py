@@ -186,7 +186,7 @@ class MqttClient:
     @property
     def queued_bytes_pending(self) -> int:
         """Packets paho holds that the socket has not taken yet (a slow or stuck broker)."""
-        return len(self._client._out_packet)  # noqa: SLF001 - read-only peek, no public API for it
+        return len(self._client._out_packet)
 
     # --- connecting --------------------------------------------------------------------------
 
@@ -268,7 +268,7 @@ class MqttClient:
             self._misc.cancel()
             self._misc = None
         if self._sock is not None:
-            self._client._sock_close()  # noqa: SLF001 - paho has no public "close now"
+            self._client._sock_close()
 
     # --- paho's socket hooks -----------------------------------------------------------------
 

@@ -37,8 +37,8 @@ from gateway.errors import (
     RequestError,
     TooManyArguments,
 )
-from gateway.model.methods import Method
 from gateway.model.context import WriteContext
+from gateway.model.methods import Method
 from gateway.model.tree import Machine, VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.payloads import plain
@@ -77,7 +77,7 @@ def command_target(topic: str, prefix: str) -> tuple[str, str] | None:
     head = prefix + "/"
     if not topic.startswith(head):
         return None
-    levels = topic[len(head):].split("/")
+    levels = topic[len(head) :].split("/")
     if len(levels) != 3 or levels[1] != COMMANDS or not levels[0] or not levels[2]:
         return None
     return levels[0], levels[2]
@@ -116,7 +116,9 @@ def arguments(method: Method, body: Mapping[str, Any]) -> list[Any]:
     unknown = sorted(k for k in body if k != CORRELATION and k not in names)
     if unknown:
         takes = ", ".join(names) if names else "no arguments"
-        raise TooManyArguments(f"{method.name} does not take {', '.join(map(repr, unknown))} (it takes {takes})")
+        raise TooManyArguments(
+            f"{method.name} does not take {', '.join(map(repr, unknown))} (it takes {takes})"
+        )
     missing = [n for n in names if n not in body]
     if missing:
         raise ArgumentsMissing(f"{method.name} needs {', '.join(missing)}")
@@ -146,11 +148,17 @@ def encode_reply(
 
 
 class _Request:
-    __slots__ = ("machine", "method", "args", "reply", "correlation", "data", "received")
+    __slots__ = ("args", "correlation", "data", "machine", "method", "received", "reply")
 
     def __init__(
-        self, machine: Machine, method: Method, args: list[Any], reply: str,
-        correlation: str | int | None, data: bytes | None, received: float,
+        self,
+        machine: Machine,
+        method: Method,
+        args: list[Any],
+        reply: str,
+        correlation: str | int | None,
+        data: bytes | None,
+        received: float,
     ) -> None:
         self.machine = machine
         self.method = method
@@ -252,8 +260,13 @@ class CommandRequests:
         return f"{topic}/{RESULT}"
 
     def _refuse(
-        self, name: str, reply: str, data: bytes | None, correlation: str | int | None,
-        exc: RequestError, started: float,
+        self,
+        name: str,
+        reply: str,
+        data: bytes | None,
+        correlation: str | int | None,
+        exc: RequestError,
+        started: float,
     ) -> None:
         self.refused += 1
         if self._quota.allow():
@@ -278,20 +291,26 @@ class CommandRequests:
     async def _run(self, req: _Request, slots: asyncio.Semaphore) -> None:
         name = req.method.name
         try:
-            outputs: Sequence[Any] = await req.machine.call_method(req.method, req.args, self._context(req.machine))
+            outputs: Sequence[Any] = await req.machine.call_method(
+                req.method, req.args, self._context(req.machine)
+            )
         except RequestError as exc:
             self._refuse(name, req.reply, req.data, req.correlation, exc, req.received)
             return
         except Exception as exc:  # a bug below must not end the commands of this machine
             log.exception("MQTT command %s/%s failed unexpectedly", req.machine.name, name)
-            self._refuse(name, req.reply, req.data, req.correlation, CallError(f"internal error: {exc}"),
-                         req.received)
+            self._refuse(
+                name, req.reply, req.data, req.correlation, CallError(f"internal error: {exc}"), req.received
+            )
             return
         finally:
             slots.release()
         result = str(outputs[0]) if outputs else ""
         log.info("MQTT command %s/%s: %s", req.machine.name, name, result)
         payload = encode_reply(
-            name, duration_ms=(time.monotonic() - req.received) * 1000, correlation=req.correlation, result=result
+            name,
+            duration_ms=(time.monotonic() - req.received) * 1000,
+            correlation=req.correlation,
+            result=result,
         )
         self.answer(req.reply, payload, req.data)

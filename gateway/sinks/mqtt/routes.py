@@ -29,7 +29,7 @@ STATUS_PREFIX = "Status/"
 class Route:
     """Where and how one variable is published."""
 
-    __slots__ = ("node", "topic", "qos", "retain", "raw", "suffix", "machine", "writable", "latest_only")
+    __slots__ = ("latest_only", "machine", "node", "qos", "raw", "retain", "suffix", "topic", "writable")
 
     def __init__(
         self, node: VariableNode, topic: str, qos: int, retain: bool, raw: bool, writable: bool

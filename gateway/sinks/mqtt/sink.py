@@ -41,11 +41,11 @@ from gateway.sinks.mqtt.client import (
     default_client_id,
     tls_context,
 )
+from gateway.sinks.mqtt.commands import CommandRequests
 from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
 from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
-from gateway.sinks.mqtt.commands import CommandRequests
 from gateway.sinks.mqtt.writes import WriteBack, report_writers
 
 log = logging.getLogger(__name__)
@@ -405,9 +405,17 @@ class MqttSink:
         """
         backlog = self.backlog
         assert backlog is not None
-        if self._online and not backlog and (
-            len(self._inflight) < self._window
-            or (qos == 0 and self._client is not None and self._client.queued_bytes_pending < PAHO_QUEUE_LIMIT)
+        if (
+            self._online
+            and not backlog
+            and (
+                len(self._inflight) < self._window
+                or (
+                    qos == 0
+                    and self._client is not None
+                    and self._client.queued_bytes_pending < PAHO_QUEUE_LIMIT
+                )
+            )
         ):
             self._publish_now(topic, payload, qos, retain, machine, latest)
             return

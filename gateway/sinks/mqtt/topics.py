@@ -105,7 +105,7 @@ def plan_topics(
     (for example `laser-sim/Axes/X/Position`); `reserved` are the gateway's own
     topics (status), which no variable may take.
     """
-    owners: dict[str, str] = {topic: "the gateway's status topic" for topic in reserved}
+    owners: dict[str, str] = dict.fromkeys(reserved, "the gateway's status topic")
     out: dict[object, str] = {}
     for key, topic, who in entries:
         if len(topic.encode("utf-8")) > MAX_TOPIC_BYTES:

@@ -56,12 +56,19 @@ def report_writers(tree: VariableTree, routes: Routes, mappings: Mapping[str, Ma
             continue
         role = access.mqtt_role(machine.name)
         if access.enabled and role is None:
-            log.info("MQTT: %s: writes and commands enabled in the mapping are refused: they have no role "
-                     "(mapping: mqtt.writer_role, or the gateway file's access.mqtt_writer_role)", machine.name)
+            log.info(
+                "MQTT: %s: writes and commands enabled in the mapping are refused: they have no role "
+                "(mapping: mqtt.writer_role, or the gateway file's access.mqtt_writer_role)",
+                machine.name,
+            )
             continue
         opened = reach(machine, role, variables=nodes, objects=objects, alarms=False)
-        log.info("MQTT: requests to %s act as %s and may %s", machine.name,
-                 role or "no role (access.enabled is false)", opened.what())
+        log.info(
+            "MQTT: requests to %s act as %s and may %s",
+            machine.name,
+            role or "no role (access.enabled is false)",
+            opened.what(),
+        )
 
 
 # (topic to answer on, payload, MQTT v5 correlation data)
@@ -97,7 +104,7 @@ class LogQuota:
 
 
 class _Request:
-    __slots__ = ("route", "value", "reply", "correlation")
+    __slots__ = ("correlation", "reply", "route", "value")
 
     def __init__(self, route: Route, value: object, reply: str, correlation: bytes | None) -> None:
         self.route = route

@@ -110,7 +110,9 @@ class AddressSpacePlan:
 
     def add_machine(self, machine: Machine) -> None:
         if MACHINES not in self._containers:
-            self._container(MACHINES, OBJECTS_FOLDER, True, MACHINES, "Machines served by this gateway", folder=True)
+            self._container(
+                MACHINES, OBJECTS_FOLDER, True, MACHINES, "Machines served by this gateway", folder=True
+            )
         if machine.name not in self._containers:
             description = machine.definition.description
             self._container(machine.name, self.machines_id, True, machine.name, description, folder=False)
@@ -144,7 +146,12 @@ class AddressSpacePlan:
                 internal_object = depth == 0 and node.internal
                 description = INTERNAL_OBJECTS.get(segment, "") if internal_object else ""
                 self._container(
-                    text, self.id(parent), parent in self._folders, segment, description, folder=not internal_object
+                    text,
+                    self.id(parent),
+                    parent in self._folders,
+                    segment,
+                    description,
+                    folder=not internal_object,
                 )
             parent = text
         nodeid = self.variable_id(node)
@@ -162,7 +169,14 @@ class AddressSpacePlan:
         return nodeid
 
     def _container(
-        self, text: str, parent: ua.NodeId, parent_is_folder: bool, name: str, description: str, *, folder: bool
+        self,
+        text: str,
+        parent: ua.NodeId,
+        parent_is_folder: bool,
+        name: str,
+        description: str,
+        *,
+        folder: bool,
     ) -> None:
         nodeid = self.id(text)
         attrs = ua.ObjectAttributes(

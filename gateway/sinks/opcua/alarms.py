@@ -39,8 +39,8 @@ from gateway.alarms.manager import AlarmManager, Check
 from gateway.alarms.records import AlarmChange, AlarmRecord
 from gateway.alarms.service import AlarmService
 from gateway.errors import CallError, RequestError
-from gateway.model.sample import utcnow
 from gateway.model.context import WriteContext
+from gateway.model.sample import utcnow
 from gateway.sinks.opcua.address_space import HAS_COMPONENT
 from gateway.sinks.opcua.conditions import (
     ACKNOWLEDGE,
@@ -136,13 +136,26 @@ class OpcUaAlarms:
         self._by_occurrence[record.occurrence] = nodeid
         return condition
 
-    def _event(self, condition: _Condition, record: AlarmRecord, time: datetime, retained: bool,
-               comment: str = "", user: str = "") -> Event:
+    def _event(
+        self,
+        condition: _Condition,
+        record: AlarmRecord,
+        time: datetime,
+        retained: bool,
+        comment: str = "",
+        user: str = "",
+    ) -> Event:
         event_id = new_event_id()
         condition.event_ids.append(event_id)
         event = condition_event(
-            record, condition.ids, event_id=event_id, time=time, retained=retained,
-            last_severity=condition.severity, comment=comment, user=user,
+            record,
+            condition.ids,
+            event_id=event_id,
+            time=time,
+            retained=retained,
+            last_severity=condition.severity,
+            comment=comment,
+            user=user,
         )
         condition.severity = record.severity
         return event
@@ -153,7 +166,9 @@ class OpcUaAlarms:
         async def listener(change: AlarmChange) -> None:
             async with self._lock:
                 condition = await self._condition(manager, change.record)
-                event = self._event(condition, change.record, change.ts, change.retained, change.comment, change.user)
+                event = self._event(
+                    condition, change.record, change.ts, change.retained, change.comment, change.user
+                )
                 condition.last = event
                 await self._send(event, condition.ids.source)
                 if not change.retained:
@@ -161,8 +176,9 @@ class OpcUaAlarms:
 
         return listener
 
-    async def _send(self, event: Event, machine_id: ua.NodeId, subscription: int | None = None,
-                    item: int | None = None) -> None:
+    async def _send(
+        self, event: Event, machine_id: ua.NodeId, subscription: int | None = None, item: int | None = None
+    ) -> None:
         for notifier in (SERVER, machine_id):
             await self.server.trigger_event(emitted_by(event, notifier), subscription, item)
 
@@ -203,10 +219,13 @@ class OpcUaAlarms:
             return ua.CallMethodResult(StatusCode=_status("BadTooManyArguments"))
         event_id, comment = inputs
         results = [
-            ua.StatusCode() if event_id.VariantType == ua.VariantType.ByteString and event_id.Value else
-            _status("BadTypeMismatch"),
-            ua.StatusCode() if comment.VariantType in (ua.VariantType.LocalizedText, ua.VariantType.String,
-                                                       ua.VariantType.Null) else _status("BadTypeMismatch"),
+            ua.StatusCode()
+            if event_id.VariantType == ua.VariantType.ByteString and event_id.Value
+            else _status("BadTypeMismatch"),
+            ua.StatusCode()
+            if comment.VariantType
+            in (ua.VariantType.LocalizedText, ua.VariantType.String, ua.VariantType.Null)
+            else _status("BadTypeMismatch"),
         ]
         if not all(r.is_good() for r in results):
             return ua.CallMethodResult(StatusCode=_status("BadTypeMismatch"), InputArgumentResults=results)
@@ -225,8 +244,13 @@ class OpcUaAlarms:
                 condition.manager, condition.occurrence, self.server.caller_context(), str(text or ""), check
             )
         except RequestError as exc:
-            log.info("OPC UA %s of alarm occurrence %d refused (%s): %s",
-                     getattr(action, "__name__", "call").strip("_"), condition.occurrence, exc.status, exc.reason)
+            log.info(
+                "OPC UA %s of alarm occurrence %d refused (%s): %s",
+                getattr(action, "__name__", "call").strip("_"),
+                condition.occurrence,
+                exc.status,
+                exc.reason,
+            )
             return ua.CallMethodResult(StatusCode=status_code(exc.status), InputArgumentResults=results)
         except Exception:
             log.exception("OPC UA alarm call on occurrence %d failed unexpectedly", condition.occurrence)
@@ -241,7 +265,9 @@ class OpcUaAlarms:
             return ua.CallMethodResult(StatusCode=_status("BadArgumentsMissing"))
         values = [v.Value for v in inputs]
         if any(not isinstance(v, int) or isinstance(v, bool) for v in values) or len(values) > 2:
-            return ua.CallMethodResult(StatusCode=_status("BadTypeMismatch" if len(values) <= 2 else "BadTooManyArguments"))
+            return ua.CallMethodResult(
+                StatusCode=_status("BadTypeMismatch" if len(values) <= 2 else "BadTooManyArguments")
+            )
         subscription = values[0]
         item = values[1] if len(values) == 2 else None
         if not self.server.has_subscription(subscription):

@@ -117,5 +117,16 @@ def _key(attribute: Any, dv: Any) -> tuple[Any, ...] | None:
         return None
     dims = tuple(variant.Dimensions) if variant.Dimensions is not None else None
     status = dv.StatusCode.value if dv.StatusCode is not None else None
-    return (attribute, type(value), value, variant.VariantType, dims, variant.is_array, status,
-            dv.SourceTimestamp, dv.ServerTimestamp, dv.SourcePicoseconds, dv.ServerPicoseconds)
+    return (
+        attribute,
+        type(value),
+        value,
+        variant.VariantType,
+        dims,
+        variant.is_array,
+        status,
+        dv.SourceTimestamp,
+        dv.ServerTimestamp,
+        dv.SourcePicoseconds,
+        dv.ServerPicoseconds,
+    )

@@ -115,11 +115,28 @@ def condition_event(
     e.LastSeverity = record.severity if last_severity is None else last_severity
     e.Comment = ua.LocalizedText(comment or record.confirm_comment or record.ack_comment)
     e.ClientUserId = user
-    _two_state(event, "ActiveState", record.active, "Active", "Inactive", record.cleared_at or record.raised_at)
-    setattr(e, "ActiveState/EffectiveDisplayName", ua.LocalizedText("Active" if record.active else "Inactive"))
-    _two_state(event, "AckedState", record.acked, "Acknowledged", "Unacknowledged", record.acked_at or record.raised_at)
-    _two_state(event, "ConfirmedState", record.confirmed, "Confirmed", "Unconfirmed",
-               record.confirmed_at or record.raised_at)
+    _two_state(
+        event, "ActiveState", record.active, "Active", "Inactive", record.cleared_at or record.raised_at
+    )
+    setattr(
+        e, "ActiveState/EffectiveDisplayName", ua.LocalizedText("Active" if record.active else "Inactive")
+    )
+    _two_state(
+        event,
+        "AckedState",
+        record.acked,
+        "Acknowledged",
+        "Unacknowledged",
+        record.acked_at or record.raised_at,
+    )
+    _two_state(
+        event,
+        "ConfirmedState",
+        record.confirmed,
+        "Confirmed",
+        "Unconfirmed",
+        record.confirmed_at or record.raised_at,
+    )
     e.SuppressedOrShelved = False
     e.InputNode = ua.NodeId()
     return event

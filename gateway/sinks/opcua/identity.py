@@ -106,7 +106,14 @@ def report_anonymous(
     if not open_:
         log.info("OPC UA: anonymous clients on %s act as %s: they read, and change nothing", where, role)
         return
-    why = ("access.enabled is false: no role is checked" if not policy.enabled
-           else f"access.anonymous gives them role {role!r}")
-    log.warning("OPC UA: anonymous clients, without user name or password, on %s may change machines "
-                "(%s): %s", where, why, " | ".join(r.describe() for r in open_))
+    why = (
+        "access.enabled is false: no role is checked"
+        if not policy.enabled
+        else f"access.anonymous gives them role {role!r}"
+    )
+    log.warning(
+        "OPC UA: anonymous clients, without user name or password, on %s may change machines (%s): %s",
+        where,
+        why,
+        " | ".join(r.describe() for r in open_),
+    )

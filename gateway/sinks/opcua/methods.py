@@ -26,8 +26,8 @@ from typing import Any
 from asyncua import ua
 
 from gateway.errors import CallError, RequestError
-from gateway.model.methods import Argument, Method
 from gateway.model.context import WriteContext
+from gateway.model.methods import Argument, Method
 from gateway.model.tree import Machine
 from gateway.sinks.opcua.address_space import HAS_COMPONENT, HAS_PROPERTY, PROPERTY_TYPE, AddressSpacePlan
 from gateway.sinks.opcua.values import (
@@ -121,7 +121,9 @@ def _status(name: str) -> ua.StatusCode:
     return ua.StatusCode(getattr(ua.StatusCodes, name))
 
 
-def check_inputs(method: Method, inputs: Sequence[ua.Variant]) -> tuple[list[Any] | None, ua.CallMethodResult | None]:
+def check_inputs(
+    method: Method, inputs: Sequence[ua.Variant]
+) -> tuple[list[Any] | None, ua.CallMethodResult | None]:
     """The call's input values as Python values, or the CallMethodResult that refuses them."""
     expected = method.inputs
     if len(inputs) < len(expected):
@@ -133,7 +135,11 @@ def check_inputs(method: Method, inputs: Sequence[ua.Variant]) -> tuple[list[Any
     for arg, variant in zip(expected, inputs):
         kind = value_kind(arg.type)
         is_array = bool(getattr(variant, "is_array", False)) or isinstance(variant.Value, (list, tuple))
-        if variant.VariantType != kind.vtype or is_array != arg.type.array or (variant.Value is None and not arg.type.array):
+        if (
+            variant.VariantType != kind.vtype
+            or is_array != arg.type.array
+            or (variant.Value is None and not arg.type.array)
+        ):
             results.append(_status("BadTypeMismatch"))
             values.append(None)
             continue
@@ -148,7 +154,9 @@ def check_inputs(method: Method, inputs: Sequence[ua.Variant]) -> tuple[list[Any
 def encode_outputs(method: Method, outputs: Sequence[Any]) -> list[ua.Variant]:
     """Raises ValueMismatch when a handler returns something its declared outputs cannot carry."""
     if len(outputs) != len(method.outputs):
-        raise ValueMismatch(f"{method.object}.{method.name} returned {len(outputs)} outputs, declares {len(method.outputs)}")
+        raise ValueMismatch(
+            f"{method.object}.{method.name} returned {len(outputs)} outputs, declares {len(method.outputs)}"
+        )
     return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs)]
 
 

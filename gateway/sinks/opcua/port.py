@@ -54,7 +54,9 @@ class ServerPort(Protocol):
         """Who is calling, inside a method callback."""
         ...
 
-    async def trigger_event(self, event: Event, subscription: int | None = None, item: int | None = None) -> None:
+    async def trigger_event(
+        self, event: Event, subscription: int | None = None, item: int | None = None
+    ) -> None:
         """Report an event to its notifier's subscribers: all, or one subscription (and one of its items)."""
         ...
 

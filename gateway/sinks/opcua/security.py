@@ -29,7 +29,7 @@ import os
 import re
 import socket
 from collections.abc import Iterable
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -113,12 +113,15 @@ def ensure_certificate(pki: Pki, application_uri: str, name: str, hosts: Iterabl
     if reason is None:
         return x509.load_der_x509_certificate(pki.cert.read_bytes())
     if pki.cert.exists() or pki.key.exists():
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         for path in (pki.cert, pki.key):
             if path.exists():
                 path.replace(path.with_name(f"{path.name}.{stamp}.old"))
-        log.warning("OPC UA server certificate %s: %s; generated a new one (clients must trust it again)",
-                    pki.cert, reason)
+        log.warning(
+            "OPC UA server certificate %s: %s; generated a new one (clients must trust it again)",
+            pki.cert,
+            reason,
+        )
     key = cert_gen.generate_private_key()
     names: list[x509.GeneralName] = [x509.UniformResourceIdentifier(application_uri)]
     for host in dict.fromkeys(h for h in hosts if h):
@@ -127,12 +130,21 @@ def ensure_certificate(pki: Pki, application_uri: str, name: str, hosts: Iterabl
         except ValueError:
             names.append(x509.DNSName(host))
     cert = cert_gen.generate_self_signed_app_certificate(
-        key, name, {}, names, [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=CERT_DAYS
+        key,
+        name,
+        {},
+        names,
+        [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+        days=CERT_DAYS,
     )
     _write_private(pki.key, cert_gen.dump_private_key_as_pem(key))
     pki.cert.write_bytes(cert.public_bytes(serialization.Encoding.DER))
-    log.info("OPC UA server certificate generated: %s (thumbprint %s, valid until %s)",
-             pki.cert, thumbprint(cert), cert.not_valid_after_utc.date())
+    log.info(
+        "OPC UA server certificate generated: %s (thumbprint %s, valid until %s)",
+        pki.cert,
+        thumbprint(cert),
+        cert.not_valid_after_utc.date(),
+    )
     return cert
 
 
@@ -144,7 +156,7 @@ def _unusable(pki: Pki, application_uri: str) -> str | None:
         serialization.load_pem_private_key(pki.key.read_bytes(), password=None)
     except (ValueError, TypeError, OSError) as exc:
         return f"unreadable ({exc})"
-    if cert.not_valid_after_utc - RENEW_BEFORE < datetime.now(timezone.utc):
+    if cert.not_valid_after_utc - RENEW_BEFORE < datetime.now(UTC):
         return f"expired on {cert.not_valid_after_utc.date()}"
     if application_uri not in application_uris(cert):
         return f"made for another application URI ({', '.join(application_uris(cert)) or 'none'})"
@@ -174,7 +186,8 @@ class ClientCertificates:
     def __init__(self, pki: Pki) -> None:
         self.pki = pki
         self._checks = CertificateValidator(
-            CertificateValidatorOptions.TIME_RANGE | CertificateValidatorOptions.URI
+            CertificateValidatorOptions.TIME_RANGE
+            | CertificateValidatorOptions.URI
             | CertificateValidatorOptions.PEER_CLIENT
         )
         self._stamp: tuple[float, int] | None = None
@@ -242,9 +255,16 @@ class ClientCertificates:
                 where = f"; already in {target}"
         except OSError as exc:
             where = f"; cannot save it in {folder}: {exc.strerror or exc}"
-        log.warning("OPC UA client certificate refused (%s): CN=%s, application %s, thumbprint %s, "
-                    "valid %s to %s%s", status, cn, app.ApplicationUri, thumb, cert.not_valid_before_utc.date(),
-                    cert.not_valid_after_utc.date(), where)
+        log.warning(
+            "OPC UA client certificate refused (%s): CN=%s, application %s, thumbprint %s, valid %s to %s%s",
+            status,
+            cn,
+            app.ApplicationUri,
+            thumb,
+            cert.not_valid_before_utc.date(),
+            cert.not_valid_after_utc.date(),
+            where,
+        )
 
 
 def _load_any(path: Path) -> x509.Certificate | None:
@@ -284,7 +304,9 @@ async def secure_server(
     if not any(is_secure(n) for n in names):
         return None
     try:
-        await asyncio.to_thread(ensure_certificate, pki, application_uri, name, certificate_hosts(endpoint_host))
+        await asyncio.to_thread(
+            ensure_certificate, pki, application_uri, name, certificate_hosts(endpoint_host)
+        )
         await server.load_certificate(str(pki.cert))
         await server.load_private_key(str(pki.key))
     except OSError as exc:

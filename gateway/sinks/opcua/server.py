@@ -38,13 +38,13 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
 from gateway import __version__
+from gateway.auth.users import UserDirectory
 from gateway.config.gateway import OpcUaServerConfig
 from gateway.errors import SinkError
+from gateway.model.context import WriteContext
 from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import utcnow
-from gateway.auth.users import UserDirectory
-from gateway.model.context import WriteContext
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes, keep_written_values
@@ -130,8 +130,13 @@ def _track_callers(iserver: Any, bserver: Callable[[], Any]) -> None:
 
 
 _REFUSALS_WE_LOG = (
-    "BadUserAccessDenied", "BadIdentityTokenRejected", "BadCertificateUntrusted", "BadCertificateTimeInvalid",
-    "BadCertificateUriInvalid", "BadCertificateInvalid", "BadCertificateUseNotAllowed",
+    "BadUserAccessDenied",
+    "BadIdentityTokenRejected",
+    "BadCertificateUntrusted",
+    "BadCertificateTimeInvalid",
+    "BadCertificateUriInvalid",
+    "BadCertificateInvalid",
+    "BadCertificateUseNotAllowed",
 )
 
 
@@ -146,8 +151,10 @@ class _QuietRefusals(logging.Filter):
         if fault and any(name in message for name in _REFUSALS_WE_LOG):
             return False
         if message.startswith("Rejected active session UserIdentityToken not supported"):
-            record.msg = ("OPC UA: login refused: the client used an identity token this server does not offer "
-                          "(anonymous logins are refused: access.anonymous)")
+            record.msg = (
+                "OPC UA: login refused: the client used an identity token this server does not offer "
+                "(anonymous logins are refused: access.anonymous)"
+            )
             record.args = None
             record.levelno, record.levelname = logging.WARNING, "WARNING"
         return True
@@ -186,7 +193,7 @@ def session_user_name(user: Any) -> str | None:
 class _Variable:
     """What the sink caches per tree variable."""
 
-    __slots__ = ("node", "nodeid", "kind")
+    __slots__ = ("kind", "node", "nodeid")
 
     def __init__(self, node: VariableNode, nodeid: ua.NodeId, kind: ValueKind) -> None:
         self.node = node
@@ -226,7 +233,9 @@ class _GatewayAttributeService(AttributeService):
                     results[index] = answer
         return results
 
-    async def write(self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)) -> list[ua.StatusCode]:
+    async def write(
+        self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)
+    ) -> list[ua.StatusCode]:
         owned = self._sink._owned
         items = params.NodesToWrite
         if user is self._internal_user or not any(wv.NodeId in owned for wv in items):
@@ -333,7 +342,9 @@ class OpcUaSink:
         mask = ua.EventNotifier.to_bitfield([ua.EventNotifier.SubscribeToEvents])
         notifier = ua.DataValue(ua.Variant(mask, ua.VariantType.Byte))
         await server.write_attribute_value(nodeid, notifier, ua.AttributeIds.EventNotifier)
-        await server.get_node(SERVER_OBJECT).add_reference(nodeid, HAS_NOTIFIER, forward=True, bidirectional=True)
+        await server.get_node(SERVER_OBJECT).add_reference(
+            nodeid, HAS_NOTIFIER, forward=True, bidirectional=True
+        )
 
     def caller_context(self) -> WriteContext:
         """Who is calling, inside a method callback (asyncua does not pass the session to callbacks)."""
@@ -344,7 +355,9 @@ class OpcUaSink:
         """Serve calls of a Method node (also a standard one, such as Acknowledge) with `callback`."""
         self.server.iserver.isession.add_method_callback(nodeid, callback)
 
-    async def trigger_event(self, event: Event, subscription: int | None = None, item: int | None = None) -> None:
+    async def trigger_event(
+        self, event: Event, subscription: int | None = None, item: int | None = None
+    ) -> None:
         """Report an event (an asyncua Event object) to its notifier's subscribers: all, or one subscription
         (and one of its monitored items), as ConditionRefresh does."""
         service = self.server.iserver.subscription_service
@@ -372,7 +385,8 @@ class OpcUaSink:
                 if mdata is None or (item is not None and mid != item):
                     continue
                 fields = ua.EventFieldList(
-                    ClientHandle=mdata.client_handle, EventFields=event.to_event_fields(mdata.filter.SelectClauses)
+                    ClientHandle=mdata.client_handle,
+                    EventFields=event.to_event_fields(mdata.filter.SelectClauses),
                 )
                 await sub.enqueue_event(mid, fields, mdata.queue_size)
 
@@ -389,7 +403,10 @@ class OpcUaSink:
             await self._start()
         log.info(
             "OPC UA server listening on %s: %d variables in namespace %s (ns=%d), started in %.2f s",
-            self.endpoint, len(self._vars), self.config.namespace, self.namespace_index,
+            self.endpoint,
+            len(self._vars),
+            self.config.namespace,
+            self.namespace_index,
             time.perf_counter() - started,
         )
         report_anonymous(self.users, self.tree, self.endpoint, self.config.endpoints)
@@ -407,7 +424,9 @@ class OpcUaSink:
         self._shared = SharedAttributes(server)
         self._shared.share()  # the standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py)
         await server.set_application_uri(self.application_uri)
-        await server.set_build_info(server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow())
+        await server.set_build_info(
+            server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()
+        )
         server.set_endpoint(self.endpoint)
         server.set_server_name(self.config.name)
         server.allow_remote_admin(False)  # no remote AddNodes/DeleteNodes through the "admin" user name
@@ -432,7 +451,9 @@ class OpcUaSink:
             await self._close()
             self._server = self._plan = None
             if isinstance(exc, OSError):
-                raise SinkError(f"OPC UA server cannot listen on {self.endpoint}: {exc.strerror or exc}") from None
+                raise SinkError(
+                    f"OPC UA server cannot listen on {self.endpoint}: {exc.strerror or exc}"
+                ) from None
             raise
 
     def _set_identities(self, server: Server) -> None:
@@ -446,8 +467,10 @@ class OpcUaSink:
         if users.has_users:
             tokens.append(ua.UserNameIdentityToken)
             if not any(name != "None" for name in self.config.endpoints):
-                log.warning("OPC UA: users are configured but only the None endpoint is offered: "
-                            "passwords cross the network in clear text (opcua.profile: standard or secure)")
+                log.warning(
+                    "OPC UA: users are configured but only the None endpoint is offered: "
+                    "passwords cross the network in clear text (opcua.profile: standard or secure)"
+                )
         server.set_identity_tokens(tokens)
         server.iserver.set_user_manager(GatewayUserManager(users))
 
@@ -549,8 +572,13 @@ class OpcUaSink:
             except ValueMismatch as exc:
                 if node not in mismatched:
                     mismatched.add(node)
-                    log.warning("%s holds %r, which OPC UA cannot carry as %s: %s",
-                                node.full_path, sample.value, node.type, exc)
+                    log.warning(
+                        "%s holds %r, which OPC UA cannot carry as %s: %s",
+                        node.full_path,
+                        sample.value,
+                        node.type,
+                        exc,
+                    )
                 dv = var.kind.mismatch(sample, now)
             else:
                 if mismatched:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from functools import cache
 from typing import Any
 
@@ -154,7 +154,10 @@ def eu_information(unit: str) -> ua.EUInformation:
     known = UNECE_UNITS.get(unit)
     if known is None:
         return ua.EUInformation(
-            NamespaceUri=UNECE_NAMESPACE, UnitId=-1, DisplayName=ua.LocalizedText(unit), Description=ua.LocalizedText(unit)
+            NamespaceUri=UNECE_NAMESPACE,
+            UnitId=-1,
+            DisplayName=ua.LocalizedText(unit),
+            Description=ua.LocalizedText(unit),
         )
     code, description = known
     return ua.EUInformation(
@@ -220,7 +223,7 @@ def _string(value: Any) -> str:
 
 def _datetime(value: Any) -> datetime:
     if isinstance(value, datetime):
-        return value if value.tzinfo else value.replace(tzinfo=timezone.utc)
+        return value if value.tzinfo else value.replace(tzinfo=UTC)
     raise ValueMismatch(f"expected DateTime, got {type(value).__name__}")
 
 
@@ -237,7 +240,7 @@ _SCALAR_CHECKS: dict[DataType, Callable[[Any], Any]] = {
 class ValueKind:
     """Everything needed to turn a variable's Sample into a DataValue, computed once per variable."""
 
-    __slots__ = ("spec", "vtype", "_check")
+    __slots__ = ("_check", "spec", "vtype")
 
     def __init__(self, spec: TypeSpec) -> None:
         self.spec = spec
@@ -255,7 +258,9 @@ class ValueKind:
             if isinstance(value, (bytes, bytearray)) and self.spec.base is DataType.BYTE:
                 value = list(value)
             if not isinstance(value, (list, tuple)):
-                raise ValueMismatch(f"expected an array of {self.spec.base.value}, got {type(value).__name__}")
+                raise ValueMismatch(
+                    f"expected an array of {self.spec.base.value}, got {type(value).__name__}"
+                )
             return ua.Variant([check(v) for v in value], self.vtype, is_array=True)
         if value is None:
             raise ValueMismatch("no value")

@@ -34,14 +34,16 @@ async def raise_soft_limit(rig: LaserRig, client: Client) -> None:
 
 async def acknowledge(client: Client, event: Any, comment: str) -> None:
     await client.get_node(event.NodeId).call_method(
-        ACK, ua.Variant(event.EventId, ua.VariantType.ByteString),
+        ACK,
+        ua.Variant(event.EventId, ua.VariantType.ByteString),
         ua.Variant(ua.LocalizedText(comment), ua.VariantType.LocalizedText),
     )
 
 
 async def refresh(client: Client, sub: Any) -> None:
     await client.get_node(ua.ObjectIds.ConditionType).call_method(
-        ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh), ua.Variant(sub.subscription_id, ua.VariantType.UInt32)
+        ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh),
+        ua.Variant(sub.subscription_id, ua.VariantType.UInt32),
     )
 
 
@@ -50,8 +52,11 @@ def state(event: Any, name: str) -> Any:
 
 
 def names(events: Events) -> list[str]:
-    kinds = {ua.ObjectIds.RefreshStartEventType: "start", ua.ObjectIds.RefreshEndEventType: "end",
-             ua.ObjectIds.AlarmConditionType: "alarm"}
+    kinds = {
+        ua.ObjectIds.RefreshStartEventType: "start",
+        ua.ObjectIds.RefreshEndEventType: "end",
+        ua.ObjectIds.AlarmConditionType: "alarm",
+    }
     return [kinds.get(e.EventType.Identifier, "other") for e in events.received]
 
 
@@ -73,7 +78,12 @@ async def test_soft_limit_alarm_through_opcua_and_mqtt_acknowledged_refreshed_an
 
         await wait_until(lambda: rec.last_json(ACTIVE), message="the active list on MQTT")
         [active] = rec.last_json(ACTIVE)
-        assert (active["id"], active["text"], active["severity"], active["active"]) == ("1001", SOFT_LIMIT, 700, True)
+        assert (active["id"], active["text"], active["severity"], active["active"]) == (
+            "1001",
+            SOFT_LIMIT,
+            700,
+            True,
+        )
         [raised_msg] = [m for m in rec.on(EVENTS) if m.json()["event"] == "raised"]
         assert raised_msg.qos == 1 and not raised_msg.retain
 
@@ -94,7 +104,9 @@ async def test_soft_limit_alarm_through_opcua_and_mqtt_acknowledged_refreshed_an
         assert state(acked, "ActiveState") is True and acked.Retain is True
         await wait_until(lambda: any(m.json()["event"] == "acknowledged" for m in rec.on(EVENTS)))
         [ack_msg] = [m.json() for m in rec.on(EVENTS) if m.json()["event"] == "acknowledged"]
-        assert ack_msg["comment"] == "operator saw it" and ack_msg["acked"] is True and ack_msg["id"] == "1001"
+        assert (
+            ack_msg["comment"] == "operator saw it" and ack_msg["acked"] is True and ack_msg["id"] == "1001"
+        )
         await wait_until(lambda: (rec.last_json(ACTIVE) or [{}])[0].get("acked") is True)
 
         with pytest.raises(ua.UaStatusCodeError) as info:
@@ -155,14 +167,20 @@ async def test_acknowledgement_survives_a_gateway_restart_and_confirm_ends_it(tm
         assert type(info.value).__name__ == "BadConditionBranchAlreadyAcked"
 
         await client.get_node(again.NodeId).call_method(
-            CONFIRM, ua.Variant(again.EventId, ua.VariantType.ByteString), ua.Variant(ua.LocalizedText("fixed"))
+            CONFIRM,
+            ua.Variant(again.EventId, ua.VariantType.ByteString),
+            ua.Variant(ua.LocalizedText("fixed")),
         )
-        await wait_until(lambda: any(state(e, "ConfirmedState") for e in seen.alarms()), message="the confirm event")
+        await wait_until(
+            lambda: any(state(e, "ConfirmedState") for e in seen.alarms()), message="the confirm event"
+        )
         [record] = rig.gateway.alarms.store.history(MACHINE)  # type: ignore[union-attr]
         assert record.acked_by == "anonymous (opcua)" and record.confirm_comment == "fixed"
 
 
-async def test_a_controller_outage_keeps_the_alarm_uncertain_and_reconnecting_reconciles(tmp_path: Path) -> None:
+async def test_a_controller_outage_keeps_the_alarm_uncertain_and_reconnecting_reconciles(
+    tmp_path: Path,
+) -> None:
     async with laser_rig(tmp_path) as rig:
         client = await rig.client()
         _, seen = await rig.subscribe_alarms(client)
@@ -180,6 +198,9 @@ async def test_a_controller_outage_keeps_the_alarm_uncertain_and_reconnecting_re
 
         rig.sim = Simulator(opcua_port=ports[0], ftp_port=ports[1], speed=20.0, store=tmp_path / "store")
         await rig.sim.__aenter__()  # a fresh controller: no alarms any more
-        await wait_until(lambda: state(seen.alarms()[-1], "ActiveState") is False, timeout=15,
-                         message="the alarm cleared after reconnecting")
+        await wait_until(
+            lambda: state(seen.alarms()[-1], "ActiveState") is False,
+            timeout=15,
+            message="the alarm cleared after reconnecting",
+        )
         assert seen.alarms()[-1].Quality == ua.StatusCode(ua.StatusCodes.Good)

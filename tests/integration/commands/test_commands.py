@@ -79,13 +79,19 @@ async def test_start_in_alarm_is_refused_with_the_state(tmp_path: Path) -> None:
         client = await rig.client()
         await rig.command(client, "select-program", text("soft-limit.nc"))
         await rig.command(client, "start")
-        await wait_until(lambda: rig.state() is MachineState.ALARM, timeout=15, message="the soft-limit alarm")
-        await wait_until(lambda: rig.machine.nodes["Machine/State"].sample.value == 3, message="Alarm mirrored")
+        await wait_until(
+            lambda: rig.state() is MachineState.ALARM, timeout=15, message="the soft-limit alarm"
+        )
+        await wait_until(
+            lambda: rig.machine.nodes["Machine/State"].sample.value == 3, message="Alarm mirrored"
+        )
         with pytest.raises(ua.UaStatusCodeError) as info:
             await rig.command(client, "start")
         assert bad(info) == "BadInvalidState"
         with pytest.raises(InvalidState) as reason:  # the same call, from inside: what the refusal says
-            await rig.machine.call_method(rig.machine.methods[("Commands", "start")], [], WriteContext("test", role="operator"))
+            await rig.machine.call_method(
+                rig.machine.methods[("Commands", "start")], [], WriteContext("test", role="operator")
+            )
         assert reason.value.reason == (
             "start is not allowed while Machine/State is 3 (Alarm); it needs Machine/State = 0 (Idle)"
         )
@@ -134,7 +140,11 @@ async def test_commands_over_mqtt_with_answers_correlation_and_deadlines(
         rec.publish(f"{PREFIX}/select-program", b'{"name": ')  # malformed
         await wait_until(lambda: len(answers("select-program")) >= 2, message="the malformed body's answer")
         malformed = answers("select-program")[-1]
-        assert malformed["ok"] is False and malformed["status"] == "BadDecodingError" and "JSON" in malformed["error"]
+        assert (
+            malformed["ok"] is False
+            and malformed["status"] == "BadDecodingError"
+            and "JSON" in malformed["error"]
+        )
 
         rig.sim.machine.ignore_start = True
         rec.publish(f"{PREFIX}/start", json.dumps({"correlation_id": 99}))

@@ -10,8 +10,8 @@ import pytest
 
 from gateway.sinks.copydata.sink import CopydataSink
 from gateway.sinks.copydata.tcp import TcpServerTransport
-from tests.unit.sinks.copydata.helpers import mapping
 from tests.trees import MappedTree
+from tests.unit.sinks.copydata.helpers import mapping
 from tests.waiting import free_port, wait_until
 
 

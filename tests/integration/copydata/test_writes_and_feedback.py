@@ -43,8 +43,10 @@ async def test_writes_refusals_and_feedback_everywhere(
     )
     await rig.connected()
     # No users: the replies act with the highest role, and start-up says what they may write.
-    assert any(r.getMessage().startswith("copydata laser-sim/nesting: replies act as admin and may write ")
-               for r in caplog.records), "start-up says what the COPYDATA replies may write"
+    assert any(
+        r.getMessage().startswith("copydata laser-sim/nesting: replies act as admin and may write ")
+        for r in caplog.records
+    ), "start-up says what the COPYDATA replies may write"
     mqtt = subscriber(recorders, mosquitto.port, topics=[FEEDBACK_TOPIC])
     events = rig.machine.tree.events.subscribe("test")
     client = TcpReceiver(rig.emitter())

@@ -170,7 +170,9 @@ async def publish_retained(rec: Recorder, cases: list[dict[str, Any]]) -> None:
     for case in cases:
         if case.get("retain"):
             rec.publish(case["topic"], payload(case), qos=1, retain=True)
-            await wait_until(lambda t=case["topic"]: rec.on(t), timeout=10, message=f"{case['name']} on the broker")
+            await wait_until(
+                lambda t=case["topic"]: rec.on(t), timeout=10, message=f"{case['name']} on the broker"
+            )
 
 
 async def run_mqtt(rec: Recorder, kind: str, cases: list[dict[str, Any]]) -> list[Outcome]:

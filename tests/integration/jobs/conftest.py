@@ -68,9 +68,18 @@ jobs:
 """
 
 
-def mapping_text(name: str, ftp_port: int, *, folder: str = "/DATA/Programs", attempts: int = 3, extra: str = "",
-                 opcua_port: int = 4999) -> str:
-    return MAPPING.format(name=name, opcua=opcua_port, ftp=ftp_port, folder=folder, attempts=attempts, extra=extra)
+def mapping_text(
+    name: str,
+    ftp_port: int,
+    *,
+    folder: str = "/DATA/Programs",
+    attempts: int = 3,
+    extra: str = "",
+    opcua_port: int = 4999,
+) -> str:
+    return MAPPING.format(
+        name=name, opcua=opcua_port, ftp=ftp_port, folder=folder, attempts=attempts, extra=extra
+    )
 
 
 class Store:
@@ -93,7 +102,9 @@ async def store(tmp_path: Path) -> AsyncIterator[Store]:
     root = tmp_path / "controller"
     DirectoryStore(root).prepare()
     (root / "DATA" / "Other").mkdir()
-    async with FtpStore(root, host="127.0.0.1", port=free_port(), user=STORE_USER, password=STORE_PASSWORD) as ftp:
+    async with FtpStore(
+        root, host="127.0.0.1", port=free_port(), user=STORE_USER, password=STORE_PASSWORD
+    ) as ftp:
         yield Store(root, ftp)
 
 
@@ -122,7 +133,8 @@ class Harness:
 
     async def wait_state(self, seq: int, *states: JobState, timeout: float = 15.0) -> Job:
         return await wait_until(
-            lambda: (j := self.job(seq)).state in states and j, timeout=timeout,
+            lambda: (j := self.job(seq)).state in states and j,
+            timeout=timeout,
             message=f"J{seq:06d} in {'/'.join(s.value for s in states)}",
         )
 
@@ -159,8 +171,9 @@ async def harness(tmp_path: Path) -> AsyncIterator[Build]:
     """`async with harness(mappings, **inbox) as h:` runs a JobService for mapping texts."""
 
     @asynccontextmanager
-    async def build(mappings: list[str], *, environ: dict[str, str] | None = None, accounts: Any = None,
-                    **inbox: Any) -> AsyncIterator[Harness]:
+    async def build(
+        mappings: list[str], *, environ: dict[str, str] | None = None, accounts: Any = None, **inbox: Any
+    ) -> AsyncIterator[Harness]:
         files = []
         for index, text in enumerate(mappings):
             path = tmp_path / f"machine{index}.yaml"
@@ -169,7 +182,9 @@ async def harness(tmp_path: Path) -> AsyncIterator[Build]:
         state = tmp_path / "state"
         if accounts is None:
             accounts = [{"user": USER, "password_hash": PASSWORD_HASH}]
-        inbox_config = InboxConfig.model_validate({"host": "127.0.0.1", "port": 0, "accounts": accounts, **inbox})
+        inbox_config = InboxConfig.model_validate(
+            {"host": "127.0.0.1", "port": 0, "accounts": accounts, **inbox}
+        )
         config = Config(GatewayConfig(state_dir=str(state), inbox=inbox_config), tuple(files), tmp_path)
         tree = MappedTree(config.machines)
         service = JobService(config, tree, environ=environ or {})

@@ -34,7 +34,9 @@ def controller_untouched(store: Store, renames) -> None:
     assert sorted(store.files()) == ["demo.nc", "soft-limit.nc"]
 
 
-async def test_wrong_passwords_are_refused_and_a_third_ends_the_session(store: Store, harness, renames) -> None:
+async def test_wrong_passwords_are_refused_and_a_third_ends_the_session(
+    store: Store, harness, renames
+) -> None:
     async with harness([mapping_text("laser", store.port)]) as h:
 
         def run() -> list[str]:
@@ -83,8 +85,9 @@ async def test_wrong_passwords_are_refused_and_a_third_ends_the_session(store: S
         ("MKD /laser/other", "550"),
     ],
 )
-async def test_paths_that_escape_or_look_odd_are_refused(store: Store, harness, renames, tmp_path: Path,
-                                                          command: str, code: str) -> None:
+async def test_paths_that_escape_or_look_odd_are_refused(
+    store: Store, harness, renames, tmp_path: Path, command: str, code: str
+) -> None:
     async with harness([mapping_text("laser", store.port)]) as h:
 
         def run() -> str:
@@ -151,7 +154,9 @@ async def test_oversized_uploads_are_refused(store: Store, harness, renames) -> 
 
 
 @pytest.mark.parametrize("reset", [True, False], ids=["reset", "fin"])
-async def test_a_client_that_dies_mid_stor_creates_no_job(store: Store, harness, renames, caplog, reset: bool) -> None:
+async def test_a_client_that_dies_mid_stor_creates_no_job(
+    store: Store, harness, renames, caplog, reset: bool
+) -> None:
     caplog.set_level(logging.INFO, logger="gateway.jobs.inbox")
     async with harness([mapping_text("laser", store.port)]) as h:
 
@@ -184,8 +189,10 @@ async def test_a_client_that_dies_mid_stor_creates_no_job(store: Store, harness,
                 sock.close()
 
         await in_thread(die_mid_upload)
-        await wait_until(lambda: "did not complete; discarded" in caplog.text or "failed" in caplog.text,
-                         message="the inbox to notice the dead client")
+        await wait_until(
+            lambda: "did not complete; discarded" in caplog.text or "failed" in caplog.text,
+            message="the inbox to notice the dead client",
+        )
         assert h.jobs() == []
         assert list((h.state / "inbox" / ".staging").iterdir()) == []
         assert list((h.state / "inbox" / "laser").iterdir()) == [h.state / "inbox" / "laser" / "tmp"]
@@ -205,9 +212,12 @@ BAD_PROGRAMS = [
 ]
 
 
-@pytest.mark.parametrize(("name", "data", "rule"), BAD_PROGRAMS, ids=[b[2] + ":" + b[0] for b in BAD_PROGRAMS])
-async def test_bad_programs_are_rejected_with_a_reason_and_kept(store: Store, harness, renames,
-                                                                 name: str, data: bytes, rule: str) -> None:
+@pytest.mark.parametrize(
+    ("name", "data", "rule"), BAD_PROGRAMS, ids=[b[2] + ":" + b[0] for b in BAD_PROGRAMS]
+)
+async def test_bad_programs_are_rejected_with_a_reason_and_kept(
+    store: Store, harness, renames, name: str, data: bytes, rule: str
+) -> None:
     async with harness([mapping_text("laser", store.port)]) as h:
         reply = await h.stor("laser", name, data)
         assert reply.startswith("550 J000001 rejected: "), reply
@@ -217,7 +227,9 @@ async def test_bad_programs_are_rejected_with_a_reason_and_kept(store: Store, ha
         assert kept.read_bytes() == data
         reason = Path(f"{kept}.reason").read_text()
         assert f"[{rule}]" in reason and "J000001" in reason
-        await wait_until(lambda: h.value("laser", "Jobs/LastRejected") == f"J000001 {name}", message="LastRejected")
+        await wait_until(
+            lambda: h.value("laser", "Jobs/LastRejected") == f"J000001 {name}", message="LastRejected"
+        )
         assert h.value("laser", "Jobs/LastRejectedReason") == job.reason
         controller_untouched(store, renames)
         await still_serving(h, store)
@@ -269,8 +281,11 @@ async def test_a_long_upload_is_not_an_idle_session(store: Store, harness) -> No
 async def test_anonymous_login_when_enabled(store: Store, harness, caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.INFO, logger="gateway")
     async with harness([mapping_text("laser", store.port)], accounts=[], anonymous=True) as h:
-        assert any(r.levelno == logging.WARNING and "anonymous logins (any password) may submit programs for laser"
-                   in r.getMessage() for r in caplog.records), "start-up says the inbox is open to anyone"
+        assert any(
+            r.levelno == logging.WARNING
+            and "anonymous logins (any password) may submit programs for laser" in r.getMessage()
+            for r in caplog.records
+        ), "start-up says the inbox is open to anyone"
         reply = await h.stor("laser", "anon.nc", GOOD, user="anonymous", password="guest@")
         assert reply.startswith("226 J000001")
         assert h.job(1).user == "anonymous"
@@ -285,13 +300,18 @@ async def test_a_missing_password_variable_stops_the_start_with_a_clear_error(st
     from gateway.errors import SinkError
 
     with pytest.raises(SinkError, match="NEST_PASSWORD"):
-        async with harness([mapping_text("laser", store.port)], accounts=[{"user": "nest", "password_env": "NEST_PASSWORD"}]):
+        async with harness(
+            [mapping_text("laser", store.port)], accounts=[{"user": "nest", "password_env": "NEST_PASSWORD"}]
+        ):
             pass
 
 
 async def test_environment_passwords_work(store: Store, harness) -> None:
-    async with harness([mapping_text("laser", store.port)], environ={"NEST_PASSWORD": "from-env"},
-                       accounts=[{"user": "nest", "password_env": "NEST_PASSWORD"}]) as h:
+    async with harness(
+        [mapping_text("laser", store.port)],
+        environ={"NEST_PASSWORD": "from-env"},
+        accounts=[{"user": "nest", "password_env": "NEST_PASSWORD"}],
+    ) as h:
         assert (await h.stor("laser", "env.nc", GOOD, user="nest", password="from-env")).startswith("226")
         with pytest.raises(ftplib.error_perm, match="530"):
             await h.stor("laser", "env.nc", GOOD, user="nest", password=PASSWORD)

@@ -21,12 +21,18 @@ from tests.integration.jobs.conftest import GOOD, PASSWORD, USER, Store, in_thre
 from tests.waiting import free_port
 
 
-async def cli(*args: str, stdin: bytes | None = None, env: dict[str, str] | None = None) -> tuple[int, str, str]:
+async def cli(
+    *args: str, stdin: bytes | None = None, env: dict[str, str] | None = None
+) -> tuple[int, str, str]:
     import os
 
     proc = await asyncio.create_subprocess_exec(
-        str(Path(sys.executable).with_name("cnc-gateway")), *args,
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, **(env or {})},
+        str(Path(sys.executable).with_name("cnc-gateway")),
+        *args,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env={**os.environ, **(env or {})},
     )
     out, err = await proc.communicate(stdin)
     return proc.returncode or 0, out.decode(), err.decode()
@@ -77,7 +83,9 @@ async def test_programs_put_and_delete_are_audited(store: Store, tmp_path: Path)
     code, _, err = await cli("programs", "put", "laser", str(source), *c)
     assert code == 0, err
     source.write_bytes(b"G1 X1 F100\n")
-    code, _, err = await cli("programs", "put", "laser", str(source), "--name", "bad.nc", "--user", "erik", *c)
+    code, _, err = await cli(
+        "programs", "put", "laser", str(source), "--name", "bad.nc", "--user", "erik", *c
+    )
     assert code == 1, err
     code, _, err = await cli("programs", "delete", "laser", "part.nc", "--user", "erik", *c)
     assert code == 0, err
@@ -111,7 +119,9 @@ async def test_jobs_submit_uploads_through_the_inbox(store: Store, harness, tmp_
     source.write_bytes(GOOD)
     async with harness([mapping_text("laser", store.port)]) as h:
         base = ("jobs", "submit", "--machine", "laser", "--port", str(h.port), "--user", USER)
-        code, out, err = await cli(*base, str(source), "--priority", "3", env={"CNC_INBOX_PASSWORD": PASSWORD})
+        code, out, err = await cli(
+            *base, str(source), "--priority", "3", env={"CNC_INBOX_PASSWORD": PASSWORD}
+        )
         assert code == 0 and out.startswith("J000001 queued for laser"), err
         await h.wait_state(1, JobState.DELIVERED)
         assert h.job(1).priority == 3 and store.files()["sheet.nc"] == GOOD
@@ -153,17 +163,23 @@ def self_signed(directory: Path) -> None:
 
     key = ec.generate_private_key(ec.SECP256R1())
     name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "cnc-gateway test")])
-    now = datetime.datetime.now(datetime.timezone.utc)
+    now = datetime.datetime.now(datetime.UTC)
     cert = (
-        x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
-        .serial_number(x509.random_serial_number()).not_valid_before(now - datetime.timedelta(minutes=5))
+        x509.CertificateBuilder()
+        .subject_name(name)
+        .issuer_name(name)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - datetime.timedelta(minutes=5))
         .not_valid_after(now + datetime.timedelta(days=1))
         .sign(key, hashes.SHA256())
     )
     directory.mkdir(parents=True, exist_ok=True)
     (directory / "inbox-cert.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
     (directory / "inbox-key.pem").write_bytes(
-        key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
+        key.private_bytes(
+            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+        )
     )
 
 
@@ -177,7 +193,9 @@ async def test_implicit_ftps_inbox_with_a_passive_port_range(store: Store, harne
         source = tmp_path / "secure.nc"
         source.write_bytes(GOOD)
         ok, reply = await in_thread(
-            lambda: upload("127.0.0.1", h.port, USER, PASSWORD, "laser", source, "secure.nc", tls=True, verify=False)
+            lambda: upload(
+                "127.0.0.1", h.port, USER, PASSWORD, "laser", source, "secure.nc", tls=True, verify=False
+            )
         )
         assert ok and reply.startswith("J000001 queued"), reply
         await h.wait_state(1, JobState.DELIVERED)

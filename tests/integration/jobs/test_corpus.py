@@ -32,7 +32,9 @@ def machine_text(name: str, port: int, rules: dict[str, object]) -> str:
     )
 
 
-async def run_corpus(store: Store, harness, files: list[tuple[bytes, str, dict[str, object], list[str]]]) -> None:
+async def run_corpus(
+    store: Store, harness, files: list[tuple[bytes, str, dict[str, object], list[str]]]
+) -> None:
     rule_sets: list[str] = []
     for _, _, rules, _ in files:
         key = json.dumps(rules, sort_keys=True)
@@ -62,7 +64,9 @@ async def run_corpus(store: Store, harness, files: list[tuple[bytes, str, dict[s
                 assert f"[{rule}]" in reason, (name, rule, reason)
             there = store.root / "DATA" / machine / name  # another corpus file may share the name
             assert not there.exists() or there.read_bytes() != files[seq - 1][0], name
-        await wait_until(lambda: h.queue.count(states=(JobState.QUEUED, JobState.SENDING)) == 0, message="idle queue")
+        await wait_until(
+            lambda: h.queue.count(states=(JobState.QUEUED, JobState.SENDING)) == 0, message="idle queue"
+        )
 
 
 async def test_the_project_corpus_through_the_inbox(store: Store, harness) -> None:

@@ -43,7 +43,9 @@ def port_open(port: int) -> bool:
 async def start_gateway(gateway_file: Path, log: Path) -> subprocess.Popen[bytes]:
     return subprocess.Popen(
         [str(Path(sys.executable).with_name("cnc-gateway")), "run", str(gateway_file)],
-        stdout=log.open("ab"), stderr=subprocess.STDOUT, cwd=gateway_file.parent,
+        stdout=log.open("ab"),
+        stderr=subprocess.STDOUT,
+        cwd=gateway_file.parent,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
 
@@ -85,7 +87,8 @@ async def test_killed_mid_delivery_and_restarted_delivers_exactly_once(
         temp = store.folder() / "sheet.nc.tmp"
         await wait_until(
             lambda: queue.get(1).state is S.SENDING and temp.exists() and 0 < temp.stat().st_size < len(data),
-            timeout=30, message="the upload to be under way",
+            timeout=30,
+            message="the upload to be under way",
         )
         proc.send_signal(signal.SIGKILL)
         await asyncio.to_thread(proc.wait, 30)
@@ -93,8 +96,11 @@ async def test_killed_mid_delivery_and_restarted_delivers_exactly_once(
         assert "sheet.nc" not in store.files()
 
         proc = await start_gateway(gateway_file, log)
-        job = await wait_until(lambda: (j := queue.get(1)).state is S.DELIVERED and j, timeout=60,
-                               message="delivery after the restart")
+        job = await wait_until(
+            lambda: (j := queue.get(1)).state is S.DELIVERED and j,
+            timeout=60,
+            message="delivery after the restart",
+        )
         queue.close()
     finally:
         if proc.poll() is None:

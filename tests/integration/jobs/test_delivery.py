@@ -28,7 +28,10 @@ S = JobState
 
 async def cli(*args: str) -> tuple[int, str, str]:
     proc = await asyncio.create_subprocess_exec(
-        str(Path(sys.executable).with_name("cnc-gateway")), *args, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        str(Path(sys.executable).with_name("cnc-gateway")),
+        *args,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
     )
     out, err = await proc.communicate()
     return proc.returncode or 0, out.decode(), err.decode()
@@ -43,8 +46,12 @@ async def test_a_controller_that_is_down_fails_the_job_after_retries_and_a_retry
         job = await h.wait_state(1, S.FAILED)
         assert job.attempts == 3 and "after 3 attempts" in job.reason and "unreachable" in job.reason
         history = [t.reason for t in h.queue.history(1) if t.state is S.QUEUED]
-        assert any("attempt 1 of 3 failed" in r for r in history) and any("attempt 2 of 3" in r for r in history)
-        await wait_until(lambda: h.value("laser", "Jobs/LastFailed") == "J000001 part.nc", message="LastFailed")
+        assert any("attempt 1 of 3 failed" in r for r in history) and any(
+            "attempt 2 of 3" in r for r in history
+        )
+        await wait_until(
+            lambda: h.value("laser", "Jobs/LastFailed") == "J000001 part.nc", message="LastFailed"
+        )
         assert h.value("laser", "Jobs/LastFailedReason") == job.reason
         assert h.value("laser", "Jobs/FailedCount") == 1
         assert (h.state / "jobs" / "spool" / "J000001.program").read_bytes() == GOOD  # kept for a retry
@@ -63,7 +70,9 @@ async def test_a_controller_that_is_down_fails_the_job_after_retries_and_a_retry
         await wait_until(lambda: h.value("laser", "Jobs/FailedCount") == 0, message="FailedCount back to 0")
 
 
-async def test_a_controller_that_refuses_us_fails_with_its_reply(store: Store, tmp_path: Path, harness) -> None:
+async def test_a_controller_that_refuses_us_fails_with_its_reply(
+    store: Store, tmp_path: Path, harness
+) -> None:
     text = mapping_text("laser", store.port, attempts=2).replace("password: simulator", "password: wrong")
     async with harness([text]) as h:
         await h.stor("laser", "part.nc", GOOD)
@@ -167,7 +176,9 @@ async def test_a_job_that_reached_the_controller_before_the_crash_is_not_sent_ag
         assert job.attempts == 1
 
 
-async def test_a_job_cut_off_by_the_crash_is_sent_again_once(store: Store, harness, tmp_path: Path, renames) -> None:
+async def test_a_job_cut_off_by_the_crash_is_sent_again_once(
+    store: Store, harness, tmp_path: Path, renames
+) -> None:
     left_sending(tmp_path / "state", "part.nc", GOOD)
     (store.folder() / "part.nc.tmp").write_bytes(GOOD[:20])  # the upload the crash interrupted
     (store.folder() / "part.nc").write_bytes(GOOD.replace(b"X50", b"X60"))  # an older program, same size
@@ -179,7 +190,9 @@ async def test_a_job_cut_off_by_the_crash_is_sent_again_once(store: Store, harne
         assert "interrupted by a restart" in [t.reason for t in h.queue.history(1)][-3]
 
 
-async def test_an_upload_received_but_not_yet_checked_is_finished_after_a_restart(store: Store, harness, tmp_path: Path) -> None:
+async def test_an_upload_received_but_not_yet_checked_is_finished_after_a_restart(
+    store: Store, harness, tmp_path: Path
+) -> None:
     state = tmp_path / "state"
     with JobQueue(queue_path(state)) as q:
         kept = q.receive("laser", "kept.nc", len(GOOD), hashlib.sha256(GOOD).hexdigest())
@@ -207,9 +220,15 @@ async def test_jobs_cli_lists_and_shows(store: Store, harness) -> None:
         assert code == 0, err
         assert "state      DELIVERED" in out and "extents    X 10..50  Y 10..40" in out
         assert [line.split()[2] for line in out.split("history:")[1].strip().splitlines()] == [
-            "RECEIVED", "VALIDATED", "QUEUED", "SENDING", "DELIVERED"
+            "RECEIVED",
+            "VALIDATED",
+            "QUEUED",
+            "SENDING",
+            "DELIVERED",
         ]
-        code, out, err = await cli("jobs", "list", "--json", "--state", "rejected", "--state-dir", str(h.state))
+        code, out, err = await cli(
+            "jobs", "list", "--json", "--state", "rejected", "--state-dir", str(h.state)
+        )
         import json
 
         assert [j["id"] for j in json.loads(out)] == ["J000002"]

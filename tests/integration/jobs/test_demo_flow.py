@@ -21,7 +21,7 @@ from gateway.config.loader import Config, load
 from gateway.jobs.queue.store import JobState
 from gateway.model.events import Event
 from simulator.runner import Simulator
-from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, subscriber  # noqa: F401
+from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, subscriber
 from tests.waiting import free_port, wait_until
 
 PART = b"%\nO2001 (DEMO PART)\nG21 G90\nG0 X20 Y20\nG1 X60 F6000\nG1 Y40\nG1 X20\nG1 Y20\nM30\n%\n"
@@ -41,9 +41,13 @@ def broker(tmp_path: Path) -> Iterator[Mosquitto]:
 
 @pytest.fixture
 async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[tuple[Gateway, Simulator, Namespace]]:
-    args = Namespace(inbox_host="127.0.0.1", inbox_port=free_port(), sim_ftp_port=free_port(), broker=broker.port)
+    args = Namespace(
+        inbox_host="127.0.0.1", inbox_port=free_port(), sim_ftp_port=free_port(), broker=broker.port
+    )
     # Real time: the part runs for about a second, long enough for the gateway to see it running.
-    async with Simulator(opcua_port=free_port(), ftp_port=args.sim_ftp_port, speed=1.0, store=tmp_path / "sim") as sim:
+    async with Simulator(
+        opcua_port=free_port(), ftp_port=args.sim_ftp_port, speed=1.0, store=tmp_path / "sim"
+    ) as sim:
         base = load([find_mapping(None)], environ={"LASER_SIM_COPYDATA_PORT": "0"})
         mapping = base.machines[0]
         driver = mapping.driver.model_copy(update={"endpoint": sim.opcua_endpoint})
@@ -69,21 +73,35 @@ async def test_curl_to_the_inbox_delivers_and_the_simulator_runs_it(demo, tmp_pa
     gw, sim, args = demo
     mqtt = subscriber(recorders, args.broker, topics=["cnc/laser-sim/jobs/#"])
     machine = gw.tree.machines["laser-sim"]
-    await wait_until(lambda: machine.status.is_connected and machine.nodes["Machine/State"].sample.good, timeout=20,
-                     message="the gateway connected to the simulator")
+    await wait_until(
+        lambda: machine.status.is_connected and machine.nodes["Machine/State"].sample.good,
+        timeout=20,
+        message="the gateway connected to the simulator",
+    )
     events = gw.tree.events.subscribe("test")
     part = tmp_path / "part.nc"
     part.write_bytes(PART)
     url = f"ftp://{DEMO_INBOX_USER}:{DEMO_INBOX_PASSWORD}@127.0.0.1:{args.inbox_port}/laser-sim/"
     proc = await asyncio.create_subprocess_exec(
-        "curl", "-sS", "--max-time", "30", "-T", str(part), url, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        "curl",
+        "-sS",
+        "--max-time",
+        "30",
+        "-T",
+        str(part),
+        url,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
     )
     _, err = await proc.communicate()
     assert proc.returncode == 0, err.decode()
 
     queue = gw.jobs.queue
-    job = await wait_until(lambda: (j := queue.get(1)).state is JobState.DELIVERED and j, timeout=20,
-                           message="DELIVERED in the queue")
+    job = await wait_until(
+        lambda: (j := queue.get(1)).state is JobState.DELIVERED and j,
+        timeout=20,
+        message="DELIVERED in the queue",
+    )
     assert (sim.store / "DATA" / "Programs" / "part.nc").read_bytes() == PART
 
     # OPC UA shows it under the machine's Jobs object
@@ -103,19 +121,35 @@ async def test_curl_to_the_inbox_delivers_and_the_simulator_runs_it(demo, tmp_pa
     assert all(e.machine == "laser-sim" for e in seen)
 
     # and MQTT: the retained job record, the event stream, and the Jobs variables
-    await wait_until(lambda: (mqtt.last_json("cnc/laser-sim/jobs/J000001") or {}).get("state") == "DELIVERED",
-                     timeout=10, message="the job's MQTT record DELIVERED")
-    late = subscriber(recorders, args.broker, topics=["cnc/laser-sim/jobs/J000001"])  # a dashboard opened later
-    record = await wait_until(lambda: late.last("cnc/laser-sim/jobs/J000001"), message="the retained job record")
+    await wait_until(
+        lambda: (mqtt.last_json("cnc/laser-sim/jobs/J000001") or {}).get("state") == "DELIVERED",
+        timeout=10,
+        message="the job's MQTT record DELIVERED",
+    )
+    late = subscriber(
+        recorders, args.broker, topics=["cnc/laser-sim/jobs/J000001"]
+    )  # a dashboard opened later
+    record = await wait_until(
+        lambda: late.last("cnc/laser-sim/jobs/J000001"), message="the retained job record"
+    )
     assert record.retain and record.json()["filename"] == "part.nc" and record.json()["state"] == "DELIVERED"
     states = [m.json()["state"] for m in mqtt.on("cnc/laser-sim/jobs/events")]
     assert states[:5] == ["RECEIVED", "VALIDATED", "QUEUED", "SENDING", "DELIVERED"]
-    await wait_until(lambda: (mqtt.last_json("cnc/laser-sim/jobs/lastdelivered") or {}).get("value")
-                     == "J000001 part.nc", timeout=10, message="jobs/lastdelivered on MQTT")
+    await wait_until(
+        lambda: (mqtt.last_json("cnc/laser-sim/jobs/lastdelivered") or {}).get("value") == "J000001 part.nc",
+        timeout=10,
+        message="jobs/lastdelivered on MQTT",
+    )
 
     # auto-start: selected, started, and run to its end by the simulator
-    await wait_until(lambda: sim.machine.program.name == "part.nc" and sim.machine.program.part_count >= 1,
-                     timeout=30, message="the simulator to run part.nc")
-    job = await wait_until(lambda: "started part.nc" in (j := queue.get(1)).reason and j, timeout=20,
-                           message="the auto-start noted on the job")
+    await wait_until(
+        lambda: sim.machine.program.name == "part.nc" and sim.machine.program.part_count >= 1,
+        timeout=30,
+        message="the simulator to run part.nc",
+    )
+    job = await wait_until(
+        lambda: "started part.nc" in (j := queue.get(1)).reason and j,
+        timeout=20,
+        message="the auto-start noted on the job",
+    )
     assert job.state is JobState.DELIVERED

@@ -39,9 +39,15 @@ async def test_a_plain_stor_is_validated_queued_and_delivered(store: Store, harn
         assert job.filename == "part.nc" and job.user == USER and job.attempts == 1
         assert job.sha256 == hashlib.sha256(GOOD).hexdigest()
         assert job.estimate["extents"]["max_x"] == 50.0 and job.program_name == "O1001"
-        assert store.files() == {"part.nc": GOOD, "demo.nc": store.files()["demo.nc"], "soft-limit.nc": store.files()["soft-limit.nc"]}
+        assert store.files() == {
+            "part.nc": GOOD,
+            "demo.nc": store.files()["demo.nc"],
+            "soft-limit.nc": store.files()["soft-limit.nc"],
+        }
         assert renames.targets == ["part.nc"]  # uploaded as part.nc.tmp, renamed once
-        await wait_until(lambda: h.value("laser", "Jobs/LastDelivered") == "J000001 part.nc", message="LastDelivered")
+        await wait_until(
+            lambda: h.value("laser", "Jobs/LastDelivered") == "J000001 part.nc", message="LastDelivered"
+        )
         assert h.value("laser", "Jobs/QueueLength") == 0
         seen: list[Event] = []
 
@@ -98,8 +104,15 @@ async def test_curl_upload_as_nesting_software_does(store: Store, harness, tmp_p
     source.write_bytes(GOOD)
     async with harness([mapping_text("laser", store.port)]) as h:
         proc = await asyncio.create_subprocess_exec(
-            "curl", "-sS", "--max-time", "30", "-T", str(source), f"ftp://{USER}:{PASSWORD}@127.0.0.1:{h.port}/laser/",
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            "curl",
+            "-sS",
+            "--max-time",
+            "30",
+            "-T",
+            str(source),
+            f"ftp://{USER}:{PASSWORD}@127.0.0.1:{h.port}/laser/",
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
         )
         out, err = await proc.communicate()
         assert proc.returncode == 0, err.decode()
@@ -107,8 +120,14 @@ async def test_curl_upload_as_nesting_software_does(store: Store, harness, tmp_p
         assert store.files()["part.nc"] == GOOD
         # curl also lists and reads sizes the way other clients do
         proc = await asyncio.create_subprocess_exec(
-            "curl", "-sS", "--max-time", "30", "--list-only", f"ftp://{USER}:{PASSWORD}@127.0.0.1:{h.port}/",
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            "curl",
+            "-sS",
+            "--max-time",
+            "30",
+            "--list-only",
+            f"ftp://{USER}:{PASSWORD}@127.0.0.1:{h.port}/",
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
         )
         out, err = await proc.communicate()
         assert proc.returncode == 0, err.decode()
@@ -140,22 +159,34 @@ async def test_a_20_mb_program(store: Store, harness) -> None:
 async def test_concurrent_uploads_to_two_machines(store: Store, harness) -> None:
     mappings = [mapping_text("laser", store.port), mapping_text("plasma", store.port, folder="/DATA/Other")]
     async with harness(mappings) as h:
-        uploads = [h.stor(m, f"{m}-{n}.nc", program(f"{m} {n}", lines=200)) for m in ("laser", "plasma") for n in range(3)]
+        uploads = [
+            h.stor(m, f"{m}-{n}.nc", program(f"{m} {n}", lines=200))
+            for m in ("laser", "plasma")
+            for n in range(3)
+        ]
         replies = await asyncio.gather(*uploads)
         assert all(r.startswith("226 J") for r in replies), replies
-        await wait_until(lambda: all(j.state is S.DELIVERED for j in h.jobs()) and len(h.jobs()) == 6,
-                         timeout=30, message="six deliveries")
-        assert sorted(n for n in store.files() if n.startswith("laser")) == ["laser-0.nc", "laser-1.nc", "laser-2.nc"]
+        await wait_until(
+            lambda: all(j.state is S.DELIVERED for j in h.jobs()) and len(h.jobs()) == 6,
+            timeout=30,
+            message="six deliveries",
+        )
+        assert sorted(n for n in store.files() if n.startswith("laser")) == [
+            "laser-0.nc",
+            "laser-1.nc",
+            "laser-2.nc",
+        ]
         assert sorted(store.files("Other")) == ["plasma-0.nc", "plasma-1.nc", "plasma-2.nc"]
         for job in h.jobs():
             folder = "Programs" if job.machine == "laser" else "Other"
-            assert store.files(folder)[job.filename] == program(job.filename[:-3].replace("-", " "), lines=200)
+            assert store.files(folder)[job.filename] == program(
+                job.filename[:-3].replace("-", " "), lines=200
+            )
 
 
 async def test_a_login_sees_only_its_machines(store: Store, harness) -> None:
     mappings = [mapping_text("laser", store.port), mapping_text("plasma", store.port, folder="/DATA/Other")]
-    accounts = [{"user": USER, "password_hash": PASSWORD_HASH,
-                 "machines": ["plasma"]}]
+    accounts = [{"user": USER, "password_hash": PASSWORD_HASH, "machines": ["plasma"]}]
     async with harness(mappings, accounts=accounts) as h:
 
         def run() -> tuple[list[str], str, str]:
@@ -215,7 +246,12 @@ async def test_commands_real_clients_send(store: Store, harness) -> None:
             return out
 
         out = await in_thread(run)
-    assert out["feat"].startswith("211") and " SIZE" in out["feat"] and " MDTM" in out["feat"] and "UTF8" in out["feat"]
+    assert (
+        out["feat"].startswith("211")
+        and " SIZE" in out["feat"]
+        and " MDTM" in out["feat"]
+        and "UTF8" in out["feat"]
+    )
     assert out["noop"].startswith("200") and out["opts"].startswith("200") and out["type"].startswith("200")
     assert out["mode"].startswith("200") and out["stru"].startswith("200") and out["allo"].startswith("202")
     assert out["pwd"] == "/" and out["pwd2"] == "/laser" and out["syst"].startswith("215")

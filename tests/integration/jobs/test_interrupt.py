@@ -43,35 +43,54 @@ def test_ctrl_c_stops_the_gateway_and_its_validation_process_without_a_traceback
     inbox_port = free_port()
     (tmp_path / "laser.yaml").write_text(mapping_text("laser", free_port(), opcua_port=free_port()))
     config = gateway_file(
-        tmp_path, ["laser.yaml"], opcua_port=free_port(), inbox_port=inbox_port,
+        tmp_path,
+        ["laser.yaml"],
+        opcua_port=free_port(),
+        inbox_port=inbox_port,
         inbox={"accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
     )
     out, err = tmp_path / "stdout.log", tmp_path / "stderr.log"
     with out.open("wb") as stdout, err.open("wb") as stderr:
         proc = subprocess.Popen(
-            [str(BIN / "cnc-gateway"), "run", str(config)], stdout=stdout, stderr=stderr, cwd=tmp_path,
-            env=clean_env(), start_new_session=True,  # its own process group, as a terminal's job is
+            [str(BIN / "cnc-gateway"), "run", str(config)],
+            stdout=stdout,
+            stderr=stderr,
+            cwd=tmp_path,
+            env=clean_env(),
+            start_new_session=True,  # its own process group, as a terminal's job is
         )
     try:
-        wait_until_sync(lambda: port_open(inbox_port) or proc.poll() is not None, timeout=60,
-                        message="the gateway's inbox to listen")
+        wait_until_sync(
+            lambda: port_open(inbox_port) or proc.poll() is not None,
+            timeout=60,
+            message="the gateway's inbox to listen",
+        )
         assert proc.poll() is None, err.read_text()
         with ftplib.FTP() as ftp:  # a login starts the validation process (JobThreads.warm)
             ftp.connect("127.0.0.1", inbox_port, timeout=10)
             ftp.login(USER, PASSWORD)
             ftp.quit()
         gateway = psutil.Process(proc.pid)
-        wait_until_sync(lambda: validation_process(gateway) is not None, timeout=60,
-                        message="the validation process to start")
+        wait_until_sync(
+            lambda: validation_process(gateway) is not None,
+            timeout=60,
+            message="the validation process to start",
+        )
         worker = validation_process(gateway)
         assert worker is not None
         if compiled.plain is not None:
-            wait_until_sync(lambda: has_loaded_the_validator(worker), timeout=60,
-                            message="the validation process to be ready")
+            wait_until_sync(
+                lambda: has_loaded_the_validator(worker),
+                timeout=60,
+                message="the validation process to be ready",
+            )
         os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C does
         assert proc.wait(timeout=60) == 0
-        wait_until_sync(lambda: not worker.is_running() or worker.status() == psutil.STATUS_ZOMBIE, timeout=30,
-                        message="the validation process to end")
+        wait_until_sync(
+            lambda: not worker.is_running() or worker.status() == psutil.STATUS_ZOMBIE,
+            timeout=30,
+            message="the validation process to end",
+        )
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)

@@ -67,7 +67,6 @@ async def test_only_the_newest_ended_jobs_stay_retained(
     assert fresh.last_json("cnc/laser/jobs/J000004")["state"] == "DELIVERED"
 
 
-
 async def test_a_restart_clears_records_an_earlier_run_left_retained(
     store: Store, harness, mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path
 ) -> None:
@@ -95,7 +94,9 @@ async def test_a_restart_clears_records_an_earlier_run_left_retained(
     path = tmp_path / "machine0.yaml"
     path.write_text(mapping_text("laser", store.port, extra="  mqtt_retained_jobs: 1"))
     inbox = InboxConfig.model_validate({"host": "127.0.0.1", "port": 0, "accounts": []})
-    config = Config(GatewayConfig(state_dir=str(h.state), inbox=inbox), (load_mapping(path, environ={}),), tmp_path)
+    config = Config(
+        GatewayConfig(state_dir=str(h.state), inbox=inbox), (load_mapping(path, environ={}),), tmp_path
+    )
     tree = VariableTree(config.definitions())
     sink = MqttSink(tree, mqtt_config(mosquitto.port), tmp_path / "mqtt", config.mappings)
     async with sink:

@@ -69,7 +69,10 @@ def test_the_validation_process_exits_when_its_gateway_is_killed() -> None:
 
 def test_the_validation_process_ignores_sigint() -> None:
     parent = subprocess.Popen(
-        [sys.executable, "-c", INTERRUPTED], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        [sys.executable, "-c", INTERRUPTED],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
         text=True,
     )
     try:

@@ -111,7 +111,9 @@ async def test_events_go_out_as_json_retained_state_and_an_ordered_stream(
         await wait_until(lambda: sink.online, message="the sink to connect")
         live = subscriber(recorders, mosquitto.port, topics=["cnc/m1/jobs/#"])
         for state in ("QUEUED", "SENDING", "DELIVERED"):
-            tree.events.publish(Event("m1", "jobs/J000007", {"id": "J000007", "state": state, "at": NOW}, retain=True))
+            tree.events.publish(
+                Event("m1", "jobs/J000007", {"id": "J000007", "state": state, "at": NOW}, retain=True)
+            )
             tree.events.publish(Event("m1", "jobs/events", {"id": "J000007", "to": state}))
         await wait_until(lambda: sink.settled and len(live.on("cnc/m1/jobs/events")) == 3, message="3 events")
         assert [r.json()["to"] for r in live.on("cnc/m1/jobs/events")] == ["QUEUED", "SENDING", "DELIVERED"]

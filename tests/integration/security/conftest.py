@@ -22,7 +22,11 @@ from tests.waiting import free_port
 ROOT = Path(__file__).resolve().parents[3]
 MACHINE = "laser-sim"
 # name -> (role, password). Cheap scrypt parameters: these tests log in dozens of times.
-USERS = {"vera": ("viewer", "vera-secret"), "otto": ("operator", "otto-secret"), "erik": ("engineer", "erik-secret")}
+USERS = {
+    "vera": ("viewer", "vera-secret"),
+    "otto": ("operator", "otto-secret"),
+    "erik": ("engineer", "erik-secret"),
+}
 
 
 def users_config() -> list[dict[str, str]]:
@@ -39,7 +43,9 @@ def laser_mapping(sim_port: int, ftp_port: int, **update: Any) -> MachineMapping
     )
     driver = mapping.driver.model_copy(update={"watchdog_interval": 0.5})
     assert mapping.jobs is not None
-    jobs = mapping.jobs.model_copy(update={"controller": mapping.jobs.controller.model_copy(update={"port": ftp_port})})
+    jobs = mapping.jobs.model_copy(
+        update={"controller": mapping.jobs.controller.model_copy(update={"port": ftp_port})}
+    )
     return mapping.model_copy(update={"driver": driver, "jobs": jobs, **update})
 
 
@@ -82,7 +88,11 @@ async def secure_gateway(
         "users": users_config(),
     }
     settings.update(gateway or {})
-    config = Config(GatewayConfig.model_validate(settings), (laser_mapping(sim_port, ftp_port, **(mapping or {})),), tmp_path)
+    config = Config(
+        GatewayConfig.model_validate(settings),
+        (laser_mapping(sim_port, ftp_port, **(mapping or {})),),
+        tmp_path,
+    )
     sim = None
     if simulator:
         sim = Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=tmp_path / "store")

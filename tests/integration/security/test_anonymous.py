@@ -52,11 +52,13 @@ def from_mapping_alone(tmp_path: Path, sim_port: int, gw_port: int) -> Config:
     config = load([ROOT / "mappings" / "laser-sim.yaml"], environ=environ(sim_port))
     gw = config.gateway
     assert gw.users == [] and gw.access == AccessConfig()  # what a new user gets
-    gw = gw.model_copy(update={
-        "opcua": gw.opcua.model_copy(update={"endpoint": f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"}),
-        "inbox": gw.inbox.model_copy(update={"port": free_port()}),
-        "state_dir": str(tmp_path / "state"),
-    })
+    gw = gw.model_copy(
+        update={
+            "opcua": gw.opcua.model_copy(update={"endpoint": f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"}),
+            "inbox": gw.inbox.model_copy(update={"port": free_port()}),
+            "state_dir": str(tmp_path / "state"),
+        }
+    )
     return Config(gw, config.machines, tmp_path, config.files)
 
 
@@ -89,12 +91,18 @@ async def running(tmp_path: Path, access: str | None = None) -> AsyncIterator[Ri
         config = from_gateway_file(tmp_path, sim_port, gw_port, access)
     config = to_simulator_store(config, ftp_port)
     store = tmp_path / "store"
-    async with Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=store) as sim, Gateway(config) as gw:
+    async with (
+        Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=store) as sim,
+        Gateway(config) as gw,
+    ):
         task = asyncio.create_task(gw.run(), name="test:gateway")
         try:
             machine = gw.tree.machines[MACHINE]
-            await wait_until(lambda: machine.nodes["Feed/Override"].sample.good, timeout=15,
-                             message="the gateway mirroring the simulator")
+            await wait_until(
+                lambda: machine.nodes["Feed/Override"].sample.good,
+                timeout=15,
+                message="the gateway mirroring the simulator",
+            )
             yield Rig(gw, sim, config.gateway.opcua.endpoint, config.state_dir)
         finally:
             task.cancel()
@@ -124,8 +132,11 @@ def override(value: int) -> ua.Variant:
 
 def opened(caplog: pytest.LogCaptureFixture) -> list[str]:
     """What start-up warned anonymous clients may change."""
-    return [r.getMessage() for r in caplog.records
-            if r.levelno == logging.WARNING and "anonymous clients" in r.getMessage()]
+    return [
+        r.getMessage()
+        for r in caplog.records
+        if r.levelno == logging.WARNING and "anonymous clients" in r.getMessage()
+    ]
 
 
 async def test_without_a_gateway_file_anonymous_clients_change_nothing(
@@ -142,27 +153,40 @@ async def test_without_a_gateway_file_anonymous_clients_change_nothing(
             assert await status_of(rig.node(client, "Control/Start").write_value(ua.Variant(True))) == DENIED
             commands, programs = rig.node(client, "Commands"), rig.node(client, "Programs")
             assert await status_of(commands.call_method("2:start")) == DENIED
-            assert await status_of(
-                programs.call_method("2:Delete", ua.Variant("demo.nc", ua.VariantType.String))
-            ) == DENIED
+            assert (
+                await status_of(
+                    programs.call_method("2:Delete", ua.Variant("demo.nc", ua.VariantType.String))
+                )
+                == DENIED
+            )
             assert await status_of(programs.call_method("2:List")) == "Good"  # reading stays open
 
             # An alarm raised on the machine itself: anonymous clients see it, and may not acknowledge it.
             alarms = Alarms()
             subscription = await client.create_subscription(20, alarms)
-            await subscription.subscribe_alarms_and_conditions(ua.NodeId(ua.ObjectIds.Server),
-                                                               ua.ObjectIds.AlarmConditionType)
+            await subscription.subscribe_alarms_and_conditions(
+                ua.NodeId(ua.ObjectIds.Server), ua.ObjectIds.AlarmConditionType
+            )
             sim.select_program("soft-limit.nc")
             sim.start()
             await wait_until(lambda: alarms.received, timeout=15, message="the soft-limit alarm event")
             event = alarms.received[-1]
-            assert await status_of(client.get_node(event.NodeId).call_method(
-                ACK, ua.Variant(event.EventId, ua.VariantType.ByteString),
-                ua.Variant(ua.LocalizedText("me"), ua.VariantType.LocalizedText),
-            )) == DENIED
+            assert (
+                await status_of(
+                    client.get_node(event.NodeId).call_method(
+                        ACK,
+                        ua.Variant(event.EventId, ua.VariantType.ByteString),
+                        ua.Variant(ua.LocalizedText("me"), ua.VariantType.LocalizedText),
+                    )
+                )
+                == DENIED
+            )
 
         # The controller kept its values: nothing anonymous reached it.
-        assert sim.override == 100 and rig.gateway.tree.machines[MACHINE].nodes["Feed/Override"].sample.value == 100
+        assert (
+            sim.override == 100
+            and rig.gateway.tree.machines[MACHINE].nodes["Feed/Override"].sample.value == 100
+        )
         assert sim.store.exists("demo.nc") and sim.state is MachineState.ALARM
         await rig.gateway.audit.flush()
         rows = [r.entry for r in AuditStore(audit_path(rig.state_dir)).query(machine=MACHINE, limit=100)]
@@ -171,8 +195,10 @@ async def test_without_a_gateway_file_anonymous_clients_change_nothing(
     for target in ("Feed/Override", "Control/Start", "Commands.start", "Programs.Delete", "Alarms/1001#1"):
         assert (target, None, "viewer", DENIED) in refused, (target, refused)
     assert opened(caplog) == []
-    assert any("anonymous clients on" in r.getMessage() and "change nothing" in r.getMessage()
-               for r in caplog.records), "start-up says anonymous clients only read"
+    assert any(
+        "anonymous clients on" in r.getMessage() and "change nothing" in r.getMessage()
+        for r in caplog.records
+    ), "start-up says anonymous clients only read"
 
 
 async def test_a_gateway_file_that_gives_anonymous_clients_operator_opens_those_writes_and_warns(
@@ -190,7 +216,9 @@ async def test_a_gateway_file_that_gives_anonymous_clients_operator_opens_those_
             assert await status_of(rig.node(client, "Feed/Override").write_value(override(50))) == "Good"
             mode = ua.Variant(1, ua.VariantType.Int16)
             assert await status_of(rig.node(client, "Machine/Mode").write_value(mode)) == DENIED
-        await wait_until(lambda: rig.sim.machine.override == 50, timeout=10, message="the override on the controller")
+        await wait_until(
+            lambda: rig.sim.machine.override == 50, timeout=10, message="the override on the controller"
+        )
 
 
 async def test_access_enabled_false_opens_everything_and_warns(

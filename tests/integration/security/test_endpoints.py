@@ -23,8 +23,12 @@ CLIENT_URI = "urn:cnc-gateway-tests:scada"
 def client_certificate(folder: Path, name: str) -> tuple[Path, Path]:
     key = cert_gen.generate_private_key()
     cert = cert_gen.generate_self_signed_app_certificate(
-        key, name, {}, [x509.UniformResourceIdentifier(CLIENT_URI), x509.DNSName("localhost")],
-        [ExtendedKeyUsageOID.CLIENT_AUTH], days=30,
+        key,
+        name,
+        {},
+        [x509.UniformResourceIdentifier(CLIENT_URI), x509.DNSName("localhost")],
+        [ExtendedKeyUsageOID.CLIENT_AUTH],
+        days=30,
     )
     folder.mkdir(parents=True, exist_ok=True)
     cert_path, key_path = folder / f"{name}.der", folder / f"{name}.pem"
@@ -39,7 +43,9 @@ async def secure_client(rig: Rig, cert: Path, key: Path, user: str = "otto") -> 
     client.set_user(user)
     client.set_password(USERS[user][1])
     await client.set_security(
-        SecurityPolicyBasic256Sha256, str(cert), str(key),
+        SecurityPolicyBasic256Sha256,
+        str(cert),
+        str(key),
         server_certificate=str(rig.state_dir / "pki" / "own" / "cert.der"),
         mode=ua.MessageSecurityMode.SignAndEncrypt,
     )
@@ -54,7 +60,9 @@ async def test_signed_and_encrypted_sessions_for_trusted_clients_only(tmp_path: 
         first = (pki / "own" / "cert.der").read_bytes()
         server_cert = x509.load_der_x509_certificate(first)
         uris = server_cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
-        assert rig.gateway.sink("opcua").application_uri in uris.get_values_for_type(x509.UniformResourceIdentifier)
+        assert rig.gateway.sink("opcua").application_uri in uris.get_values_for_type(
+            x509.UniformResourceIdentifier
+        )
 
         probe = Client(rig.endpoint, timeout=5)
         endpoints = await probe.connect_and_get_server_endpoints()

@@ -26,19 +26,32 @@ async def test_the_machines_mqtt_writers_role_decides(
         gateway={"mqtt": mqtt_config(mosquitto.port)},
         mapping={"mqtt": MachineMqtt(writable=True, writer_role=role)},
     ) as rig:
-        await wait_until(lambda: (rec.last_json(OVERRIDE) or {}).get("value") == 100, timeout=20,
-                         message="the override on MQTT")
+        await wait_until(
+            lambda: (rec.last_json(OVERRIDE) or {}).get("value") == 100,
+            timeout=20,
+            message="the override on MQTT",
+        )
         rec.publish(f"{OVERRIDE}/set", b'{"value": 55}')
-        result = await wait_until(lambda: rec.last_json(f"{OVERRIDE}/set/result"), message="the write's answer")
+        result = await wait_until(
+            lambda: rec.last_json(f"{OVERRIDE}/set/result"), message="the write's answer"
+        )
         assert rig.sim is not None
         if accepted:
             assert result == {"ok": True}
-            await wait_until(lambda: rig.sim.machine.override == 55, timeout=5, message="the simulator's override")
+            await wait_until(
+                lambda: rig.sim.machine.override == 55, timeout=5, message="the simulator's override"
+            )
         else:
             assert result["ok"] is False and result["status"] == "BadUserAccessDenied"
             assert f"role {role!r} may not write {MACHINE}/Feed/Override" in result["error"]
             assert rig.sim.machine.override == 100
         await rig.gateway.audit.flush()
         [entry] = [r.entry for r in AuditStore(audit_path(rig.state_dir)).query(machine=MACHINE)]
-    assert (entry.origin, entry.role, entry.user, entry.target, entry.new) == ("mqtt", role, None, "Feed/Override", "55")
+    assert (entry.origin, entry.role, entry.user, entry.target, entry.new) == (
+        "mqtt",
+        role,
+        None,
+        "Feed/Override",
+        "55",
+    )
     assert entry.status == ("Good" if accepted else "BadUserAccessDenied")

@@ -49,18 +49,30 @@ async def attempt(rig: Rig, client: Client, override: int) -> dict[str, Any]:
         "mode_level": bool(await user_access(client, "Machine/Mode") & WRITE),
         "delete_executable": await user_executable(client, "Programs/Delete"),
         "list_executable": await user_executable(client, "Programs/List"),
-        "override": await status_of(node(client, "Feed/Override").write_value(ua.Variant(override, ua.VariantType.UInt16))),
-        "mode": await status_of(node(client, "Machine/Mode").write_value(ua.Variant(0, ua.VariantType.Int16))),
-        "delete": await status_of(programs.call_method("2:Delete", ua.Variant("gone.nc", ua.VariantType.String))),
+        "override": await status_of(
+            node(client, "Feed/Override").write_value(ua.Variant(override, ua.VariantType.UInt16))
+        ),
+        "mode": await status_of(
+            node(client, "Machine/Mode").write_value(ua.Variant(0, ua.VariantType.Int16))
+        ),
+        "delete": await status_of(
+            programs.call_method("2:Delete", ua.Variant("gone.nc", ua.VariantType.String))
+        ),
         "put": await status_of(
-            programs.call_method("2:Put", ua.Variant("t.nc", ua.VariantType.String), ua.Variant("M30\n", ua.VariantType.String))
-        ) if override == 41 else None,
+            programs.call_method(
+                "2:Put", ua.Variant("t.nc", ua.VariantType.String), ua.Variant("M30\n", ua.VariantType.String)
+            )
+        )
+        if override == 41
+        else None,
     }
 
 
 async def test_each_role_may_do_what_it_may_and_the_audit_shows_all_of_it(tmp_path: Path) -> None:
     async with secure_gateway(tmp_path) as rig:
-        await wait_until(lambda: rig.machine.nodes["Feed/Override"].sample.good, timeout=15, message="override Good")
+        await wait_until(
+            lambda: rig.machine.nodes["Feed/Override"].sample.good, timeout=15, message="override Good"
+        )
         seen: dict[str, dict[str, Any]] = {}
         for index, user in enumerate([None, "vera", "otto", "erik"]):
             client = rig.client(user)
@@ -76,10 +88,17 @@ async def test_each_role_may_do_what_it_may_and_the_audit_shows_all_of_it(tmp_pa
         assert not seen[who]["delete_executable"] and seen[who]["list_executable"]
     assert seen["vera"]["put"] == denied
     assert (seen["otto"]["override"], seen["otto"]["mode"]) == ("Good", denied)
-    assert seen["otto"]["override_level"] and not seen["otto"]["mode_level"] and seen["otto"]["delete_executable"]
+    assert (
+        seen["otto"]["override_level"]
+        and not seen["otto"]["mode_level"]
+        and seen["otto"]["delete_executable"]
+    )
     assert seen["erik"]["override"] == seen["erik"]["mode"] == "Good"
     assert seen["erik"]["override_level"] and seen["erik"]["mode_level"]
-    for who in ("otto", "erik"):  # allowed: the call reaches the simulator's program store, which has no such file
+    for who in (
+        "otto",
+        "erik",
+    ):  # allowed: the call reaches the simulator's program store, which has no such file
         assert seen[who]["delete"] == "BadNotFound", who
 
     def row(user: str | None, target: str) -> Any:
@@ -91,7 +110,13 @@ async def test_each_role_may_do_what_it_may_and_the_audit_shows_all_of_it(tmp_pa
     assert (refused.status, refused.role, refused.origin, refused.new) == (denied, "viewer", "opcua", "41")
     assert "role 'viewer' may not write laser-sim/Feed/Override" in refused.reason
     written = row("otto", "Feed/Override")
-    assert (written.kind, written.status, written.role, written.old, written.new) == ("write", "Good", "operator", "100", "42")
+    assert (written.kind, written.status, written.role, written.old, written.new) == (
+        "write",
+        "Good",
+        "operator",
+        "100",
+        "42",
+    )
     assert row(None, "Feed/Override").role == "viewer"
     assert row("otto", "Machine/Mode").status == denied and row("erik", "Machine/Mode").status == "Good"
     call = row("vera", "Programs.Delete")
@@ -100,9 +125,21 @@ async def test_each_role_may_do_what_it_may_and_the_audit_shows_all_of_it(tmp_pa
     assert row("vera", "Programs.Put").status == denied
 
     out = subprocess.run(
-        [sys.executable, "-m", "gateway.cli.main", "audit", "list", "--state-dir", str(rig.state_dir),
-         "--user", "otto"],
-        capture_output=True, text=True, timeout=60, cwd=ROOT,
+        [
+            sys.executable,
+            "-m",
+            "gateway.cli.main",
+            "audit",
+            "list",
+            "--state-dir",
+            str(rig.state_dir),
+            "--user",
+            "otto",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
     )
     assert out.returncode == 0, out.stderr
     lines = [line for line in out.stdout.splitlines() if "Feed/Override" in line]
@@ -116,11 +153,15 @@ async def test_wrong_passwords_are_refused_and_repeated_ones_lock_the_address_ou
 ) -> None:
     caplog.set_level(logging.INFO, logger="gateway.auth")
     lockout = {"failures": 3, "window": 60, "duration": 300}
-    async with secure_gateway(tmp_path, simulator=False, gateway={"access": {"anonymous": "refuse", "lockout": lockout}}) as rig:
+    async with secure_gateway(
+        tmp_path, simulator=False, gateway={"access": {"anonymous": "refuse", "lockout": lockout}}
+    ) as rig:
         with pytest.raises(ua.UaError) as anonymous:
             async with rig.client():
                 pass
-        assert "BadIdentityTokenRejected" in repr(anonymous.value) or "BadUserAccessDenied" in repr(anonymous.value)
+        assert "BadIdentityTokenRejected" in repr(anonymous.value) or "BadUserAccessDenied" in repr(
+            anonymous.value
+        )
 
         async with rig.client("otto") as client:  # the right password, before any failure
             assert await user_access(client, "Feed/Override") & WRITE

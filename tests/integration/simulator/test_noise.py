@@ -48,7 +48,9 @@ async def test_noise_changes_arrive_in_sequence_round_robin_with_their_write_tim
                 got = [value for value, _ in seen.values[str(node)]]
                 assert got[0] == 0.0  # the initial value, before the noise started
                 changes = got[1:]
-                assert changes == [float(k) for k in range(index + 1, written + 1, 20)]  # change k goes to (k-1) % 20
+                assert changes == [
+                    float(k) for k in range(index + 1, written + 1, 20)
+                ]  # change k goes to (k-1) % 20
                 stamps = [ts for _, ts in seen.values[str(node)][1:]]
                 now = datetime.now(UTC)
                 assert all(started - timedelta(seconds=1) <= ts.replace(tzinfo=UTC) <= now for ts in stamps)

@@ -11,7 +11,7 @@ import time
 from collections import defaultdict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +57,7 @@ variables:
   - {path: Ram/Setpoint, source: "ns=3;s=fs", type: Double, unit: kN, access: readwrite}
 """
 
-TS = datetime(2026, 11, 21, 12, 0, tzinfo=timezone.utc)
+TS = datetime(2026, 11, 21, 12, 0, tzinfo=UTC)
 
 
 class Writer:
@@ -122,7 +122,9 @@ async def env(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Env]:
         async with Client(sink.endpoint) as client:
             changes = Changes()
             sub = await client.create_subscription(20, changes)
-            yield Env(tree, sink, client, tree.machines["laser"], tree.machines["press"], writer, changes, sub)
+            yield Env(
+                tree, sink, client, tree.machines["laser"], tree.machines["press"], writer, changes, sub
+            )
         runner.cancel()
         await asyncio.wait({runner})
         assert not runner.done() or runner.cancelled(), "the value loop died"
@@ -153,8 +155,12 @@ async def test_variable_attributes_by_browse_path(env: Env) -> None:
     assert await node.read_node_class() == ua.NodeClass.Variable
     assert await node.read_data_type() == ua.NodeId(ua.ObjectIds.Double)
     assert await node.read_value_rank() == -1
-    assert (await node.read_attribute(ua.AttributeIds.AccessLevel)).Value.Value == ua.AccessLevel.CurrentRead.mask
-    assert (await node.read_attribute(ua.AttributeIds.UserAccessLevel)).Value.Value == ua.AccessLevel.CurrentRead.mask
+    assert (
+        await node.read_attribute(ua.AttributeIds.AccessLevel)
+    ).Value.Value == ua.AccessLevel.CurrentRead.mask
+    assert (
+        await node.read_attribute(ua.AttributeIds.UserAccessLevel)
+    ).Value.Value == ua.AccessLevel.CurrentRead.mask
     assert (await node.read_description()).Text == "Actual X position"
     assert (await node.read_display_name()).Text == "Position"
     assert await node.read_type_definition() == ua.NodeId(ua.ObjectIds.AnalogItemType)
@@ -173,14 +179,20 @@ async def test_equal_constant_attributes_are_one_object_and_stay_apart_when_set(
     nodes = env.sink.server.iserver.aspace._nodes
     x = nodes[ua.NodeId("laser/Axes/X/Position", 2)].attributes
     y = nodes[ua.NodeId("laser/Axes/Y/Position", 2)].attributes
-    for attribute in (ua.AttributeIds.ValueRank, ua.AttributeIds.DataType, ua.AttributeIds.AccessLevel,
-                      ua.AttributeIds.WriteMask, ua.AttributeIds.Historizing):
+    for attribute in (
+        ua.AttributeIds.ValueRank,
+        ua.AttributeIds.DataType,
+        ua.AttributeIds.AccessLevel,
+        ua.AttributeIds.WriteMask,
+        ua.AttributeIds.Historizing,
+    ):
         assert x[attribute].value is y[attribute].value, attribute.name
     target = nodes[ua.NodeId("laser/Axes/X/Target", 2)].attributes
     assert x[ua.AttributeIds.AccessLevel].value is not target[ua.AttributeIds.AccessLevel].value  # not equal
     shared = y[ua.AttributeIds.MinimumSamplingInterval].value
     await env.sink.server.write_attribute_value(
-        ua.NodeId("laser/Axes/X/Position", 2), ua.DataValue(ua.Variant(250.0, ua.VariantType.Double)),
+        ua.NodeId("laser/Axes/X/Position", 2),
+        ua.DataValue(ua.Variant(250.0, ua.VariantType.Double)),
         ua.AttributeIds.MinimumSamplingInterval,
     )
     try:
@@ -290,7 +302,9 @@ async def test_invalidate_turns_the_value_bad_not_connected(env: Env) -> None:
     )
     assert dv.StatusCode.is_bad()
     env.laser.ingest(node, False, TS + timedelta(seconds=2))
-    dv = await wait_until(lambda: (d := env.changes.latest(nodeid)) and d.StatusCode.is_good() and d, message="good again")
+    dv = await wait_until(
+        lambda: (d := env.changes.latest(nodeid)) and d.StatusCode.is_good() and d, message="good again"
+    )
     assert dv.Value.Value is False
 
 
@@ -299,23 +313,29 @@ async def test_arrays_datetimes_and_strings(env: Env) -> None:
     started = env.laser.nodes["Program/Started"]
     name = env.laser.nodes["Program/Name"]
     ids = [await env.watch(n) for n in (table, started, name)]
-    when = datetime(2026, 11, 20, 8, 30, 15, 250000, tzinfo=timezone.utc)
+    when = datetime(2026, 11, 20, 8, 30, 15, 250000, tzinfo=UTC)
     env.laser.ingest(table, [10.0, 55.5, 100.0], TS)
     env.laser.ingest(started, when, TS)
     env.laser.ingest(name, "bracket.nc", TS)
-    await wait_until(lambda: (d := env.changes.latest(ids[0])) and d.Value.Value == [10.0, 55.5, 100.0], message="array")
+    await wait_until(
+        lambda: (d := env.changes.latest(ids[0])) and d.Value.Value == [10.0, 55.5, 100.0], message="array"
+    )
     dv = env.changes.latest(ids[0])
     assert dv.Value.VariantType == ua.VariantType.Double and dv.Value.is_array
     await wait_until(lambda: (d := env.changes.latest(ids[1])) and d.Value.Value == when, message="datetime")
     assert env.changes.latest(ids[1]).Value.VariantType == ua.VariantType.DateTime
-    await wait_until(lambda: (d := env.changes.latest(ids[2])) and d.Value.Value == "bracket.nc", message="string")
+    await wait_until(
+        lambda: (d := env.changes.latest(ids[2])) and d.Value.Value == "bracket.nc", message="string"
+    )
 
 
 async def test_scaling_is_visible_to_the_client(env: Env) -> None:
     node = env.laser.nodes["Axes/X/Target"]
     nodeid = await env.watch(node)
     env.laser.ingest(node, 250000, TS)  # raw counts: 250000 * 0.001 + 5 = 255 mm
-    dv = await wait_until(lambda: (d := env.changes.latest(nodeid)) and d.Value.Value == 255.0 and d, message="scaled")
+    dv = await wait_until(
+        lambda: (d := env.changes.latest(nodeid)) and d.Value.Value == 255.0 and d, message="scaled"
+    )
     assert dv.Value.VariantType == ua.VariantType.Double
 
 
@@ -324,10 +344,13 @@ async def test_a_value_that_does_not_fit_is_bad_type_mismatch_and_the_loop_goes_
     nodeid = await env.watch(node)
     env.laser.ingest(node, "not a number", TS)  # a misbehaving driver
     await wait_until(
-        lambda: (d := env.changes.latest(nodeid)) and d.StatusCode == code("BadTypeMismatch"), message="mismatch"
+        lambda: (d := env.changes.latest(nodeid)) and d.StatusCode == code("BadTypeMismatch"),
+        message="mismatch",
     )
     env.laser.ingest(node, 42, TS + timedelta(seconds=1))
-    dv = await wait_until(lambda: (d := env.changes.latest(nodeid)) and d.StatusCode.is_good() and d, message="recovered")
+    dv = await wait_until(
+        lambda: (d := env.changes.latest(nodeid)) and d.StatusCode.is_good() and d, message="recovered"
+    )
     assert dv.Value.Value == 42 and dv.Value.VariantType == ua.VariantType.UInt32
 
 
@@ -335,7 +358,9 @@ async def test_status_variables_follow_the_machine(env: Env) -> None:
     state = await env.var("laser", "Status/State")
     nodeid = await env.watch(env.laser.status.state_node)
     env.laser.status.connected()
-    await wait_until(lambda: (d := env.changes.latest(nodeid)) and d.Value.Value == "connected", message="state")
+    await wait_until(
+        lambda: (d := env.changes.latest(nodeid)) and d.Value.Value == "connected", message="state"
+    )
     assert await state.read_value() == "connected"
 
 
@@ -427,14 +452,20 @@ async def test_machine_without_controller_connection_is_bad_not_connected(env: E
 async def test_other_attributes_and_non_variables_are_not_writable(env: Env, writer: Writer) -> None:
     target = await env.var("laser", "Axes/X/Target")
     with pytest.raises(UaStatusCodeError) as raised:
-        await target.write_attribute(ua.AttributeIds.DisplayName, ua.DataValue(ua.Variant(ua.LocalizedText("Y"))))
+        await target.write_attribute(
+            ua.AttributeIds.DisplayName, ua.DataValue(ua.Variant(ua.LocalizedText("Y")))
+        )
     assert raised.value.code == ua.StatusCodes.BadNotWritable
     axes = await env.var("laser", "Axes")
     with pytest.raises(UaStatusCodeError) as raised:
-        await axes.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText("x"))))
+        await axes.write_attribute(
+            ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText("x")))
+        )
     assert raised.value.code == ua.StatusCodes.BadNotWritable
     eu = await target.get_child("0:EngineeringUnits")
-    assert await _write(eu, ua.Variant(ua.EUInformation(), ua.VariantType.ExtensionObject)) == code("BadNotWritable")
+    assert await _write(eu, ua.Variant(ua.EUInformation(), ua.VariantType.ExtensionObject)) == code(
+        "BadNotWritable"
+    )
     assert (await target.read_display_name()).Text == "Target"
     assert writer.writes == []
 
@@ -488,11 +519,17 @@ def _big_mapping(index: int, count: int) -> MachineMapping:
             var["range"] = {"min": 0, "max": 100}
         variables.append(var)
     return MachineMapping.model_validate(
-        {"machine": f"m{index:02d}", "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"}, "variables": variables}
+        {
+            "machine": f"m{index:02d}",
+            "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+            "variables": variables,
+        }
     )
 
 
-async def test_ten_thousand_variables_over_twenty_machines(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+async def test_ten_thousand_variables_over_twenty_machines(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     tree = VariableTree([_big_mapping(i, 500).definition() for i in range(20)])
     config = OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/big")
     started = time.perf_counter()
@@ -502,7 +539,9 @@ async def test_ten_thousand_variables_over_twenty_machines(tmp_path: Path, capsy
         with capsys.disabled():
             print(f"\nOPC UA sink: {mapped} mapped variables over 20 machines started in {elapsed:.2f} s")
         async with Client(sink.endpoint) as client:
-            node = await client.nodes.objects.get_child(["2:Machines", "2:m19", "2:Group1", "2:Sub9", "2:Var24"])
+            node = await client.nodes.objects.get_child(
+                ["2:Machines", "2:m19", "2:Group1", "2:Sub9", "2:Var24"]
+            )
             assert node.nodeid == ua.NodeId("m19/Group1/Sub9/Var24", 2)
             assert await node.read_data_type() == ua.NodeId(ua.ObjectIds.Double)
     assert mapped == 10_000

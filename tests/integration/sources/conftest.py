@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -21,7 +21,7 @@ from tests.trees import MappedTree
 from tests.waiting import free_port
 
 NS_URI = "urn:cnc-gateway:test-controller"
-SOURCE_TS = datetime(2024, 5, 6, 7, 8, 9, 123000, tzinfo=timezone.utc)
+SOURCE_TS = datetime(2024, 5, 6, 7, 8, 9, 123000, tzinfo=UTC)
 
 # (browse name, node id string within our namespace, initial value, variant type, writable)
 SCALARS = [
@@ -32,7 +32,7 @@ SCALARS = [
     (
         "Clock",
         "s=::AsGlobalPV:gClock",
-        datetime(2024, 1, 2, 3, 4, 5, tzinfo=timezone.utc),
+        datetime(2024, 1, 2, 3, 4, 5, tzinfo=UTC),
         ua.VariantType.DateTime,
         True,
     ),

@@ -8,7 +8,7 @@ import signal
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -63,10 +63,10 @@ async def test_values_flow_into_the_tree_with_source_timestamps(controller: Cont
         assert pos.value == 12.5
         assert pos.source_ts == SOURCE_TS
         assert machine.nodes["ActiveAlarms/Ids"].sample.value == [3, 7]
-        assert machine.nodes["Clock"].sample.value == datetime(2024, 1, 2, 3, 4, 5, tzinfo=timezone.utc)
+        assert machine.nodes["Clock"].sample.value == datetime(2024, 1, 2, 3, 4, 5, tzinfo=UTC)
         assert machine.nodes["Program/Name"].sample.value == "part.nc"
 
-        later = datetime(2024, 5, 6, 7, 9, 0, tzinfo=timezone.utc)
+        later = datetime(2024, 5, 6, 7, 9, 0, tzinfo=UTC)
         await controller.set("ActPos", 13.25, later)
         await wait_until(
             lambda: machine.nodes["Axes/X/Position"].sample.value == 13.25, message="new position"
@@ -190,9 +190,9 @@ async def test_write_is_accepted_and_visible_on_the_server(controller: Controlle
         assert await controller.get("Override") == 75
         await machine.write("Counter", -12, CTX)
         assert await controller.get("Counter") == -12
-        when = datetime(2025, 1, 1, 12, 0, tzinfo=timezone.utc)
+        when = datetime(2025, 1, 1, 12, 0, tzinfo=UTC)
         await machine.write("Clock", when.isoformat(), CTX)
-        assert (await controller.get("Clock")).replace(tzinfo=timezone.utc) == when
+        assert (await controller.get("Clock")).replace(tzinfo=UTC) == when
         await wait_until(lambda: machine.nodes["Feed/Override"].sample.value == 75, message="write seen back")
 
 

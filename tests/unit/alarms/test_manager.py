@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -21,25 +21,27 @@ from gateway.model.tree import Machine, VariableTree
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 
-T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=UTC)
 OPERATOR = WriteContext("test", "olga", "operator")
 
 
 def mapping(confirm: bool = False) -> MachineMapping:
-    return MachineMapping.model_validate({
-        "machine": "m",
-        "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
-        "variables": [
-            {"path": "A/Ids", "source": "ns=2;s=ids", "type": "UInt32[]"},
-            {"path": "A/Texts", "source": "ns=2;s=texts", "type": "String[]"},
-            {"path": "A/Classes", "source": "ns=2;s=classes", "type": "UInt16[]"},
-        ],
-        "alarms": {
-            "source": {"ids": "A/Ids", "texts": "A/Texts", "severities": "A/Classes"},
-            "severity": {1: 100, 3: 700},
-            "confirm": confirm,
-        },
-    })
+    return MachineMapping.model_validate(
+        {
+            "machine": "m",
+            "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+            "variables": [
+                {"path": "A/Ids", "source": "ns=2;s=ids", "type": "UInt32[]"},
+                {"path": "A/Texts", "source": "ns=2;s=texts", "type": "String[]"},
+                {"path": "A/Classes", "source": "ns=2;s=classes", "type": "UInt16[]"},
+            ],
+            "alarms": {
+                "source": {"ids": "A/Ids", "texts": "A/Texts", "severities": "A/Classes"},
+                "severity": {1: 100, 3: 700},
+                "confirm": confirm,
+            },
+        }
+    )
 
 
 class Rig:
@@ -85,14 +87,22 @@ async def test_raise_and_clear_with_severity_mapped_and_times_from_the_controlle
     await rig.look()
     raised = [c for c in rig.changes if c.kind is Kind.RAISED]
     assert [(c.record.id, c.record.severity, c.record.raised_at) for c in raised] == [
-        ("1001", 700, rig.clock), ("5", 500, rig.clock)  # class 9 is not mapped: default_severity
+        ("1001", 700, rig.clock),
+        ("5", 500, rig.clock),  # class 9 is not mapped: default_severity
     ]
     events = rig.bus("alarms/events")
-    assert [(e["event"], e["id"]) for e in events if e["event"] == "raised"] == [("raised", "1001"), ("raised", "5")]
+    assert [(e["event"], e["id"]) for e in events if e["event"] == "raised"] == [
+        ("raised", "1001"),
+        ("raised", "5"),
+    ]
     rig.controller((5, "Info", 9))
     await rig.look()
     cleared = rig.changes[-1]
-    assert cleared.kind is Kind.CLEARED and cleared.record.id == "1001" and cleared.record.cleared_at == rig.clock
+    assert (
+        cleared.kind is Kind.CLEARED
+        and cleared.record.id == "1001"
+        and cleared.record.cleared_at == rig.clock
+    )
     assert cleared.retained  # not acknowledged yet
     active = rig.bus("alarms/active")[-1]
     assert [(a["id"], a["active"]) for a in active] == [("1001", False), ("5", True)]

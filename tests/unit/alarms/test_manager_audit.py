@@ -10,8 +10,8 @@ import pytest
 
 from gateway.alarms.manager import AlarmManager, AlreadyAcknowledged, UnknownAlarm
 from gateway.alarms.service import AlarmService
-from gateway.model.audit import AuditEntry
 from gateway.errors import AccessDenied, WriteError
+from gateway.model.audit import AuditEntry
 from gateway.model.context import WriteContext
 from gateway.model.tree import VariableTree
 from tests.trees import MappedTree

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 from gateway.alarms.records import ActiveAlarm, AlarmRecord
 from gateway.alarms.sources import diff, read_parallel
 
-T0 = datetime(2026, 5, 6, 7, 8, 9, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 8, 9, tzinfo=UTC)
 
 
 def record(occurrence: int, alarm_id: str) -> AlarmRecord:
@@ -24,7 +24,10 @@ def test_parallel_arrays_pair_up_by_index() -> None:
 
 def test_short_companion_arrays_leave_gaps_and_empty_slots_are_skipped() -> None:
     alarms = read_parallel([0, 1001, "", 7], ["", "Soft limit"], [3])
-    assert [(a.id, a.text, a.severity_class) for a in alarms] == [("1001", "Soft limit", None), ("7", "Alarm 7", None)]
+    assert [(a.id, a.text, a.severity_class) for a in alarms] == [
+        ("1001", "Soft limit", None),
+        ("7", "Alarm 7", None),
+    ]
 
 
 def test_no_texts_or_classes_at_all() -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -10,7 +10,7 @@ import pytest
 from gateway.alarms.records import ActiveAlarm
 from gateway.alarms.store import AlarmStore, AlarmStoreError
 
-T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=UTC)
 
 
 @pytest.fixture
@@ -21,8 +21,15 @@ def store(tmp_path: Path) -> AlarmStore:
 
 
 def test_raise_clear_and_the_transitions_are_recorded(store: AlarmStore) -> None:
-    [first, second] = store.apply("m", [(ActiveAlarm("1001", "Soft limit", 3, {"Axis": "X"}), 700),
-                                        (ActiveAlarm("2001", "Program error", 2), 400)], [], T0)
+    [first, second] = store.apply(
+        "m",
+        [
+            (ActiveAlarm("1001", "Soft limit", 3, {"Axis": "X"}), 700),
+            (ActiveAlarm("2001", "Program error", 2), 400),
+        ],
+        [],
+        T0,
+    )
     assert second == first + 1
     store.apply("m", [], [(first, T0 + timedelta(seconds=5), True)], T0 + timedelta(seconds=5))
     retained = {r.occurrence: r for r in store.retained("m")}

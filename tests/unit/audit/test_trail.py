@@ -4,22 +4,36 @@ from __future__ import annotations
 
 import logging
 import threading
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
 
-from gateway.model.audit import MAX_TEXT, AuditEntry, as_text
 from gateway.audit.store import AuditStore
 from gateway.audit.trail import AuditTrail
+from gateway.model.audit import MAX_TEXT, AuditEntry, as_text
 from tests.waiting import wait_until
 
-T0 = datetime(2026, 5, 6, 7, 8, 9, 123456, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 8, 9, 123456, tzinfo=UTC)
 
 
-def entry(i: int, *, user: str | None = "olga", machine: str = "m1", status: str = "Good", at: datetime = T0) -> AuditEntry:
-    return AuditEntry(at + timedelta(seconds=i), "write", machine, "Feed/Override", "opcua", user, "operator",
-                      "100", str(i), status, "" if status == "Good" else "no", 0.002)
+def entry(
+    i: int, *, user: str | None = "olga", machine: str = "m1", status: str = "Good", at: datetime = T0
+) -> AuditEntry:
+    return AuditEntry(
+        at + timedelta(seconds=i),
+        "write",
+        machine,
+        "Feed/Override",
+        "opcua",
+        user,
+        "operator",
+        "100",
+        str(i),
+        status,
+        "" if status == "Good" else "no",
+        0.002,
+    )
 
 
 async def test_a_burst_is_stored_in_few_transactions_and_logged_one_line_each(
@@ -84,7 +98,7 @@ async def test_queries_by_machine_user_and_time(tmp_path: Path) -> None:
 async def test_old_entries_are_pruned_at_start(tmp_path: Path) -> None:
     path = tmp_path / "audit.sqlite3"
     store = AuditStore(path)
-    now = datetime.now(timezone.utc)
+    now = datetime.now(UTC)
     store.insert([entry(0, at=now - timedelta(days=400)), entry(0, at=now - timedelta(days=1))])
     store.close()
     async with AuditTrail(path, retention_days=365):

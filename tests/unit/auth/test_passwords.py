@@ -28,8 +28,15 @@ def test_the_default_cost_is_what_parse_reports() -> None:
 
 @pytest.mark.parametrize(
     "encoded",
-    ["", "plain-password", "bcrypt$x", "scrypt$1000$8$1$AAAAAAAAAAA=$AAAAAAAAAAAAAAAAAAAAAA==",
-     "scrypt$1024$8$1$!!!$AAAA", "scrypt$1024$8$1$AAAA$AAAA", "scrypt$2097152$8$1$AAAAAAAAAAA=$AAAAAAAAAAAAAAAAAAAAAA=="],
+    [
+        "",
+        "plain-password",
+        "bcrypt$x",
+        "scrypt$1000$8$1$AAAAAAAAAAA=$AAAAAAAAAAAAAAAAAAAAAA==",
+        "scrypt$1024$8$1$!!!$AAAA",
+        "scrypt$1024$8$1$AAAA$AAAA",
+        "scrypt$2097152$8$1$AAAAAAAAAAA=$AAAAAAAAAAAAAAAAAAAAAA==",
+    ],
 )
 def test_malformed_hashes_are_errors_to_parse_and_never_match(encoded: str) -> None:
     with pytest.raises(ValueError):

@@ -49,10 +49,12 @@ def test_anonymous_gets_the_configured_role_or_is_refused(hashed: str) -> None:
 
 
 def test_built_from_the_gateway_file(hashed: str) -> None:
-    config = GatewayConfig.model_validate({
-        "users": [{"name": "olga", "password_hash": hashed, "role": "engineer"}],
-        "access": {"anonymous": "refuse", "lockout": {"failures": 2, "window": 10, "duration": 20}},
-    })
+    config = GatewayConfig.model_validate(
+        {
+            "users": [{"name": "olga", "password_hash": hashed, "role": "engineer"}],
+            "access": {"anonymous": "refuse", "lockout": {"failures": 2, "window": 10, "duration": 20}},
+        }
+    )
     users = config.user_directory()
     assert users.has_users and not users.anonymous_allowed
     assert users.limiter.failures == 2 and users.limiter.lockout == 20

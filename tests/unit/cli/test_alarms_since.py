@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import pytest
 
 from gateway.cli.since import parse_since
 
-NOW = datetime(2026, 5, 6, 12, 0, 0, tzinfo=timezone.utc)
+NOW = datetime(2026, 5, 6, 12, 0, 0, tzinfo=UTC)
 
 
 @pytest.mark.parametrize(
@@ -18,8 +18,8 @@ NOW = datetime(2026, 5, 6, 12, 0, 0, tzinfo=timezone.utc)
         ("15m", NOW - timedelta(minutes=15)),
         ("2h", NOW - timedelta(hours=2)),
         ("1.5d", NOW - timedelta(hours=36)),
-        ("2026-05-06T10:00:00Z", datetime(2026, 5, 6, 10, tzinfo=timezone.utc)),
-        ("2026-05-06T10:00:00+02:00", datetime(2026, 5, 6, 8, tzinfo=timezone.utc)),
+        ("2026-05-06T10:00:00Z", datetime(2026, 5, 6, 10, tzinfo=UTC)),
+        ("2026-05-06T10:00:00+02:00", datetime(2026, 5, 6, 8, tzinfo=UTC)),
     ],
 )
 def test_durations_and_times(text: str, expected: datetime) -> None:

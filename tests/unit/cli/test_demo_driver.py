@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -17,11 +17,11 @@ from gateway.commands.runner import install_commands
 from gateway.config.mapping import MachineMapping
 from gateway.errors import InvalidState
 from gateway.model.context import WriteContext
-from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.model.tree import Machine, VariableNode
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 
-T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=UTC)
 IDLE, RUNNING, PAUSED, ALARM = 0, 1, 2, 3
 USER = WriteContext("mqtt", None, "operator")
 
@@ -31,21 +31,31 @@ def mapping() -> MachineMapping:
         {"path": f"Control/{name}", "source": f"ns=2;s={name}", "type": "Boolean", "access": "readwrite"}
         for name in ("Start", "Stop", "Reset")
     ]
-    return MachineMapping.model_validate({
-        "machine": "m",
-        "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
-        "variables": [
-            {"path": "Machine/State", "source": "ns=2;s=state", "type": "Int16"},
-            {"path": "Program/Name", "source": "ns=2;s=name", "type": "String"},
-            {"path": "Control/SelectProgram", "source": "ns=2;s=select", "type": "String", "access": "readwrite"},
-            {"path": "Feed/Override", "source": "ns=2;s=ovr", "type": "UInt16", "access": "readwrite"},
-            *control,
-        ],
-        "commands": {
-            "stop": {"writes": [{"path": "Control/Stop", "value": True}],
-                     "done": {"path": "Machine/State", "in": [0, 3]}, "timeout": 2},
-        },
-    })
+    return MachineMapping.model_validate(
+        {
+            "machine": "m",
+            "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+            "variables": [
+                {"path": "Machine/State", "source": "ns=2;s=state", "type": "Int16"},
+                {"path": "Program/Name", "source": "ns=2;s=name", "type": "String"},
+                {
+                    "path": "Control/SelectProgram",
+                    "source": "ns=2;s=select",
+                    "type": "String",
+                    "access": "readwrite",
+                },
+                {"path": "Feed/Override", "source": "ns=2;s=ovr", "type": "UInt16", "access": "readwrite"},
+                *control,
+            ],
+            "commands": {
+                "stop": {
+                    "writes": [{"path": "Control/Stop", "value": True}],
+                    "done": {"path": "Machine/State", "in": [0, 3]},
+                    "timeout": 2,
+                },
+            },
+        }
+    )
 
 
 class Controller:
@@ -62,9 +72,7 @@ class Controller:
             if self.state != IDLE:
                 raise InvalidState("a program is already running")
             self.show(RUNNING)
-        elif node.path == "Control/Stop" and self.state in (RUNNING, PAUSED):
-            self.show(IDLE)
-        elif node.path == "Control/Reset":
+        elif (node.path == "Control/Stop" and self.state in (RUNNING, PAUSED)) or node.path == "Control/Reset":
             self.show(IDLE)
         elif node.path == "Control/SelectProgram":
             self.select(raw)
@@ -114,9 +122,15 @@ async def running(**options: Any) -> AsyncIterator[tuple[Machine, Controller, De
 
 
 async def driver_ran_demo(controller: Controller, trail: Trail, starts: int = 1) -> None:
-    await wait_until(lambda: controller.program == DEMO_PROGRAM and controller.state == RUNNING
-                     and trail.by("demo").count("Control/Start") >= starts, timeout=5,
-                     message=f"the driver to start {DEMO_PROGRAM}")
+    await wait_until(
+        lambda: (
+            controller.program == DEMO_PROGRAM
+            and controller.state == RUNNING
+            and trail.by("demo").count("Control/Start") >= starts
+        ),
+        timeout=5,
+        message=f"the driver to start {DEMO_PROGRAM}",
+    )
 
 
 async def settled(driver: DemoDriver) -> None:

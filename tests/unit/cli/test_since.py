@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Iterator
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import pytest
 from hypothesis import given
@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from gateway.cli import alarms, audit
 from gateway.cli.since import parse_since, since_arg
 
-NOW = datetime(2026, 5, 6, 12, 0, 0, tzinfo=timezone.utc)
+NOW = datetime(2026, 5, 6, 12, 0, 0, tzinfo=UTC)
 BERLIN = timezone(timedelta(hours=2))  # Europe/Berlin in May (CEST)
 
 
@@ -37,9 +37,9 @@ def in_berlin(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
         ("1.5d", NOW - timedelta(hours=36)),
         ("2w", NOW - timedelta(weeks=2)),  # alarms took weeks, audit did not
         (" 7d ", NOW - timedelta(days=7)),
-        ("2026-05-06T10:00:00Z", datetime(2026, 5, 6, 10, tzinfo=timezone.utc)),
-        ("2026-05-06T10:00:00z", datetime(2026, 5, 6, 10, tzinfo=timezone.utc)),
-        ("2026-05-06T09:00+02:00", datetime(2026, 5, 6, 7, tzinfo=timezone.utc)),
+        ("2026-05-06T10:00:00Z", datetime(2026, 5, 6, 10, tzinfo=UTC)),
+        ("2026-05-06T10:00:00z", datetime(2026, 5, 6, 10, tzinfo=UTC)),
+        ("2026-05-06T09:00+02:00", datetime(2026, 5, 6, 7, tzinfo=UTC)),
     ],
 )
 def test_durations_and_zoned_times(text: str, expected: datetime) -> None:
@@ -47,15 +47,15 @@ def test_durations_and_zoned_times(text: str, expected: datetime) -> None:
 
 
 def test_a_time_or_date_without_a_zone_is_local_time(in_berlin: None) -> None:
-    assert parse_since("2026-05-06T07:00", NOW) == datetime(2026, 5, 6, 5, 0, tzinfo=timezone.utc)
-    assert parse_since("2026-05-06", NOW) == datetime(2026, 5, 5, 22, 0, tzinfo=timezone.utc)
+    assert parse_since("2026-05-06T07:00", NOW) == datetime(2026, 5, 6, 5, 0, tzinfo=UTC)
+    assert parse_since("2026-05-06", NOW) == datetime(2026, 5, 5, 22, 0, tzinfo=UTC)
     assert parse_since("2026-05-06 07:00:30", NOW).utcoffset() == timedelta(hours=2)
 
 
 def test_today_is_local_midnight(in_berlin: None) -> None:
     got = parse_since("today", NOW)  # 14:00 in Berlin
     assert got == datetime(2026, 5, 6, 0, 0, tzinfo=BERLIN)
-    assert parse_since("Today", datetime(2026, 5, 6, 23, 30, tzinfo=timezone.utc)) == datetime(
+    assert parse_since("Today", datetime(2026, 5, 6, 23, 30, tzinfo=UTC)) == datetime(
         2026, 5, 7, 0, 0, tzinfo=BERLIN
     )  # already the 7th in Berlin
 
@@ -74,7 +74,7 @@ def test_every_duration_is_that_long_ago(amount: int, unit: str) -> None:
     assert NOW - parse_since(f"{amount}{unit}", NOW) == timedelta(seconds=amount * seconds)
 
 
-@given(st.datetimes(datetime(1970, 1, 2), datetime(9999, 12, 30), timezones=st.just(timezone.utc)))
+@given(st.datetimes(datetime(1970, 1, 2), datetime(9999, 12, 30), timezones=st.just(UTC)))
 def test_an_iso_time_reads_back_as_itself(when: datetime) -> None:
     assert parse_since(when.isoformat(), NOW) == when
     assert parse_since(when.isoformat().replace("+00:00", "Z"), NOW) == when
@@ -86,8 +86,8 @@ def test_both_commands_take_the_same_since(command: object) -> None:
     command.register(parser.add_subparsers())  # type: ignore[attr-defined]
     name = command.__name__.rsplit(".", 1)[-1]  # type: ignore[attr-defined]
     args = parser.parse_args([name, "list", "--since", "2w"])
-    assert isinstance(args.since, datetime) and args.since < datetime.now(timezone.utc) - timedelta(days=13)
-    assert since_arg("2026-05-06T10:00:00Z") == datetime(2026, 5, 6, 10, tzinfo=timezone.utc)
+    assert isinstance(args.since, datetime) and args.since < datetime.now(UTC) - timedelta(days=13)
+    assert since_arg("2026-05-06T10:00:00Z") == datetime(2026, 5, 6, 10, tzinfo=UTC)
     with pytest.raises(SystemExit) as exit_:
         parser.parse_args([name, "list", "--since", "yesterday"])
     assert exit_.value.code == 2

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 from hypothesis import strategies as st
@@ -42,7 +42,7 @@ def scalars(base: DataType, encoding: str = "utf-8") -> st.SearchStrategy[Any]:
     return st.datetimes(
         min_value=datetime(1601, 1, 1),
         max_value=datetime(9999, 12, 31, 23, 59, 59, 999999),
-        timezones=st.just(timezone.utc),
+        timezones=st.just(UTC),
     )
 
 

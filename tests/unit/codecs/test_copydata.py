@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import itertools
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -373,7 +373,7 @@ def test_layout_refuses_bad_settings(kwargs: dict[str, Any]) -> None:
 
 
 def test_layout_defaults() -> None:
-    assert DEFAULT == Layout(2, 2, "utf-8", 1 << 20)
+    assert Layout(2, 2, "utf-8", 1 << 20) == DEFAULT
     assert (DEFAULT.max_id, DEFAULT.max_length, DEFAULT.header.size) == (65535, 65535, 4)
 
 
@@ -406,7 +406,7 @@ def test_errors_are_codec_errors_with_a_kind() -> None:
 
 def test_datetime_values_survive_a_frame() -> None:
     table = VariableTable.from_ids({1: ("T", "DateTime")})
-    when = datetime(2024, 2, 29, 12, 0, 0, 1, tzinfo=timezone.utc)
+    when = datetime(2024, 2, 29, 12, 0, 0, 1, tzinfo=UTC)
     [reading] = table.decode(
         decode_tcp(pack_tcp(table.encode({1: when}, DEFAULT), DEFAULT), DEFAULT)[0], DEFAULT
     )

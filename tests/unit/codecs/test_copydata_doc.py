@@ -7,7 +7,7 @@ Each example is a fenced block right after a `<!-- copydata-example: NAME -->` m
 from __future__ import annotations
 
 import re
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ TABLE = VariableTable.from_ids(
 WORKED_EXAMPLE = [(1, 1234.5), (5, 42), (7, True), (9, "Teil-Ø3.nc")]
 TCP_EXAMPLES: dict[str, list[tuple[int, Any]]] = {
     "tcp": WORKED_EXAMPLE,
-    "filetime": [(12, datetime(2024, 1, 1, tzinfo=timezone.utc))],
+    "filetime": [(12, datetime(2024, 1, 1, tzinfo=UTC))],
     "double-array": [(13, [0.5, 100.0])],
     "string-array": [(11, ["Gas low", "Düse"])],
 }

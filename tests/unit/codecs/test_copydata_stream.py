@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import pytest
 from hypothesis import given, settings
@@ -43,7 +43,7 @@ FRAMES = [
     TABLE.encode({1: 1234.5}, LAYOUT),
     TABLE.encode({1: -0.25, 5: 42, 7: True, 9: "PART-01.nc"}, LAYOUT),
     TABLE.encode(
-        {11: ["Gas pressure low", "Düse verschmutzt"], 12: datetime(2024, 1, 1, tzinfo=timezone.utc)}, LAYOUT
+        {11: ["Gas pressure low", "Düse verschmutzt"], 12: datetime(2024, 1, 1, tzinfo=UTC)}, LAYOUT
     ),
     TABLE.encode({7: False}, LAYOUT),
     Frame.multi([Item(5, b"\x00\x00\x00\x00")]),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import pytest
 from hypothesis import given, settings
@@ -71,8 +71,8 @@ def test_arrays_are_their_elements_back_to_back(base: DataType, data: st.DataObj
         ("String", "Grüße", "47 72 c3 bc c3 9f 65"),
         ("String", "", ""),
         # FILETIME of the Unix epoch: 116444736000000000 = 0x019DB1DED53E8000
-        ("DateTime", datetime(1970, 1, 1, tzinfo=timezone.utc), "00 80 3e d5 de b1 9d 01"),
-        ("DateTime", datetime(1601, 1, 1, 0, 0, 0, 1, tzinfo=timezone.utc), "0a 00 00 00 00 00 00 00"),
+        ("DateTime", datetime(1970, 1, 1, tzinfo=UTC), "00 80 3e d5 de b1 9d 01"),
+        ("DateTime", datetime(1601, 1, 1, 0, 0, 0, 1, tzinfo=UTC), "0a 00 00 00 00 00 00 00"),
         ("Int16[]", [1, -1], "01 00 ff ff"),
         ("Boolean[]", [True, False, True], "01 00 01"),
         ("Double[]", [], ""),
@@ -97,20 +97,20 @@ def test_text_follows_the_layout_encoding() -> None:
 
 def test_datetime_naive_is_utc_and_other_zones_are_converted() -> None:
     naive = datetime(2024, 5, 6, 7, 8, 9, 123456)
-    aware = naive.replace(tzinfo=timezone.utc)
+    aware = naive.replace(tzinfo=UTC)
     plus2 = aware.astimezone(timezone(timedelta(hours=2)))
     spec = T("DateTime")
     assert (
         encode_value(spec, naive, UTF8) == encode_value(spec, aware, UTF8) == encode_value(spec, plus2, UTF8)
     )
     assert decode_value(spec, encode_value(spec, plus2, UTF8), UTF8) == aware
-    assert decode_value(spec, encode_value(spec, plus2, UTF8), UTF8).tzinfo is timezone.utc
+    assert decode_value(spec, encode_value(spec, plus2, UTF8), UTF8).tzinfo is UTC
 
 
 def test_sub_microsecond_filetime_ticks_are_truncated() -> None:
     # 7 ticks = 700 ns after 1601-01-01: below Python's resolution.
     assert decode_value(T("DateTime"), (17).to_bytes(8, "little"), UTF8) == datetime(
-        1601, 1, 1, 0, 0, 0, 1, tzinfo=timezone.utc
+        1601, 1, 1, 0, 0, 0, 1, tzinfo=UTC
     )
 
 
@@ -158,7 +158,7 @@ def test_float_too_large_for_32_bits_is_refused() -> None:
 
 def test_datetime_before_1601_is_refused() -> None:
     with pytest.raises(ValueOutOfRange, match="before 1601-01-01"):
-        encode_value(T("DateTime"), datetime(1600, 12, 31, 23, 59, 59, tzinfo=timezone.utc), UTF8)
+        encode_value(T("DateTime"), datetime(1600, 12, 31, 23, 59, 59, tzinfo=UTC), UTF8)
 
 
 @pytest.mark.parametrize(
@@ -253,7 +253,7 @@ def test_invalid_text_points_at_the_bad_byte() -> None:
 
 
 def test_filetime_after_year_9999_is_refused() -> None:
-    last = encode_value(T("DateTime"), datetime(9999, 12, 31, 23, 59, 59, 999999, tzinfo=timezone.utc), UTF8)
+    last = encode_value(T("DateTime"), datetime(9999, 12, 31, 23, 59, 59, 999999, tzinfo=UTC), UTF8)
     after = (int.from_bytes(last, "little") + 10).to_bytes(8, "little")
     with pytest.raises(BadFiletime, match="after 9999-12-31") as info:
         decode_value(T("DateTime"), after, UTF8)

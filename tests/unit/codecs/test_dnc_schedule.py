@@ -69,7 +69,7 @@ def replay(lines: list[DripLine], out: Outcome, links: dict[str, float]) -> Repl
     by_key = {line.key: line for line in lines}
     arrivals: dict[str, list[tuple[float, float]]] = {k: [] for k in by_key}  # (granted at, arrives)
     grant_times: dict[str, list[tuple[float, int]]] = {k: [] for k in by_key}  # (time, bytes granted so far)
-    sent_bytes = {k: 0 for k in by_key}
+    sent_bytes = dict.fromkeys(by_key, 0)
     sent_blocks: dict[str, list[int]] = {k: [] for k in by_key}
     for when, grant in out.grants:
         line = by_key[grant.key]

@@ -208,7 +208,7 @@ def test_gcode_like_text_raises_nothing_but_gcode_error(text: str) -> None:
 
 @given(st.text(alphabet="GXYZgxyzFIJKMNOS0123456789.+- \t();%/#[]", max_size=40))
 def test_fast_path_agrees_with_the_exact_lexer(line: str) -> None:
-    from gateway.codecs.gcode import _LineLexer, _fast_line
+    from gateway.codecs.gcode import _fast_line, _LineLexer
 
     fast = _fast_line(line, 7)
     if fast is None:

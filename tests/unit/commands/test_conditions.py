@@ -44,7 +44,9 @@ def test_reasons_name_the_state() -> None:
     assert bind(cond(**{"not": 0}), {}).expected() == "≠ 0 (Idle)"
     assert bind(cond(equals=1), {}).expected() == "= 1 (Running)"
     assert bind(cond(**{"in": [1]}), {}).expected() == "= 1 (Running)"
-    assert bind(Condition.model_validate({"path": "Program/Name", "equals": "x"}), {}).label("a.nc") == "'a.nc'"
+    assert (
+        bind(Condition.model_validate({"path": "Program/Name", "equals": "x"}), {}).label("a.nc") == "'a.nc'"
+    )
 
 
 def test_arguments_are_put_in_typed_or_as_text() -> None:
@@ -60,7 +62,9 @@ def test_arguments_are_put_in_typed_or_as_text() -> None:
 def test_placeholders_are_plain_argument_names() -> None:
     assert placeholders("a {x} b {y_2}") == ["x", "y_2"]
     assert placeholders("{{not}} one") == []
-    assert whole_reference("{x}") == "x" and whole_reference("{x} ") is None and whole_reference("{{x}}") is None
+    assert (
+        whole_reference("{x}") == "x" and whole_reference("{x} ") is None and whole_reference("{{x}}") is None
+    )
     for bad in ("{x.attr}", "{x[0]}", "{x!r}", "{x:>3}", "{", "}"):
         with pytest.raises(ValueError):
             placeholders(bad)

@@ -4,7 +4,7 @@ completion, timeout, a controller that drops while the command waits, and regist
 from __future__ import annotations
 
 import asyncio
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -17,43 +17,55 @@ from gateway.model.tree import Machine, VariableNode
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 
-T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=UTC)
 CTX = WriteContext("test", "olga", "operator")
 STATES = {0: "Idle", 1: "Running", 2: "Paused", 3: "Alarm"}
 
 
 def mapping(timeout: float = 2.0) -> MachineMapping:
-    return MachineMapping.model_validate({
-        "machine": "m",
-        "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
-        "variables": [
-            {"path": "Machine/State", "source": "ns=2;s=state", "type": "Int16"},
-            {"path": "Program/Name", "source": "ns=2;s=name", "type": "String"},
-            {"path": "Control/Start", "source": "ns=2;s=start", "type": "Boolean", "access": "readwrite"},
-            {"path": "Control/Select", "source": "ns=2;s=select", "type": "String", "access": "readwrite"},
-            {"path": "Feed/Override", "source": "ns=2;s=ovr", "type": "UInt16", "access": "readwrite",
-             "range": {"min": 0, "max": 150}},
-        ],
-        "commands": {
-            "start": {
-                "allowed": {"path": "Machine/State", "in": [0], "names": STATES},
-                "writes": [{"path": "Control/Start", "value": True}],
-                "done": {"path": "Machine/State", "not": 0, "names": STATES},
-                "timeout": timeout,
+    return MachineMapping.model_validate(
+        {
+            "machine": "m",
+            "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+            "variables": [
+                {"path": "Machine/State", "source": "ns=2;s=state", "type": "Int16"},
+                {"path": "Program/Name", "source": "ns=2;s=name", "type": "String"},
+                {"path": "Control/Start", "source": "ns=2;s=start", "type": "Boolean", "access": "readwrite"},
+                {
+                    "path": "Control/Select",
+                    "source": "ns=2;s=select",
+                    "type": "String",
+                    "access": "readwrite",
+                },
+                {
+                    "path": "Feed/Override",
+                    "source": "ns=2;s=ovr",
+                    "type": "UInt16",
+                    "access": "readwrite",
+                    "range": {"min": 0, "max": 150},
+                },
+            ],
+            "commands": {
+                "start": {
+                    "allowed": {"path": "Machine/State", "in": [0], "names": STATES},
+                    "writes": [{"path": "Control/Start", "value": True}],
+                    "done": {"path": "Machine/State", "not": 0, "names": STATES},
+                    "timeout": timeout,
+                },
+                "select-program": {
+                    "arguments": [{"name": "name", "type": "String"}],
+                    "writes": [{"path": "Control/Select", "value": "{name}"}],
+                    "done": {"path": "Program/Name", "equals": "{name}"},
+                    "timeout": timeout,
+                },
+                "override": {
+                    "arguments": [{"name": "percent", "type": "UInt16"}],
+                    "writes": [{"path": "Feed/Override", "value": "{percent}"}],
+                    "role": "engineer",
+                },
             },
-            "select-program": {
-                "arguments": [{"name": "name", "type": "String"}],
-                "writes": [{"path": "Control/Select", "value": "{name}"}],
-                "done": {"path": "Program/Name", "equals": "{name}"},
-                "timeout": timeout,
-            },
-            "override": {
-                "arguments": [{"name": "percent", "type": "UInt16"}],
-                "writes": [{"path": "Feed/Override", "value": "{percent}"}],
-                "role": "engineer",
-            },
-        },
-    })
+        }
+    )
 
 
 class Controller:
@@ -127,7 +139,10 @@ async def test_the_guard_refuses_naming_the_state_and_nothing_is_written() -> No
     machine.ingest(machine.nodes["Machine/State"], 3, T0)
     with pytest.raises(InvalidState) as info:
         await call(machine, "start")
-    assert info.value.reason == "start is not allowed while Machine/State is 3 (Alarm); it needs Machine/State = 0 (Idle)"
+    assert (
+        info.value.reason
+        == "start is not allowed while Machine/State is 3 (Alarm); it needs Machine/State = 0 (Idle)"
+    )
     assert controller.writes == []
 
 
@@ -137,7 +152,9 @@ async def test_no_answer_within_the_timeout_is_bad_timeout_saying_what_it_waited
     with pytest.raises(ConfirmTimeout) as info:
         await call(machine, "start")
     assert info.value.status == "BadTimeout"
-    assert "no completion within 0.3 s" in info.value.reason and "Machine/State is 0 (Idle)" in info.value.reason
+    assert (
+        "no completion within 0.3 s" in info.value.reason and "Machine/State is 0 (Idle)" in info.value.reason
+    )
     assert controller.writes == [("Control/Start", True)]
 
 

@@ -31,7 +31,9 @@ def test_defaults_access_control_follows_the_users() -> None:
     assert not plain.access.is_enabled(plain.users)
     with_users = GatewayConfig.model_validate({"users": [user("olga", "operator")]})
     assert with_users.access.is_enabled(with_users.users)
-    forced_off = GatewayConfig.model_validate({"users": [user("olga", "operator")], "access": {"enabled": False}})
+    forced_off = GatewayConfig.model_validate(
+        {"users": [user("olga", "operator")], "access": {"enabled": False}}
+    )
     assert not forced_off.access.is_enabled(forced_off.users)
 
 
@@ -40,15 +42,19 @@ def test_users_need_a_known_role_a_unique_name_and_a_real_hash() -> None:
         {"users": [user("olga", "boss")]}
     )
     assert "user 'olga' is listed twice" in error({"users": [user("olga", "viewer"), user("olga", "admin")]})
-    assert "expected scrypt$N$r$p$salt$key" in error({"users": [{"name": "olga", "password_hash": "olga", "role": "admin"}]})
+    assert "expected scrypt$N$r$p$salt$key" in error(
+        {"users": [{"name": "olga", "password_hash": "olga", "role": "admin"}]}
+    )
     assert "use access.anonymous" in error({"users": [user("anonymous", "viewer")]})
 
 
 def test_roles_are_extendable_and_checked() -> None:
-    config = GatewayConfig.model_validate({
-        "roles": ["viewer", "operator", "shift-lead", "engineer", "admin"],
-        "users": [user("sam", "shift-lead")],
-    })
+    config = GatewayConfig.model_validate(
+        {
+            "roles": ["viewer", "operator", "shift-lead", "engineer", "admin"],
+            "users": [user("sam", "shift-lead")],
+        }
+    )
     assert config.users[0].role == "shift-lead"
     assert "listed twice" in error({"roles": ["viewer", "viewer"]})
     assert "lower-case letters" in error({"roles": ["Viewer"]})
@@ -56,7 +62,9 @@ def test_roles_are_extendable_and_checked() -> None:
 
 
 def test_access_roles_must_exist_and_someone_must_be_able_to_log_in() -> None:
-    assert "access.mqtt_writer_role: 'writer' is not a role" in error({"access": {"mqtt_writer_role": "writer"}})
+    assert "access.mqtt_writer_role: 'writer' is not a role" in error(
+        {"access": {"mqtt_writer_role": "writer"}}
+    )
     assert "access.anonymous: 'nobody' is not a role" in error({"access": {"anonymous": "nobody"}})
     assert "nobody could log in" in error({"access": {"enabled": True, "anonymous": "refuse"}})
     assert "nobody could log in" in error({"access": {"anonymous": "refuse"}})
@@ -97,4 +105,7 @@ def test_mapping_roles_are_checked_against_the_gateway_files_roles(tmp_path: Pat
         load([tmp_path / "gateway.yaml"])
     [issue] = info.value.issues
     assert (issue.file, issue.line, issue.key) == (str(tmp_path / "m1.yaml"), 5, "variables[0].role")
-    assert "'foreman' is not a role; the roles are viewer, operator, shift-lead, engineer, admin" in issue.message
+    assert (
+        "'foreman' is not a role; the roles are viewer, operator, shift-lead, engineer, admin"
+        in issue.message
+    )

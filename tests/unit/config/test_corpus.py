@@ -53,7 +53,10 @@ def test_broken_mapping_reports_every_error_located(path: Path) -> None:
 def test_check_command_exits_nonzero_and_prints_every_error() -> None:
     path = CORPUS / "many-errors.yaml"
     proc = subprocess.run(
-        [sys.executable, "-m", "gateway.cli.main", "check", str(path)], capture_output=True, text=True, timeout=60
+        [sys.executable, "-m", "gateway.cli.main", "check", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert proc.returncode == 2
     for line, key, _ in expectations(path):

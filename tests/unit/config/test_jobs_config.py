@@ -56,7 +56,13 @@ def test_duplicate_accounts_and_bad_ranges_are_refused() -> None:
 def test_jobs_defaults() -> None:
     jobs = JobsConfig.model_validate({"controller": {"host": "10.0.0.5"}})
     c = jobs.controller
-    assert (c.port, c.folder, c.upload, c.tls, c.user) == (21, "/DATA/Programs", "temp-rename", "none", "anonymous")
+    assert (c.port, c.folder, c.upload, c.tls, c.user) == (
+        21,
+        "/DATA/Programs",
+        "temp-rename",
+        "none",
+        "anonymous",
+    )
     assert jobs.duplicates == "skip" and jobs.max_attempts == 5 and jobs.auto is None
     assert jobs.validation.dialect == "generic"
 
@@ -77,7 +83,9 @@ def test_gateway_file_inbox_errors_are_located(tmp_path: Path) -> None:
         "  - {path: A, source: 'ns=2;s=a', type: Double}\n"
     )
     gw = tmp_path / "gateway.yaml"
-    gw.write_text("machines: [m.yaml]\ninbox:\n  port: 2121\n  accounts:\n    - user: nest\n      password_hash: nope\n")
+    gw.write_text(
+        "machines: [m.yaml]\ninbox:\n  port: 2121\n  accounts:\n    - user: nest\n      password_hash: nope\n"
+    )
     with pytest.raises(ConfigError) as info:
         load([gw], environ={})
     issue = info.value.issues[0]

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from gateway.cli.schema import schema
-from gateway.config.loader import load, load_mapping, read_yaml, is_gateway_file
+from gateway.config.loader import is_gateway_file, load, load_mapping, read_yaml
 
 MAPPINGS = Path(__file__).resolve().parents[3] / "mappings"
 YAML_FILES = sorted(MAPPINGS.rglob("*.yaml"))

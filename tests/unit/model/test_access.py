@@ -35,8 +35,12 @@ def test_gateway_writers_without_a_role_of_their_own_use_their_origins() -> None
     from gateway.model.context import WriteContext
 
     policy = AccessPolicy()
-    policy.configure(["viewer", "operator"], enabled=True, origin_roles={"jobs": "operator", "copydata": None},
-                     mqtt_roles={"m1": "viewer"})
+    policy.configure(
+        ["viewer", "operator"],
+        enabled=True,
+        origin_roles={"jobs": "operator", "copydata": None},
+        mqtt_roles={"m1": "viewer"},
+    )
     assert policy.role_of(WriteContext("jobs")) == "operator"
     assert policy.role_of(WriteContext("jobs", role="viewer")) == "viewer"  # a context's own role wins
     assert policy.role_of(WriteContext("copydata")) is None

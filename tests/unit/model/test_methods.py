@@ -6,8 +6,8 @@ from typing import Any
 import pytest
 
 from gateway.errors import ArgumentsMissing, TooManyArguments, TypeMismatch
-from gateway.model.methods import Argument, Method
 from gateway.model.context import WriteContext
+from gateway.model.methods import Argument, Method
 from gateway.model.types import TypeSpec
 
 
@@ -16,7 +16,9 @@ async def echo(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
 
 
 METHOD = Method(
-    "Programs", "Select", "select a program",
+    "Programs",
+    "Select",
+    "select a program",
     (Argument("name", TypeSpec.parse("String")), Argument("copies", TypeSpec.parse("UInt16"))),
     (Argument("result", TypeSpec.parse("String")),),
     echo,
@@ -29,7 +31,12 @@ async def test_method_checks_and_passes_typed_arguments() -> None:
 
 @pytest.mark.parametrize(
     ("args", "error"),
-    [(["part.nc"], ArgumentsMissing), (["a", 1, 2], TooManyArguments), ([5, 1], TypeMismatch), (["a", -1], TypeMismatch)],
+    [
+        (["part.nc"], ArgumentsMissing),
+        (["a", 1, 2], TooManyArguments),
+        ([5, 1], TypeMismatch),
+        (["a", -1], TypeMismatch),
+    ],
 )
 async def test_method_refuses_bad_arguments(args: list[Any], error: type) -> None:
     with pytest.raises(error):

@@ -1,13 +1,20 @@
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from gateway.config.loader import load_mapping
-from gateway.errors import ControllerRefused, ControllerUnavailable, NotWritable, OutOfRange, TypeMismatch, UnknownVariable
+from gateway.errors import (
+    ControllerRefused,
+    ControllerUnavailable,
+    NotWritable,
+    OutOfRange,
+    TypeMismatch,
+    UnknownVariable,
+)
 from gateway.model.context import WriteContext
 from gateway.model.sample import ReadBack
 from gateway.model.tree import VariableNode, VariableTree
@@ -24,7 +31,7 @@ variables:
   - {path: Name, source: "ns=2;s=n", type: String}
 """
 
-TS = datetime(2026, 11, 21, 12, 0, tzinfo=timezone.utc)
+TS = datetime(2026, 11, 21, 12, 0, tzinfo=UTC)
 CTX = WriteContext("test")
 
 
@@ -57,8 +64,11 @@ def test_deadband_drops_small_changes_but_not_slow_drift(tree: VariableTree) -> 
     x = m.nodes["Axes/X/Position"]
     for value in (0.0, 0.2, 0.4, 0.6, 0.7, 1.2):
         m.ingest(x, value, TS)
-    assert published(tree) == [("Axes/X/Position", 0.0, "Good"), ("Axes/X/Position", 0.6, "Good"),
-                               ("Axes/X/Position", 1.2, "Good")]
+    assert published(tree) == [
+        ("Axes/X/Position", 0.0, "Good"),
+        ("Axes/X/Position", 0.6, "Good"),
+        ("Axes/X/Position", 1.2, "Good"),
+    ]
 
 
 def test_percent_deadband_is_a_share_of_the_range(tree: VariableTree) -> None:
@@ -97,8 +107,11 @@ def test_quality_changes_are_published_and_keep_the_last_value(tree: VariableTre
     m.invalidate("BadNotConnected", "connection refused")  # no duplicate
     m.ingest(x, 3.0, TS)  # same value, but Good again: published
     rows = [r for r in published(tree) if r[0] == "Axes/X/Position"]
-    assert rows == [("Axes/X/Position", 3.0, "Good"), ("Axes/X/Position", 3.0, "BadNotConnected"),
-                    ("Axes/X/Position", 3.0, "Good")]
+    assert rows == [
+        ("Axes/X/Position", 3.0, "Good"),
+        ("Axes/X/Position", 3.0, "BadNotConnected"),
+        ("Axes/X/Position", 3.0, "Good"),
+    ]
     assert x.sample.reason == ""
 
 
@@ -130,7 +143,9 @@ async def test_write_reaches_the_source_unscaled(tree: VariableTree) -> None:
         ("No/Such", 1, UnknownVariable),
     ],
 )
-async def test_refused_writes_never_reach_the_source(tree: VariableTree, path: str, value: Any, error: type) -> None:
+async def test_refused_writes_never_reach_the_source(
+    tree: VariableTree, path: str, value: Any, error: type
+) -> None:
     m = tree.machines["m1"]
     m.writer = rec = Recorder()
     with pytest.raises(error) as info:

@@ -8,11 +8,11 @@ from typing import Any
 
 import pytest
 
-from gateway.model.audit import AuditEntry
 from gateway.config.loader import load_mapping
 from gateway.errors import AccessDenied, InvalidState, NotWritable, OutOfRange, TypeMismatch
-from gateway.model.methods import Argument, Method
+from gateway.model.audit import AuditEntry
 from gateway.model.context import WriteContext
+from gateway.model.methods import Argument, Method
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.model.types import TypeSpec
 
@@ -41,8 +41,15 @@ async def start(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
     return [f"started {args[0]}"]
 
 
-START = Method("Commands", "Start", "Start", (Argument("Program", TypeSpec.parse("String")),),
-               (Argument("Result", TypeSpec.parse("String")),), start, role="operator")
+START = Method(
+    "Commands",
+    "Start",
+    "Start",
+    (Argument("Program", TypeSpec.parse("String")),),
+    (Argument("Result", TypeSpec.parse("String")),),
+    start,
+    role="operator",
+)
 
 
 @pytest.fixture
@@ -51,7 +58,9 @@ def machine(tmp_path: Path) -> Machine:
     path.write_text(MAPPING)
     tree = VariableTree([load_mapping(path).definition()])
     tree.access.configure(
-        ["viewer", "operator", "engineer", "admin"], enabled=True, default_write_role="operator",
+        ["viewer", "operator", "engineer", "admin"],
+        enabled=True,
+        default_write_role="operator",
         origin_roles={"jobs": "operator", "copydata": None},
     )
     m = tree.machines["m1"]
@@ -69,19 +78,29 @@ def entries(machine: Machine) -> list[AuditEntry]:
 async def test_a_write_needs_the_variables_role_and_leaves_an_entry_either_way(machine: Machine) -> None:
     audit = entries(machine)
     override = machine.nodes["Feed/Override"]
-    with pytest.raises(AccessDenied, match="role 'viewer' may not write m1/Feed/Override: it needs 'operator'"):
+    with pytest.raises(
+        AccessDenied, match="role 'viewer' may not write m1/Feed/Override: it needs 'operator'"
+    ):
         await machine.write_node(override, 50, WriteContext("opcua", "vera", "viewer"))
     await machine.write_node(override, 50, WriteContext("opcua", "otto", "operator"))
     assert machine.writer.writes == [("Feed/Override", 50)]  # type: ignore[union-attr]
     refused, done = audit
     assert (refused.user, refused.role, refused.status, refused.target, refused.new) == (
-        "vera", "viewer", "BadUserAccessDenied", "Feed/Override", "50")
+        "vera",
+        "viewer",
+        "BadUserAccessDenied",
+        "Feed/Override",
+        "50",
+    )
     assert (done.status, done.reason, done.old, done.origin, done.kind) == ("Good", "", "0", "opcua", "write")
 
 
 async def test_the_machine_default_applies_to_variables_without_a_role(machine: Machine) -> None:
     gas = machine.nodes["Process/Gas"]
-    assert machine.write_role(gas) == "engineer" and machine.write_role(machine.nodes["Feed/Override"]) == "operator"
+    assert (
+        machine.write_role(gas) == "engineer"
+        and machine.write_role(machine.nodes["Feed/Override"]) == "operator"
+    )
     with pytest.raises(AccessDenied):
         await machine.write_node(gas, 1.5, WriteContext("opcua", "otto", "operator"))
     await machine.write_node(gas, 1.5, WriteContext("opcua", "erik", "engineer"))
@@ -91,7 +110,9 @@ async def test_refusals_of_every_kind_are_audited(machine: Machine) -> None:
     audit = entries(machine)
     ctx = WriteContext("mqtt", role="admin")
     for node, value, error in [
-        ("Feed/Rate", 1.0, NotWritable), ("Feed/Override", "50", TypeMismatch), ("Feed/Override", 151, OutOfRange)
+        ("Feed/Rate", 1.0, NotWritable),
+        ("Feed/Override", "50", TypeMismatch),
+        ("Feed/Override", 151, OutOfRange),
     ]:
         with pytest.raises(error):
             await machine.write_node(machine.nodes[node], value, ctx)
@@ -107,10 +128,14 @@ async def test_a_sinks_own_check_runs_after_the_role_check_inside_the_audit(mach
         raise TypeMismatch("wrong Variant")
 
     with pytest.raises(AccessDenied):
-        await machine.write_node(machine.nodes["Feed/Override"], 5, WriteContext("opcua", role="viewer"), check=check)
+        await machine.write_node(
+            machine.nodes["Feed/Override"], 5, WriteContext("opcua", role="viewer"), check=check
+        )
     assert not checked  # a viewer hears "access denied" whatever it sent
     with pytest.raises(TypeMismatch):
-        await machine.write_node(machine.nodes["Feed/Override"], 5, WriteContext("opcua", role="operator"), check=check)
+        await machine.write_node(
+            machine.nodes["Feed/Override"], 5, WriteContext("opcua", role="operator"), check=check
+        )
     assert [e.status for e in audit] == ["BadUserAccessDenied", "BadTypeMismatch"]
 
 
@@ -124,7 +149,9 @@ async def test_method_calls_are_authorised_and_audited(machine: Machine) -> None
     audit = entries(machine)
     with pytest.raises(AccessDenied, match="may not call m1/Commands.Start"):
         await machine.call_method(START, ["a.nc"], WriteContext("opcua", "vera", "viewer"))
-    assert await machine.call_method(START, ["a.nc"], WriteContext("mqtt", None, "operator")) == ["started a.nc"]
+    assert await machine.call_method(START, ["a.nc"], WriteContext("mqtt", None, "operator")) == [
+        "started a.nc"
+    ]
     with pytest.raises(InvalidState):
         await machine.call_method(START, ["alarm"], WriteContext("opcua", "otto", "operator"))
     assert [(e.kind, e.target, e.status, e.new) for e in audit] == [

@@ -1,6 +1,6 @@
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import pytest
 from hypothesis import given
@@ -71,13 +71,19 @@ def test_array_elements_are_checked_with_their_index() -> None:
 
 def test_datetime_from_iso_text_is_utc_aware() -> None:
     value = coerce(TypeSpec(DataType.DATETIME), "2026-11-21T10:00:00Z")
-    assert value == datetime(2026, 11, 21, 10, tzinfo=timezone.utc)
+    assert value == datetime(2026, 11, 21, 10, tzinfo=UTC)
 
 
 @pytest.mark.parametrize(
     ("type_name", "text", "expected"),
-    [("Double", "12.5", 12.5), ("UInt16", "80", 80), ("Boolean", "true", True), ("Boolean", "0", False),
-     ("String", " hi ", " hi "), ("Int32[]", "[1, 2]", [1, 2])],
+    [
+        ("Double", "12.5", 12.5),
+        ("UInt16", "80", 80),
+        ("Boolean", "true", True),
+        ("Boolean", "0", False),
+        ("String", " hi ", " hi "),
+        ("Int32[]", "[1, 2]", [1, 2]),
+    ],
 )
 def test_parse_text(type_name: str, text: str, expected: object) -> None:
     assert parse_text(TypeSpec.parse(type_name), text) == expected

@@ -1,6 +1,6 @@
 """The receive path, fed with real asyncua notification objects (no network needed)."""
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 from asyncua import ua
@@ -9,8 +9,8 @@ from gateway.config.mapping import MachineMapping
 from gateway.model.tree import Machine, VariableTree
 from gateway.sources.opcua_client import OpcUaSource
 
-TS = datetime(2024, 5, 6, 7, 8, 9, tzinfo=timezone.utc)
-SERVER_TS = datetime(2024, 5, 6, 7, 8, 10, tzinfo=timezone.utc)
+TS = datetime(2024, 5, 6, 7, 8, 9, tzinfo=UTC)
+SERVER_TS = datetime(2024, 5, 6, 7, 8, 10, tzinfo=UTC)
 
 
 def make_source() -> tuple[OpcUaSource, Machine]:
@@ -69,7 +69,7 @@ def test_missing_source_timestamp_falls_back_to_server_time_then_now() -> None:
     source, machine = make_source()
     feed(source, change(source, "Pos", 1.0, ts=None, server_ts=SERVER_TS))
     assert machine.nodes["Pos"].sample.source_ts == SERVER_TS
-    before = datetime.now(timezone.utc)
+    before = datetime.now(UTC)
     feed(source, change(source, "Count", 3, ts=None))
     ts = machine.nodes["Count"].sample.source_ts
     assert ts.tzinfo is not None and ts >= before

@@ -85,7 +85,9 @@ class FtpProgramStore:
             await client.login(cfg.user, password)
         except aioftp.StatusCodeError as exc:
             client.close()
-            raise DeliveryError(f"{self.what} {self.address} refused the login: {reply_of(exc)}", reply=reply_of(exc)) from None
+            raise DeliveryError(
+                f"{self.what} {self.address} refused the login: {reply_of(exc)}", reply=reply_of(exc)
+            ) from None
         except (OSError, EOFError, TimeoutError, ssl.SSLError, aioftp.AIOFTPException) as exc:
             client.close()
             raise DeliveryError(f"{self.what} {self.address} is unreachable: {_describe(exc)}") from None
@@ -118,7 +120,9 @@ class FtpProgramStore:
             reply = reply_of(exc)
             if missing is not None and _code(exc) in ("550", "450"):
                 raise ProgramNotFound(f"{missing} is not in {self.address} ({reply})", reply=reply) from None
-            raise DeliveryError(f"{what}: {self.what} answered {reply}", reply=reply, permanent=_code(exc) == "553") from None
+            raise DeliveryError(
+                f"{what}: {self.what} answered {reply}", reply=reply, permanent=_code(exc) == "553"
+            ) from None
         except (OSError, EOFError, TimeoutError, aioftp.AIOFTPException) as exc:
             raise DeliveryError(f"{what}: connection to {self.address} failed: {_describe(exc)}") from None
 
@@ -133,7 +137,13 @@ class FtpProgramStore:
                 if info.get("type") != "file":
                     continue
                 size = info.get("size")
-                out.append(RemoteFile(PurePosixPath(path).name, int(size) if size not in (None, "") else None, info.get("modify")))
+                out.append(
+                    RemoteFile(
+                        PurePosixPath(path).name,
+                        int(size) if size not in (None, "") else None,
+                        info.get("modify"),
+                    )
+                )
             return sorted(out, key=lambda f: f.name)
 
         return await self._call(f"listing {self.config.folder}", collect())
@@ -148,11 +158,15 @@ class FtpProgramStore:
             if _code(exc) in ("550", "450"):
                 return None
             if not _code(exc).startswith("50"):
-                raise DeliveryError(f"SIZE {name}: {self.what} answered {reply_of(exc)}", reply=reply_of(exc)) from None
+                raise DeliveryError(
+                    f"SIZE {name}: {self.what} answered {reply_of(exc)}", reply=reply_of(exc)
+                ) from None
         except ValueError:
             pass  # an odd SIZE reply: fall back to the listing
         except (OSError, EOFError, TimeoutError, aioftp.AIOFTPException) as exc:
-            raise DeliveryError(f"SIZE {name}: connection to {self.address} failed: {_describe(exc)}") from None
+            raise DeliveryError(
+                f"SIZE {name}: connection to {self.address} failed: {_describe(exc)}"
+            ) from None
         for remote in await self.list():
             if remote.name == name:
                 return remote.size

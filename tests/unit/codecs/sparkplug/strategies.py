@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from hypothesis import strategies as st
@@ -11,10 +11,10 @@ from hypothesis import strategies as st
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 
 ALL_SPECS = [TypeSpec(base, array) for base in DataType for array in (False, True)]
-EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 _MS = timedelta(milliseconds=1)
-_FIRST_MS = (datetime(1, 1, 1, tzinfo=timezone.utc) - EPOCH) // _MS
-_LAST_MS = (datetime(9999, 12, 31, 23, 59, 59, 999000, tzinfo=timezone.utc) - EPOCH) // _MS
+_FIRST_MS = (datetime(1, 1, 1, tzinfo=UTC) - EPOCH) // _MS
+_LAST_MS = (datetime(9999, 12, 31, 23, 59, 59, 999000, tzinfo=UTC) - EPOCH) // _MS
 
 
 def datetimes_ms() -> st.SearchStrategy[datetime]:

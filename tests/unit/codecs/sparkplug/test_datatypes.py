@@ -4,7 +4,7 @@ independent host, the specification's array examples byte for byte, and every re
 from __future__ import annotations
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import pytest
 from hypothesis import given
@@ -113,8 +113,8 @@ def test_none_is_a_null_without_a_value() -> None:
         ("Boolean[]", [False, False, True, True, False, True, False, False, True, True, False, True],
          "0c 00 00 00 34 d0"),
         ("String[]", ["ABC", "hello"], "41 42 43 00 68 65 6c 6c 6f 00"),
-        ("DateTime[]", [datetime(2009, 10, 21, 5, 27, 55, 335000, tzinfo=timezone.utc),
-                        datetime(2022, 6, 24, 21, 57, 55, tzinfo=timezone.utc)],
+        ("DateTime[]", [datetime(2009, 10, 21, 5, 27, 55, 335000, tzinfo=UTC),
+                        datetime(2022, 6, 24, 21, 57, 55, tzinfo=UTC)],
          "c7 d0 90 75 24 01 00 00 b8 ba b8 97 81 01 00 00"),
         ("Boolean[]", [], "00 00 00 00"),
         ("String[]", [], ""),
@@ -139,13 +139,13 @@ def test_array_bytes_are_the_specifications(spec: str, value: list[object], hexe
         ("UInt64", 2**64 - 1, "long_value", 2**64 - 1),
         (
             "DateTime",
-            datetime(2017, 2, 3, 17, 55, 2, 122000, tzinfo=timezone.utc),
+            datetime(2017, 2, 3, 17, 55, 2, 122000, tzinfo=UTC),
             "long_value",
             1486144502122,
         ),
         (
             "DateTime",
-            datetime(1969, 12, 31, 23, 59, 59, 999000, tzinfo=timezone.utc),
+            datetime(1969, 12, 31, 23, 59, 59, 999000, tzinfo=UTC),
             "long_value",
             2**64 - 1,
         ),

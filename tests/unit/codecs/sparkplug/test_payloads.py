@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import pytest
 from hypothesis import given
@@ -310,7 +310,7 @@ def test_inputs_the_wire_cannot_carry_are_refused(call: object, fragment: str) -
 
 
 def test_a_datetime_metric_before_1970() -> None:
-    early = datetime(1601, 1, 1, tzinfo=timezone.utc)  # the gateway's neutral DateTime
+    early = datetime(1601, 1, 1, tzinfo=UTC)  # the gateway's neutral DateTime
     seen = host.read(
         encode_dbirth([Metric("T", T("DateTime"), early, NOW, alias=1)], seq=Seq(), timestamp=NOW)
     )

@@ -64,8 +64,14 @@ def job(tmp_path: Path) -> Job:
 
 
 def auto(**kw: Any) -> AutoStart:
-    return AutoStart.model_validate({"select": "Control/Select", "start": "Control/Start",
-                                     "ready": {"path": "Machine/State", "equals": 0}, **kw})
+    return AutoStart.model_validate(
+        {
+            "select": "Control/Select",
+            "start": "Control/Start",
+            "ready": {"path": "Machine/State", "equals": 0},
+            **kw,
+        }
+    )
 
 
 async def test_waits_for_ready_then_selects_starts_and_confirms(machine: Machine, job: Job) -> None:

@@ -32,7 +32,9 @@ DIGEST = hashlib.sha256(CONTENT).hexdigest()
 class FakeTransport:
     """Records what it is given; `fail` decides each delivery's outcome, `found` what `holds` says."""
 
-    def __init__(self, fail: Callable[[int], DeliveryError | None] = lambda n: None, found: bool = False) -> None:
+    def __init__(
+        self, fail: Callable[[int], DeliveryError | None] = lambda n: None, found: bool = False
+    ) -> None:
         self.fail = fail
         self.found = found
         self.delivered: list[Program] = []
@@ -70,15 +72,20 @@ class Rig:
     def __init__(self, tmp_path: Path, transport: DeliveryTransport, **jobs: Any) -> None:
         config = JobsConfig.model_validate({"controller": {"host": "127.0.0.1"}, **jobs})
         mapping = MachineMapping.model_validate(
-            {"machine": "m1", "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
-             "variables": [{"path": "State", "source": "s", "type": "Int16"}]}
+            {
+                "machine": "m1",
+                "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+                "variables": [{"path": "State", "source": "s", "type": "Int16"}],
+            }
         )
         self.tree = VariableTree([mapping.definition()])
         self.events = self.tree.events.subscribe("test")
         self.queue = JobQueue(tmp_path / "q.sqlite3").open()
         self.spool = Spool(tmp_path)
         self.publisher = JobPublisher(self.tree, {"m1": config})
-        self.worker = DeliveryWorker("m1", config, self.queue, self.spool, self.publisher, self.call, transport)
+        self.worker = DeliveryWorker(
+            "m1", config, self.queue, self.spool, self.publisher, self.call, transport
+        )
 
     async def call(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         return fn(*args, **kwargs)
@@ -110,13 +117,20 @@ def rigs(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
         rig.queue.close()
 
 
-async def test_the_transport_gets_the_validated_program_and_says_where_it_went(rigs: Callable[..., Rig]) -> None:
+async def test_the_transport_gets_the_validated_program_and_says_where_it_went(
+    rigs: Callable[..., Rig],
+) -> None:
     transport = FakeTransport()
     rig = rigs(transport)
     job = rig.queued()
     await rig.worker.deliver(job)
     (program,) = transport.delivered
-    assert (program.name, program.size, program.sha256, program.number) == ("part.nc", len(CONTENT), DIGEST, "O1234")
+    assert (program.name, program.size, program.sha256, program.number) == (
+        "part.nc",
+        len(CONTENT),
+        DIGEST,
+        "O1234",
+    )
     done = rig.queue.get(job.seq)
     assert done.state is JobState.DELIVERED and done.reason.startswith("delivered to fake:part.nc in ")
     assert not rig.spool.program(job).exists()  # delivered: the spool copy goes
@@ -140,20 +154,26 @@ async def test_other_failures_are_retried_with_backoff(rigs: Callable[..., Rig])
     job = rig.queued()
     await rig.worker.deliver(job)
     again = rig.queue.get(job.seq)
-    assert again.state is JobState.QUEUED and again.reason.startswith("attempt 1 of 3 failed: connection reset")
+    assert again.state is JobState.QUEUED and again.reason.startswith(
+        "attempt 1 of 3 failed: connection reset"
+    )
     await asyncio.sleep(0.02)
     await rig.worker.deliver(rig.queue.head("m1") or again)
     assert rig.queue.get(job.seq).state is JobState.DELIVERED and transport.attempts == 2
 
 
-async def test_after_a_crash_a_program_the_controller_holds_is_not_sent_again(rigs: Callable[..., Rig]) -> None:
+async def test_after_a_crash_a_program_the_controller_holds_is_not_sent_again(
+    rigs: Callable[..., Rig],
+) -> None:
     transport = FakeTransport(found=True)
     rig = rigs(transport)
     job = rig.queue.start_sending(rig.queued().seq)  # the earlier run died while sending
     await rig.worker.recover(job)
     assert [p.sha256 for p in transport.asked] == [DIGEST] and transport.delivered == []
     done = rig.queue.get(job.seq)
-    assert done.state is JobState.DELIVERED and done.reason == "found complete on the controller after a restart"
+    assert (
+        done.state is JobState.DELIVERED and done.reason == "found complete on the controller after a restart"
+    )
 
 
 async def test_after_a_crash_a_program_not_found_is_sent_again(rigs: Callable[..., Rig]) -> None:

@@ -20,7 +20,10 @@ def accounts(environ: dict[str, str] | None = None, **inbox: object) -> Accounts
 def test_hashed_and_environment_passwords_both_work() -> None:
     acc = accounts(
         {"OPS_PW": "from-env"},
-        accounts=[{"user": "nest", "password_hash": HASH}, {"user": "ops", "password_env": "OPS_PW", "machines": ["plasma"]}],
+        accounts=[
+            {"user": "nest", "password_hash": HASH},
+            {"user": "ops", "password_env": "OPS_PW", "machines": ["plasma"]},
+        ],
     )
     assert acc.authenticate("nest", "pw").machines == {"laser", "plasma"}
     assert acc.authenticate("ops", "from-env").machines == {"plasma"}

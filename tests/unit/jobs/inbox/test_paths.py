@@ -58,8 +58,25 @@ def test_escapes_and_odd_paths_are_refused(cwd: str, arg: str, fragment: str) ->
 
 @pytest.mark.parametrize(
     "name",
-    [".hidden.nc", "-rf.nc", " lead.nc", "trail.nc ", "end.", "CON", "nul.nc", "COM1.txt", "a:b.nc", "a*b.nc",
-     "a?.nc", "tab\t.nc", "bell\x07.nc", "rtl\u202e.nc", "x" * 256, "..", "."],
+    [
+        ".hidden.nc",
+        "-rf.nc",
+        " lead.nc",
+        "trail.nc ",
+        "end.",
+        "CON",
+        "nul.nc",
+        "COM1.txt",
+        "a:b.nc",
+        "a*b.nc",
+        "a?.nc",
+        "tab\t.nc",
+        "bell\x07.nc",
+        "rtl\u202e.nc",
+        "x" * 256,
+        "..",
+        ".",
+    ],
 )
 def test_odd_file_names_are_refused(name: str) -> None:
     with pytest.raises(PathRefused):
@@ -82,7 +99,9 @@ def test_temporary_names_by_suffix_or_folder() -> None:
 @settings(max_examples=300, deadline=None)
 @given(
     cwd=st.sampled_from(["/", "/laser", "/laser/tmp", "/plasma"]),
-    arg=st.lists(st.sampled_from(list("./\\ab:\x00-_ ~") + ["..", "laser", "plasma", "tmp", "etc"]), max_size=12).map("".join),
+    arg=st.lists(
+        st.sampled_from(list("./\\ab:\x00-_ ~") + ["..", "laser", "plasma", "tmp", "etc"]), max_size=12
+    ).map("".join),
 )
 def test_whatever_a_client_sends_stays_inside_the_inbox(cwd: str, arg: str) -> None:
     root = Path("/srv/inbox")

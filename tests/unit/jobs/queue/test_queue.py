@@ -25,8 +25,14 @@ def new(q: JobQueue, machine: str = "laser", name: str = "a.nc", sha: str = "aa"
     return q.receive(machine, name, 10, sha, user="nest", origin="ftp", priority=priority).seq
 
 
-def queued(q: JobQueue, machine: str = "laser", name: str = "a.nc", sha: str = "aa", priority: int = 0,
-           duplicates: str = "skip") -> int:
+def queued(
+    q: JobQueue,
+    machine: str = "laser",
+    name: str = "a.nc",
+    sha: str = "aa",
+    priority: int = 0,
+    duplicates: str = "skip",
+) -> int:
     seq = new(q, machine, name, sha, priority)
     job, _ = q.accept(seq, duplicates=duplicates, program_size=10, program_sha256=sha)  # type: ignore[arg-type]
     return job.seq
@@ -53,8 +59,16 @@ def test_job_ids_parse_in_the_forms_people_type() -> None:
 
 def test_the_happy_path_records_every_transition_with_reason_and_time(queue: JobQueue) -> None:
     seq = new(queue)
-    job, replaced = queue.accept(seq, duplicates="skip", program_size=9, program_sha256="bb", program_name="O1",
-                                 estimate={"seconds": 1.5}, warnings=("w1",), reason="valid")
+    job, replaced = queue.accept(
+        seq,
+        duplicates="skip",
+        program_size=9,
+        program_sha256="bb",
+        program_name="O1",
+        estimate={"seconds": 1.5},
+        warnings=("w1",),
+        reason="valid",
+    )
     assert job.state is S.QUEUED and replaced == []
     assert job.estimate == {"seconds": 1.5} and job.warnings == ("w1",) and job.program_name == "O1"
     job = queue.start_sending(seq)
@@ -63,7 +77,10 @@ def test_the_happy_path_records_every_transition_with_reason_and_time(queue: Job
     assert job.state is S.DELIVERED and job.delivered_name == "a.nc" and job.delivered_at is not None
     history = queue.history(seq)
     assert [(t.previous, t.state) for t in history] == [
-        (None, S.RECEIVED), (S.RECEIVED, S.VALIDATED), (S.VALIDATED, S.QUEUED), (S.QUEUED, S.SENDING),
+        (None, S.RECEIVED),
+        (S.RECEIVED, S.VALIDATED),
+        (S.VALIDATED, S.QUEUED),
+        (S.QUEUED, S.SENDING),
         (S.SENDING, S.DELIVERED),
     ]
     assert history[1].reason == "valid" and history[-1].reason == "done"
@@ -85,7 +102,9 @@ def test_the_happy_path_records_every_transition_with_reason_and_time(queue: Job
         ("delivered", lambda q, s: q.start_sending(s)),
     ],
 )
-def test_transitions_the_state_machine_does_not_allow_are_refused(queue: JobQueue, setup: str, action) -> None:
+def test_transitions_the_state_machine_does_not_allow_are_refused(
+    queue: JobQueue, setup: str, action
+) -> None:
     seq = new(queue) if setup == "received" else queued(queue)
     if setup in ("sending", "delivered"):
         queue.start_sending(seq)
@@ -248,9 +267,8 @@ def test_a_writer_waits_for_another_writer_and_a_hopeless_wait_is_a_clear_error(
         seq = queued(q)
     holder = sqlite3.connect(path, isolation_level=None)
     holder.execute("BEGIN IMMEDIATE")
-    with JobQueue(path, busy_timeout=0.05) as impatient:
-        with pytest.raises(JobError, match="busy"):
-            impatient.cancel(seq)
+    with JobQueue(path, busy_timeout=0.05) as impatient, pytest.raises(JobError, match="busy"):
+        impatient.cancel(seq)
     done = threading.Event()
     result: list[JobState] = []
 

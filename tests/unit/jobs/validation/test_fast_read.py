@@ -61,7 +61,9 @@ def test_the_compiled_reader_is_built_where_a_compiler_is() -> None:
     """`pip install -e .` builds `_plain.c`; a silent fallback would cost thirty times the time."""
     if compiled.plain is None and not (os.environ.get("CI") or shutil.which("cc") or shutil.which("gcc")):
         pytest.skip("no C compiler here: the pure-Python readers do the work")
-    assert compiled.plain is not None, "gateway/jobs/validation/_plain.c was not built: run `pip install -e .` again"
+    assert compiled.plain is not None, (
+        "gateway/jobs/validation/_plain.c was not built: run `pip install -e .` again"
+    )
 
 
 @pytest.mark.parametrize("path", CASES, ids=lambda p: p.name)

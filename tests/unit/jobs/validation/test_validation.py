@@ -520,14 +520,19 @@ def test_the_one_pass_reading_agrees_with_assemble_and_estimate_program(
     rules = ValidationRules.model_validate({"dialect": dialect, "forbid_codes": ["M8"]})
     verdict = validate_program(text.encode(), "O100.nc", rules)
     parsed = assemble(lex_lines(text))
-    if verdict.estimate is not None and not any(r.rule in ("size", "binary", "encoding") for r in verdict.rejections):
+    if verdict.estimate is not None and not any(
+        r.rule in ("size", "binary", "encoding") for r in verdict.rejections
+    ):
         expected = estimate_program(
             parsed.program, rapid_feed_mm_min=rules.rapid_feed, default_feed_mm_min=rules.default_feed,
             dwell_p=rules.dwell_p,
         )  # fmt: skip
         got = verdict.estimate
         assert (got.seconds, got.cut_mm, got.blocks, got.extents) == (
-            expected.seconds, expected.cut_mm, expected.blocks, expected.extents
+            expected.seconds,
+            expected.cut_mm,
+            expected.blocks,
+            expected.extents,
         )
     forbidden_lines = sorted(r.line for r in verdict.rejections if r.rule == "forbidden-code")
     expected_lines = sorted(

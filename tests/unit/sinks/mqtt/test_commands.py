@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -26,27 +26,34 @@ from gateway.sinks.mqtt.commands import (
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 
-T0 = datetime(2026, 5, 6, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, tzinfo=UTC)
 
 
 def tree(commands_enabled: bool = True, timeout: float = 2.0) -> MappedTree:
-    mapping = MachineMapping.model_validate({
-        "machine": "laser-sim",
-        "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
-        "variables": [
-            {"path": "Program/Name", "source": "ns=2;s=name", "type": "String"},
-            {"path": "Control/Select", "source": "ns=2;s=select", "type": "String", "access": "readwrite"},
-        ],
-        "commands": {
-            "select-program": {
-                "arguments": [{"name": "name", "type": "String"}],
-                "writes": [{"path": "Control/Select", "value": "{name}"}],
-                "done": {"path": "Program/Name", "equals": "{name}"},
-                "timeout": timeout,
+    mapping = MachineMapping.model_validate(
+        {
+            "machine": "laser-sim",
+            "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+            "variables": [
+                {"path": "Program/Name", "source": "ns=2;s=name", "type": "String"},
+                {
+                    "path": "Control/Select",
+                    "source": "ns=2;s=select",
+                    "type": "String",
+                    "access": "readwrite",
+                },
+            ],
+            "commands": {
+                "select-program": {
+                    "arguments": [{"name": "name", "type": "String"}],
+                    "writes": [{"path": "Control/Select", "value": "{name}"}],
+                    "done": {"path": "Program/Name", "equals": "{name}"},
+                    "timeout": timeout,
+                },
             },
-        },
-        "mqtt": MachineMqtt(commands=commands_enabled).model_dump(),
-    })
+            "mqtt": MachineMqtt(commands=commands_enabled).model_dump(),
+        }
+    )
     t = MappedTree([mapping])
     install_commands(t, t.mappings)
     machine = t.machines["laser-sim"]
@@ -81,15 +88,25 @@ TOPIC = "cnc/laser-sim/commands/select-program"
 def test_command_topics() -> None:
     assert command_target(TOPIC, "cnc") == ("laser-sim", "select-program")
     assert command_target("plant/a/cnc/m/commands/start", "plant/a/cnc") == ("m", "start")
-    for other in ("cnc/m/commands/start/result", "cnc/m/feed/override/set", "cnc/m/commands", "other/m/commands/x"):
+    for other in (
+        "cnc/m/commands/start/result",
+        "cnc/m/feed/override/set",
+        "cnc/m/commands",
+        "other/m/commands/x",
+    ):
         assert command_target(other, "cnc") is None
 
 
 def test_bodies_and_arguments() -> None:
     assert read_body(b"") == {} and read_body(b"  ") == {}
     assert read_body(b'{"name": "a.nc", "correlation_id": "c1"}') == {"name": "a.nc", "correlation_id": "c1"}
-    for bad, fragment in [(b"\xff", "not UTF-8"), (b"{nope", "malformed JSON"), (b"[1]", "JSON object"),
-                          (b"5", "JSON object"), (b"[" * 100_000, "malformed JSON")]:
+    for bad, fragment in [
+        (b"\xff", "not UTF-8"),
+        (b"{nope", "malformed JSON"),
+        (b"[1]", "JSON object"),
+        (b"5", "JSON object"),
+        (b"[" * 100_000, "malformed JSON"),
+    ]:
         with pytest.raises(MalformedRequest, match=fragment):
             read_body(bad)
     method = tree().machines["laser-sim"].methods[("Commands", "select-program")]
@@ -105,11 +122,24 @@ def test_bodies_and_arguments() -> None:
 
 def test_replies_carry_ok_or_error_reason_status_and_duration() -> None:
     ok = json.loads(encode_reply("start", duration_ms=12.34, correlation="c", result="Machine/State is 1"))
-    assert ok == {"ok": True, "command": "start", "status": "Good", "reason": "Machine/State is 1",
-                  "result": "Machine/State is 1", "duration_ms": 12.3, "correlation_id": "c"}
+    assert ok == {
+        "ok": True,
+        "command": "start",
+        "status": "Good",
+        "reason": "Machine/State is 1",
+        "result": "Machine/State is 1",
+        "duration_ms": 12.3,
+        "correlation_id": "c",
+    }
     bad = json.loads(encode_reply("start", duration_ms=5001, error=ConfirmTimeout("no completion")))
-    assert bad == {"ok": False, "command": "start", "status": "BadTimeout", "error": "no completion",
-                   "reason": "no completion", "duration_ms": 5001}
+    assert bad == {
+        "ok": False,
+        "command": "start",
+        "status": "BadTimeout",
+        "error": "no completion",
+        "reason": "no completion",
+        "duration_ms": 5001,
+    }
 
 
 async def run_worker(reqs: CommandRequests, answers: Answers, count: int) -> None:
@@ -131,7 +161,9 @@ async def test_a_request_runs_the_command_and_answers_on_result_with_the_correla
     await run_worker(reqs, answers, 1)
     [(topic, doc, corr)] = answers
     assert topic == TOPIC + "/result" and corr is None
-    assert doc["ok"] is True and doc["correlation_id"] == "c-17" and doc["reason"] == "Program/Name is 'demo.nc'"
+    assert (
+        doc["ok"] is True and doc["correlation_id"] == "c-17" and doc["reason"] == "Program/Name is 'demo.nc'"
+    )
     assert doc["duration_ms"] >= 0
 
 
@@ -140,10 +172,15 @@ async def test_mqtt5_response_topic_and_correlation_data_are_used() -> None:
     t.machines["laser-sim"].writer = Selects(t)
     answers = Answers()
     reqs = requests(t, answers)
-    reqs.handle(Incoming(TOPIC, b'{"name": "a.nc"}', 1, response_topic="client/7/reply", correlation_data=b"\x01"))
+    reqs.handle(
+        Incoming(TOPIC, b'{"name": "a.nc"}', 1, response_topic="client/7/reply", correlation_data=b"\x01")
+    )
     reqs.handle(Incoming(TOPIC, b'{"name": "b.nc"}', 1, response_topic="cnc/laser-sim/axes/x/position"))
     await run_worker(reqs, answers, 2)
-    assert {(topic, corr) for topic, _, corr in answers} == {("client/7/reply", b"\x01"), (TOPIC + "/result", None)}
+    assert {(topic, corr) for topic, _, corr in answers} == {
+        ("client/7/reply", b"\x01"),
+        (TOPIC + "/result", None),
+    }
 
 
 async def test_a_command_that_times_out_answers_an_error_with_its_duration() -> None:
@@ -171,7 +208,9 @@ async def test_a_command_that_times_out_answers_an_error_with_its_duration() -> 
         (TOPIC, b'{"name": "' + b"x" * 70_000 + b'"}', False, "BadRequestTooLarge", "bytes"),
     ],
 )
-def test_refusals_are_answered_at_once(topic: str, payload: bytes, retain: bool, status: str, fragment: str) -> None:
+def test_refusals_are_answered_at_once(
+    topic: str, payload: bytes, retain: bool, status: str, fragment: str
+) -> None:
     answers = Answers()
     reqs = requests(tree(), answers)
     assert reqs.handle(Incoming(topic, payload, 1, retain=retain))
@@ -218,8 +257,15 @@ def test_other_topics_are_not_ours() -> None:
 
 
 def test_no_commands_no_subscription() -> None:
-    t = MappedTree([MachineMapping.model_validate({
-        "machine": "m", "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
-        "variables": [{"path": "A", "source": "ns=2;s=a", "type": "Int16"}],
-    })])
+    t = MappedTree(
+        [
+            MachineMapping.model_validate(
+                {
+                    "machine": "m",
+                    "driver": {"endpoint": "opc.tcp://127.0.0.1:4841"},
+                    "variables": [{"path": "A", "source": "ns=2;s=a", "type": "Int16"}],
+                }
+            )
+        ]
+    )
     assert requests(t, Answers()).filters == []

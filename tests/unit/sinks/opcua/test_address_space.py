@@ -72,20 +72,32 @@ def test_folders_objects_and_reference_types(tree: VariableTree) -> None:
 
     machines = items["Machines"]
     assert (machines.ParentNodeId, machines.ReferenceTypeId, machines.TypeDefinition) == (
-        OBJECTS_FOLDER, ORGANIZES, FOLDER_TYPE,
+        OBJECTS_FOLDER,
+        ORGANIZES,
+        FOLDER_TYPE,
     )
     machine = items["m1"]
     assert machine.NodeClass == ua.NodeClass.Object
     assert (machine.ParentNodeId, machine.ReferenceTypeId, machine.TypeDefinition) == (
-        ua.NodeId("Machines", NS), ORGANIZES, BASE_OBJECT_TYPE,
+        ua.NodeId("Machines", NS),
+        ORGANIZES,
+        BASE_OBJECT_TYPE,
     )
     assert machine.NodeAttributes.Description == ua.LocalizedText("Test machine")
     assert machine.BrowseName == ua.QualifiedName("m1", NS)
 
     axes = items["m1/Axes"]
-    assert (axes.ParentNodeId, axes.ReferenceTypeId, axes.TypeDefinition) == (ua.NodeId("m1", NS), HAS_COMPONENT, FOLDER_TYPE)
+    assert (axes.ParentNodeId, axes.ReferenceTypeId, axes.TypeDefinition) == (
+        ua.NodeId("m1", NS),
+        HAS_COMPONENT,
+        FOLDER_TYPE,
+    )
     x = items["m1/Axes/X"]
-    assert (x.ParentNodeId, x.ReferenceTypeId, x.TypeDefinition) == (ua.NodeId("m1/Axes", NS), ORGANIZES, FOLDER_TYPE)
+    assert (x.ParentNodeId, x.ReferenceTypeId, x.TypeDefinition) == (
+        ua.NodeId("m1/Axes", NS),
+        ORGANIZES,
+        FOLDER_TYPE,
+    )
     assert x.NodeAttributes.DisplayName == ua.LocalizedText("X")
 
     status = items["m1/Status"]
@@ -138,7 +150,9 @@ def test_analog_items_and_their_properties(tree: VariableTree) -> None:
 
     eu = items["m1/Axes/X/Position/EngineeringUnits"]
     assert (eu.ParentNodeId, eu.ReferenceTypeId, eu.TypeDefinition) == (
-        ua.NodeId("m1/Axes/X/Position", NS), HAS_PROPERTY, PROPERTY_TYPE,
+        ua.NodeId("m1/Axes/X/Position", NS),
+        HAS_PROPERTY,
+        PROPERTY_TYPE,
     )
     assert eu.BrowseName == ua.QualifiedName("EngineeringUnits", 0)
     assert eu.NodeAttributes.DataType == ua.NodeId(ua.ObjectIds.EUInformation)
@@ -162,7 +176,11 @@ def test_late_variable_brings_only_its_missing_parents(tree: VariableTree) -> No
     jobs = machine.add_internal("Jobs/Queue/Length", "UInt32", "Jobs waiting", 0)
     nodeid = plan.add_variable(jobs)
     items = plan.take()
-    assert [item.RequestedNewNodeId.Identifier for item in items] == ["m1/Jobs", "m1/Jobs/Queue", "m1/Jobs/Queue/Length"]
+    assert [item.RequestedNewNodeId.Identifier for item in items] == [
+        "m1/Jobs",
+        "m1/Jobs/Queue",
+        "m1/Jobs/Queue/Length",
+    ]
     assert items[0].TypeDefinition == BASE_OBJECT_TYPE and items[1].TypeDefinition == FOLDER_TYPE
     assert nodeid == ua.NodeId("m1/Jobs/Queue/Length", NS)
     assert plan.add_variable(jobs) == nodeid and plan.take() == []

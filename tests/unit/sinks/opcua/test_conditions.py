@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 from asyncua import ua
 from asyncua.ua.ua_binary import variant_to_binary
@@ -10,7 +10,7 @@ from asyncua.ua.ua_binary import variant_to_binary
 from gateway.alarms.records import AlarmRecord, Quality
 from gateway.sinks.opcua.conditions import SERVER, ConditionIds, condition_event, emitted_by, refresh_event
 
-T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=UTC)
 IDS = ConditionIds(ua.NodeId("laser-sim/Alarms/17", 2), ua.NodeId("laser-sim", 2), "laser-sim")
 
 
@@ -48,13 +48,27 @@ def test_a_raised_alarm_is_active_unacknowledged_and_retained() -> None:
 
 
 def test_acknowledged_cleared_and_uncertain_states() -> None:
-    done = record(cleared_at=T0 + timedelta(seconds=5), acked_at=T0 + timedelta(seconds=2), acked_by="olga",
-                  ack_comment="seen", quality=Quality.UNCERTAIN)
-    event = condition_event(done, IDS, event_id=b"e2", time=T0 + timedelta(seconds=5), retained=False,
-                            user="olga", last_severity=400)
+    done = record(
+        cleared_at=T0 + timedelta(seconds=5),
+        acked_at=T0 + timedelta(seconds=2),
+        acked_by="olga",
+        ack_comment="seen",
+        quality=Quality.UNCERTAIN,
+    )
+    event = condition_event(
+        done,
+        IDS,
+        event_id=b"e2",
+        time=T0 + timedelta(seconds=5),
+        retained=False,
+        user="olga",
+        last_severity=400,
+    )
     assert getattr(event, "ActiveState/Id") is False and event.ActiveState.Text == "Inactive"
     assert getattr(event, "ActiveState/TransitionTime") == T0 + timedelta(seconds=5)
-    assert getattr(event, "AckedState/Id") is True and getattr(event, "AckedState/TransitionTime") == T0 + timedelta(seconds=2)
+    assert getattr(event, "AckedState/Id") is True and getattr(
+        event, "AckedState/TransitionTime"
+    ) == T0 + timedelta(seconds=2)
     assert event.Comment.Text == "seen" and event.ClientUserId == "olga" and event.LastSeverity == 400
     assert event.Retain is False
     assert event.Quality == ua.StatusCode(ua.StatusCodes.UncertainLastUsableValue)

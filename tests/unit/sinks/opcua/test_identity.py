@@ -13,8 +13,8 @@ from asyncua.crypto.permission_rules import UserRole
 from gateway.auth.passwords import hash_password
 from gateway.auth.users import UserDirectory
 from gateway.config.loader import load_mapping
-from gateway.model.methods import Method
 from gateway.model.context import WriteContext
+from gateway.model.methods import Method
 from gateway.model.tree import Machine, VariableTree
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
@@ -46,14 +46,21 @@ def machine(tmp_path: Path) -> Machine:
     path = tmp_path / "m1.yaml"
     path.write_text(MAPPING)
     tree = VariableTree([load_mapping(path).definition()])
-    tree.access.configure(["viewer", "operator", "engineer", "admin"], enabled=True, default_write_role="operator")
+    tree.access.configure(
+        ["viewer", "operator", "engineer", "admin"], enabled=True, default_write_role="operator"
+    )
     return tree.machines["m1"]
 
 
 @pytest.mark.parametrize(
     ("role", "override", "mode"),
-    [(None, READ, READ), ("viewer", READ, READ), ("operator", READ_WRITE, READ), ("engineer", READ_WRITE, READ_WRITE),
-     ("admin", READ_WRITE, READ_WRITE)],
+    [
+        (None, READ, READ),
+        ("viewer", READ, READ),
+        ("operator", READ_WRITE, READ),
+        ("engineer", READ_WRITE, READ_WRITE),
+        ("admin", READ_WRITE, READ_WRITE),
+    ],
 )
 def test_user_access_level_per_role(machine: Machine, role: str | None, override: int, mode: int) -> None:
     policy = machine.tree.access

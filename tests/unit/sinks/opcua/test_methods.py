@@ -11,8 +11,8 @@ from asyncua import ua
 
 from gateway.config.loader import load_mapping
 from gateway.errors import InvalidState
-from gateway.model.methods import Argument, Method
 from gateway.model.context import WriteContext
+from gateway.model.methods import Argument, Method
 from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
 from gateway.sinks.opcua.address_space import BASE_OBJECT_TYPE, HAS_COMPONENT, HAS_PROPERTY, AddressSpacePlan
@@ -38,7 +38,9 @@ async def handler(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
 
 
 METHOD = Method(
-    "Programs", "Find", "Find programs",
+    "Programs",
+    "Find",
+    "Find programs",
     (Argument("Pattern", TypeSpec.parse("String")), Argument("Limit", TypeSpec.parse("UInt32"))),
     (Argument("Names", TypeSpec.parse("String[]")),),
     handler,
@@ -66,10 +68,13 @@ def test_a_method_hangs_on_its_object_with_typed_argument_properties(tree: Varia
     assert node.NodeClass == ua.NodeClass.Method and node.ReferenceTypeId == HAS_COMPONENT
     assert node.NodeAttributes.Executable and node.NodeAttributes.UserExecutable
     inputs = items["m1/Programs/Find/InputArguments"]
-    assert inputs.ReferenceTypeId == HAS_PROPERTY and inputs.BrowseName == ua.QualifiedName("InputArguments", 0)
+    assert inputs.ReferenceTypeId == HAS_PROPERTY and inputs.BrowseName == ua.QualifiedName(
+        "InputArguments", 0
+    )
     args = inputs.NodeAttributes.Value.Value
     assert [(a.Name, a.DataType, a.ValueRank) for a in args] == [
-        ("Pattern", ua.NodeId(ua.ObjectIds.String, 0), -1), ("Limit", ua.NodeId(ua.ObjectIds.UInt32, 0), -1),
+        ("Pattern", ua.NodeId(ua.ObjectIds.String, 0), -1),
+        ("Limit", ua.NodeId(ua.ObjectIds.UInt32, 0), -1),
     ]
     outputs = items["m1/Programs/Find/OutputArguments"].NodeAttributes.Value.Value
     assert [(a.Name, a.ValueRank, a.ArrayDimensions) for a in outputs] == [("Names", 1, [0])]
@@ -94,7 +99,9 @@ def u32(value: int) -> ua.Variant:
         ([ua.Variant(["a"], ua.VariantType.String, is_array=True), u32(1)], "BadTypeMismatch", [False, True]),
     ],
 )
-def test_wrong_calls_are_refused_before_the_handler(inputs: list[ua.Variant], status: str, marked: list[bool] | None) -> None:
+def test_wrong_calls_are_refused_before_the_handler(
+    inputs: list[ua.Variant], status: str, marked: list[bool] | None
+) -> None:
     values, refused = check_inputs(METHOD, inputs)
     assert values is None and refused is not None
     assert refused.StatusCode == ua.StatusCode(getattr(ua.StatusCodes, status))
@@ -116,7 +123,9 @@ async def test_a_call_reaches_the_handler_with_the_caller_and_encodes_outputs(tr
     assert out.VariantType == ua.VariantType.String and out.Value == ["part.nc", "b.nc"]
 
 
-async def test_a_refusal_becomes_its_status_code_and_a_bad_output_an_internal_error(tree: VariableTree) -> None:
+async def test_a_refusal_becomes_its_status_code_and_a_bad_output_an_internal_error(
+    tree: VariableTree,
+) -> None:
     machine = tree.machines["m1"]
     refused = await call_result(machine, METHOD, [s("busy"), u32(1)], None)
     assert refused.StatusCode == ua.StatusCode(ua.StatusCodes.BadInvalidState)

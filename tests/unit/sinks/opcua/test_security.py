@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import typing
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -15,7 +15,13 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from gateway.config.security import SecurityName
-from gateway.sinks.opcua.security import POLICY_TYPES, ClientCertificates, Pki, application_uris, ensure_certificate
+from gateway.sinks.opcua.security import (
+    POLICY_TYPES,
+    ClientCertificates,
+    Pki,
+    application_uris,
+    ensure_certificate,
+)
 
 URI = "urn:host:cnc-gateway"
 CLIENT = "urn:tests:client"
@@ -44,14 +50,23 @@ def client_cert(name: str, *, days: int = 30, expired: bool = False) -> x509.Cer
     key = cert_gen.generate_private_key()
     if not expired:
         return cert_gen.generate_self_signed_app_certificate(
-            key, name, {}, [x509.UniformResourceIdentifier(CLIENT)], [ExtendedKeyUsageOID.CLIENT_AUTH], days=days
+            key,
+            name,
+            {},
+            [x509.UniformResourceIdentifier(CLIENT)],
+            [ExtendedKeyUsageOID.CLIENT_AUTH],
+            days=days,
         )
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)])
-    now = datetime.now(timezone.utc)
+    now = datetime.now(UTC)
     return (
-        x509.CertificateBuilder().subject_name(subject).issuer_name(subject).public_key(key.public_key())
+        x509.CertificateBuilder()
+        .subject_name(subject)
+        .issuer_name(subject)
+        .public_key(key.public_key())
         .serial_number(x509.random_serial_number())
-        .not_valid_before(now - timedelta(days=60)).not_valid_after(now - timedelta(days=1))
+        .not_valid_before(now - timedelta(days=60))
+        .not_valid_after(now - timedelta(days=1))
         .add_extension(x509.SubjectAlternativeName([x509.UniformResourceIdentifier(CLIENT)]), critical=False)
         .sign(key, hashes.SHA256())
     )
@@ -91,7 +106,9 @@ async def test_a_certificate_for_another_application_is_refused(tmp_path: Path) 
     (pki.trusted / "scada.der").write_bytes(cert.public_bytes(serialization.Encoding.DER))
     check = ClientCertificates(pki)
     await check(cert, app())
-    other = ua.ApplicationDescription(ApplicationUri="urn:someone-else", ApplicationType=ua.ApplicationType.Client)
+    other = ua.ApplicationDescription(
+        ApplicationUri="urn:someone-else", ApplicationType=ua.ApplicationType.Client
+    )
     with pytest.raises(ServiceError) as info:
         await check(cert, other)
     assert ua.StatusCode(info.value.code).name == "BadCertificateUriInvalid"
@@ -99,7 +116,9 @@ async def test_a_certificate_for_another_application_is_refused(tmp_path: Path) 
 
 async def test_certificates_issued_by_a_trusted_ca_are_accepted(tmp_path: Path) -> None:
     ca_key = cert_gen.generate_private_key()
-    ca = cert_gen.generate_self_signed_app_certificate(ca_key, "Plant CA", {}, [], [], days=30)  # [] usage: a CA
+    ca = cert_gen.generate_self_signed_app_certificate(
+        ca_key, "Plant CA", {}, [], [], days=30
+    )  # [] usage: a CA
     key = cert_gen.generate_private_key()
     csr = cert_gen.generate_app_certificate_signing_request(
         key, "hmi-3", {}, [x509.UniformResourceIdentifier(CLIENT)], [ExtendedKeyUsageOID.CLIENT_AUTH]

@@ -1,7 +1,7 @@
 from __future__ import annotations
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import pytest
 from asyncua import ua
@@ -22,8 +22,8 @@ from gateway.sinks.opcua.values import (
     variant_type,
 )
 
-TS = datetime(2026, 11, 21, 12, 0, tzinfo=timezone.utc)
-NOW = datetime(2026, 11, 21, 12, 0, 1, tzinfo=timezone.utc)
+TS = datetime(2026, 11, 21, 12, 0, tzinfo=UTC)
+NOW = datetime(2026, 11, 21, 12, 0, 1, tzinfo=UTC)
 
 EXPECTED = {
     "Boolean": (ua.VariantType.Boolean, 1),
@@ -68,10 +68,29 @@ def test_aliases_map_like_their_targets() -> None:
 @pytest.mark.parametrize(
     ("unit", "code"),
     [
-        ("mm", "MMT"), ("m", "MTR"), ("mm/min", "H81"), ("m/min", "2X"), ("mm/s", "C16"), ("W", "WTT"),
-        ("kW", "KWT"), ("bar", "BAR"), ("Pa", "PAL"), ("%", "P1"), ("s", "SEC"), ("ms", "C26"), ("min", "MIN"),
-        ("h", "HUR"), ("degC", "CEL"), ("°C", "CEL"), ("Hz", "HTZ"), ("rpm", "RPM"), ("1/min", "C94"),
-        ("A", "AMP"), ("V", "VLT"), ("N", "NEW"), ("kg", "KGM"),
+        ("mm", "MMT"),
+        ("m", "MTR"),
+        ("mm/min", "H81"),
+        ("m/min", "2X"),
+        ("mm/s", "C16"),
+        ("W", "WTT"),
+        ("kW", "KWT"),
+        ("bar", "BAR"),
+        ("Pa", "PAL"),
+        ("%", "P1"),
+        ("s", "SEC"),
+        ("ms", "C26"),
+        ("min", "MIN"),
+        ("h", "HUR"),
+        ("degC", "CEL"),
+        ("°C", "CEL"),
+        ("Hz", "HTZ"),
+        ("rpm", "RPM"),
+        ("1/min", "C94"),
+        ("A", "AMP"),
+        ("V", "VLT"),
+        ("N", "NEW"),
+        ("kg", "KGM"),
     ],
 )
 def test_usual_machine_units_have_their_unece_code(unit: str, code: str) -> None:
@@ -107,7 +126,9 @@ def test_unknown_unit_keeps_its_text_with_unit_id_minus_one() -> None:
 # --- status codes --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", ["Good", "BadNotConnected", "UncertainLastUsableValue", "BadWaitingForInitialData"])
+@pytest.mark.parametrize(
+    "name", ["Good", "BadNotConnected", "UncertainLastUsableValue", "BadWaitingForInitialData"]
+)
 def test_status_names_map_to_their_codes(name: str) -> None:
     assert status_code(name) == ua.StatusCode(getattr(ua.StatusCodes, name))
 
@@ -159,7 +180,7 @@ def test_unknown_status_name_is_reported_not_raised() -> None:
         ("Double", 3, 3.0),
         ("Float", 1.5, 1.5),
         ("String", "abc", "abc"),
-        ("DateTime", datetime(2026, 1, 1), datetime(2026, 1, 1, tzinfo=timezone.utc)),
+        ("DateTime", datetime(2026, 1, 1), datetime(2026, 1, 1, tzinfo=UTC)),
         ("Double[]", [1, 2.5], [1.0, 2.5]),
         ("UInt16[]", [], []),
         ("Byte[]", b"\x01\x02", [1, 2]),

@@ -41,8 +41,14 @@ def tree(tmp_path: Path) -> VariableTree:
     return VariableTree([load_mapping(path).definition()])
 
 
-def wv(value: Any, vtype: ua.VariantType, *, attr: int = ua.AttributeIds.Value, status: int = ua.StatusCodes.Good,
-       index_range: str | None = None) -> ua.WriteValue:
+def wv(
+    value: Any,
+    vtype: ua.VariantType,
+    *,
+    attr: int = ua.AttributeIds.Value,
+    status: int = ua.StatusCodes.Good,
+    index_range: str | None = None,
+) -> ua.WriteValue:
     dv = ua.DataValue(ua.Variant(value, vtype), ua.StatusCode(status))
     return ua.WriteValue(NodeId=ua.NodeId("x", 2), AttributeId=attr, IndexRange=index_range, Value=dv)
 
@@ -76,7 +82,9 @@ def test_a_matching_write_passes(tree: VariableTree) -> None:
         ("Table", wv([1, 2], ua.VariantType.Int32, index_range="1"), "BadWriteNotSupported"),
     ],
 )
-def test_strict_checks_refuse_before_the_tree(tree: VariableTree, path: str, write: ua.WriteValue, expected: str) -> None:
+def test_strict_checks_refuse_before_the_tree(
+    tree: VariableTree, path: str, write: ua.WriteValue, expected: str
+) -> None:
     assert check(tree, path, write) == code(expected)
 
 
