@@ -8,6 +8,8 @@ the gateway is one edge node, every machine one of its devices.
     nbirth = encode_nbirth(node_metrics, bdseq=bd.current, seq=seq, timestamp=now_ms)
     dbirth = encode_dbirth(machine_metrics, seq=seq, timestamp=now_ms)
     ddata = encode_ddata(changed, seq=seq, timestamp=now_ms)     # by alias; historical=True when stored
+    kept = encode_stored(changed, timestamp=now_ms)              # offline: by name, historical, no seq
+    release_stored(kept, {"Axes/X/Position": 7}, seq=seq).payload  # later: by alias, with the next seq
     topic = device_topic("plant", MessageType.DDATA, "cnc-gateway", "laser-sim")
     command = decode_dcmd(payload, MetricTable.from_metrics(machine_metrics))
     command.writes, command.refusals                             # Write(metric, value, timestamp), errors
@@ -62,14 +64,17 @@ from gateway.codecs.sparkplug.payloads import (
     Metric,
     Property,
     Quality,
+    Released,
     encode_dbirth,
     encode_ddata,
     encode_ddeath,
     encode_nbirth,
     encode_ndata,
     encode_ndeath,
+    encode_stored,
     metric_properties,
     quality_of_status,
+    release_stored,
 )
 from gateway.codecs.sparkplug.sequence import BdSeq, Seq
 from gateway.codecs.sparkplug.state import HostState, PrimaryHost, parse_state
@@ -120,6 +125,7 @@ __all__ = [
     "PrimaryHost",
     "Property",
     "Quality",
+    "Released",
     "Scalar",
     "Seq",
     "SparkplugError",
@@ -143,6 +149,7 @@ __all__ = [
     "encode_nbirth",
     "encode_ndata",
     "encode_ndeath",
+    "encode_stored",
     "gateway_type",
     "get_metric_value",
     "metric_properties",
@@ -152,6 +159,7 @@ __all__ = [
     "parse_state",
     "parse_topic",
     "quality_of_status",
+    "release_stored",
     "set_metric_value",
     "sparkplug_type",
     "state_topic",

@@ -10,6 +10,12 @@ Sparkplug 3.0 rules these functions apply (chapters 4-6):
 - DDEATH: the next seq and a timestamp, no metrics;
 - NDEATH (the MQTT will): the metric `bdSeq` only, and no seq.
 
+Store-and-forward (`encode_stored`, `release_stored`): while the edge node cannot publish, a DATA
+message is kept without its seq and with every metric by name and marked historical; when it goes
+out, in a later session, the names become that session's aliases and the seq the next one. Names,
+not aliases, because a stored message may outlive the births its aliases came from (a restart with
+another mapping); a name the new births no longer have is left out, and reported.
+
 A message's seq is taken from the counter only once its payload is built, so a refused call
 never leaves a gap that a host would answer with a rebirth request.
 
@@ -26,14 +32,14 @@ Choices where the specification is silent or leaves room:
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import IntEnum
 
 from gateway.codecs.sparkplug.datatypes import SparkplugType, set_metric_value, set_scalar, sparkplug_type
 from gateway.codecs.sparkplug.errors import BadBirth, Unencodable
 from gateway.codecs.sparkplug.sequence import Seq
 from gateway.codecs.sparkplug.sparkplug_b_pb2 import Payload
-from gateway.codecs.sparkplug.wire import serialize
+from gateway.codecs.sparkplug.wire import MAX_PAYLOAD, parse_payload, serialize
 from gateway.model.types import DataType, TypeSpec
 
 BDSEQ = "bdSeq"
@@ -123,7 +129,7 @@ class Metric:
 
 
 def encode_nbirth(metrics: Sequence[Metric], *, bdseq: int, seq: Seq, timestamp: int) -> bytes:
-    """An NBIRTH: the node's own metrics with bdSeq and Node Control/Rebirth beside them; seq restarts at 0."""
+    """An NBIRTH: the node's own metrics with bdSeq and Node Control/Rebirth beside them; seq starts at 0."""
     _check_bdseq(bdseq)
     for metric in metrics:
         if metric.name in _RESERVED_NAMES:
@@ -191,6 +197,63 @@ def _data(metrics: Sequence[Metric], seq: Seq, timestamp: int) -> bytes:
         _write_metric(payload.metrics.add(), metric, birth=False)
     payload.seq = seq.next()
     return serialize(payload)
+
+
+# --- store-and-forward --------------------------------------------------------------------------
+
+
+def encode_stored(metrics: Sequence[Metric], *, timestamp: int) -> bytes:
+    """A DATA payload to keep until it can be sent: every metric by name and historical, no seq yet."""
+    if not metrics:
+        raise Unencodable("a DATA message needs at least one metric")
+    stored = [replace(m, alias=None, historical=True) for m in metrics]
+    latest: dict[tuple[str, int], Metric] = {}
+    for metric in stored:
+        key = (metric.name, metric.timestamp)
+        latest.pop(key, None)
+        latest[key] = metric
+    payload = _payload(timestamp)
+    for metric in _chronological(latest.values()):
+        _write_metric(payload.metrics.add(), metric, birth=False)
+    return serialize(payload)
+
+
+@dataclass(frozen=True, slots=True)
+class Released:
+    """A stored message made ready to send: `payload` None when none of its metrics is born any more."""
+
+    payload: bytes | None
+    dropped: tuple[str, ...] = ()
+
+
+def release_stored(
+    data: bytes, aliases: Mapping[str, int], *, seq: Seq, limit: int = MAX_PAYLOAD
+) -> Released:
+    """A payload from `encode_stored` as the DATA message to publish now: each metric by its alias in
+    `aliases` (name → alias, from this session's birth) instead of its name, and the next seq.
+
+    Metrics whose name `aliases` lacks are left out and named in `dropped`; a message left with none
+    takes no seq. MalformedPayload if `data` is not a payload at all.
+    """
+    stored = parse_payload(data, limit=limit)
+    payload = Payload()
+    if stored.HasField("timestamp"):
+        payload.timestamp = stored.timestamp
+    dropped: list[str] = []
+    for metric in stored.metrics:
+        name: object = metric.name if metric.HasField("name") else None
+        alias = aliases.get(name) if isinstance(name, str) else None
+        if alias is None:
+            dropped.append(name if isinstance(name, str) else "a metric without a name")
+            continue
+        out = payload.metrics.add()
+        out.CopyFrom(metric)
+        out.ClearField("name")
+        out.alias = alias
+    if not payload.metrics:
+        return Released(None, tuple(dropped))
+    payload.seq = seq.next()
+    return Released(serialize(payload), tuple(dropped))
 
 
 # --- deaths -------------------------------------------------------------------------------------

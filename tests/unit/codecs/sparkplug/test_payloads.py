@@ -14,9 +14,11 @@ from gateway.codecs.sparkplug import (
     Aliases,
     BadBirth,
     BdSeq,
+    MalformedPayload,
     Metric,
     Property,
     Quality,
+    Released,
     Seq,
     SparkplugType,
     Unencodable,
@@ -26,8 +28,10 @@ from gateway.codecs.sparkplug import (
     encode_nbirth,
     encode_ndata,
     encode_ndeath,
+    encode_stored,
     metric_properties,
     quality_of_status,
+    release_stored,
     sparkplug_type,
 )
 from gateway.codecs.sparkplug.sparkplug_b_pb2 import Payload
@@ -336,3 +340,67 @@ def test_aliases_are_unique_across_the_node_and_stable_across_rebirths() -> None
     born += host.read(encode_dbirth(laser, seq=seq, timestamp=NOW)).metrics
     bound = [m.alias for m in born if m.alias is not None]
     assert len(bound) == len(set(bound)) == 6
+
+
+# --- store-and-forward -------------------------------------------------------------------------------
+
+
+def test_a_stored_message_is_historical_by_name_and_takes_no_seq() -> None:
+    seq = Seq()
+    kept = encode_stored(
+        [
+            Metric("Axes/X/Position", T("Double"), 1.5, NOW - 9, alias=10),
+            Metric("Feed/Override", T("UInt16"), 80, NOW - 10, alias=11),
+        ],
+        timestamp=NOW,
+    )
+    raw = Payload.FromString(kept)
+    assert not raw.HasField("seq") and seq.peek == 0
+    assert [(m.name, m.HasField("alias"), m.is_historical) for m in raw.metrics] == [
+        ("Feed/Override", False, True),
+        ("Axes/X/Position", False, True),
+    ]
+
+
+def test_a_released_message_goes_by_this_sessions_aliases_with_the_next_seq() -> None:
+    kept = encode_stored(
+        [
+            Metric("Axes/X/Position", T("Double"), 1.5, NOW - 9),
+            Metric("Feed/Override", T("UInt16"), 80, NOW - 10),
+        ],
+        timestamp=NOW - 5,
+    )
+    seq = Seq()
+    encode_nbirth([], bdseq=3, seq=seq, timestamp=NOW)
+    released = release_stored(kept, {"Axes/X/Position": 40, "Feed/Override": 41}, seq=seq)
+    assert released.payload is not None and released.dropped == ()
+    seen = host.read(released.payload, {40: host.DOUBLE, 41: host.UINT16})
+    assert seen.seq == 1 and seen.timestamp == NOW - 5
+    assert [(m.name, m.alias, m.value, m.timestamp, m.is_historical) for m in seen.metrics] == [
+        (None, 41, 80, NOW - 10, True),
+        (None, 40, 1.5, NOW - 9, True),
+    ]
+    assert seq.next() == 2
+
+
+def test_stored_metrics_the_new_births_lack_are_left_out_and_named() -> None:
+    kept = encode_stored(
+        [Metric("Gone/Variable", T("Int32"), 1, NOW), Metric("Laser/On", T("Boolean"), True, NOW)],
+        timestamp=NOW,
+    )
+    seq = Seq()
+    released = release_stored(kept, {"Laser/On": 5}, seq=seq)
+    assert released.dropped == ("Gone/Variable",)
+    assert released.payload is not None
+    assert [(m.alias, m.value) for m in host.read(released.payload, {5: host.BOOLEAN}).metrics] == [(5, True)]
+    nothing = release_stored(
+        encode_stored([Metric("Gone/Variable", T("Int32"), 1, NOW)], timestamp=NOW), {"Laser/On": 5}, seq=seq
+    )
+    assert nothing == Released(None, ("Gone/Variable",)) and seq.peek == 1  # no seq used up
+
+
+def test_stored_bytes_that_are_no_payload_are_refused() -> None:
+    with pytest.raises(MalformedPayload):
+        release_stored(b"\xff", {}, seq=Seq())
+    with pytest.raises(Unencodable):
+        encode_stored([], timestamp=NOW)
