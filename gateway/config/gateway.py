@@ -22,6 +22,7 @@ from gateway.config.jobs import InboxConfig
 from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
 from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
+from gateway.config.sparkplug import SparkplugConfig
 
 SecurityMode = SecurityName
 
@@ -74,6 +75,10 @@ class GatewayConfig(Strict):
     mqtt: MqttConfig | None = Field(
         default=None, description="The MQTT broker to publish to; absent: no MQTT"
     )
+    sparkplug: SparkplugConfig | None = Field(
+        default=None,
+        description="Publish every machine as a Sparkplug B device of this edge node; absent: no Sparkplug",
+    )
     # --- users, roles and access control (gateway/config/access.py) ---
     roles: list[str] = Field(
         default_factory=lambda: list(DEFAULT_ROLES),
@@ -105,6 +110,13 @@ class GatewayConfig(Strict):
     def _access(cls, access: AccessConfig, info: ValidationInfo) -> AccessConfig:
         roles, users = info.data.get("roles"), info.data.get("users")
         return access if roles is None or users is None else check_access(access, roles, users)
+
+    @field_validator("sparkplug")
+    @classmethod
+    def _sparkplug(cls, value: SparkplugConfig | None, info: ValidationInfo) -> SparkplugConfig | None:
+        if value is not None and "mqtt" in info.data:
+            value.connection(info.data["mqtt"])  # a broker of its own, or the mqtt: section's
+        return value
 
     def user_directory(self) -> UserDirectory:
         """The users, the anonymous role and the lockout, as gateway/auth/users.py checks logins."""

@@ -1,0 +1,149 @@
+"""Sparkplug B settings (gateway file, `sparkplug:`): who the gateway is as an edge node, and its broker.
+
+Without the section nothing Sparkplug runs. With it, the gateway is one Sparkplug edge node
+(`group_id`, `edge_node_id`) and every machine one of its devices.
+
+The broker: by default the `mqtt:` section's (host, port, credentials, TLS, protocol, timings),
+reached over a connection of its own, because Sparkplug needs what one MQTT connection cannot
+share with the JSON topics: its own will (the NDEATH, not retained, with a number that changes
+every connect) and a clean session. Its client id is the `mqtt:` one with `-sparkplug` appended
+(two connections with one id would throw each other off the broker). `broker:` names another
+broker instead, for plants whose SCADA broker is not the one the JSON topics go to; a gateway
+without `mqtt:` needs it.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BeforeValidator, Field, SecretStr, field_validator
+
+from gateway.codecs.sparkplug import SparkplugError, check_id
+from gateway.config.base import Strict
+from gateway.config.mqtt import MqttConfig, MqttReconnect, MqttTls
+
+SUFFIX = "-sparkplug"  # appended to the mqtt: section's client id
+
+
+def _protocol(value: Any) -> Any:
+    """YAML reads `protocol: 5` as a number; take it as the text it names."""
+    return str(value) if isinstance(value, int) and not isinstance(value, bool) else value
+
+
+class SparkplugBroker(Strict):
+    """The MQTT broker the edge node connects to, when it is not the `mqtt:` section's."""
+
+    host: str = Field(default="127.0.0.1", min_length=1)
+    port: int = Field(default=1883, ge=1, le=65535, description="1883, or usually 8883 with TLS")
+    client_id: str = Field(
+        default="",
+        max_length=128,
+        description="Default: cnc-gateway-<host name>-sparkplug; keep it stable for broker ACLs",
+    )
+    username: str | None = None
+    password: SecretStr | None = Field(
+        default=None, description="Use ${NAME} to take it from the environment"
+    )
+    protocol: Annotated[Literal["3.1.1", "5"], BeforeValidator(_protocol)] = Field(
+        default="3.1.1", description="MQTT protocol version: 3.1.1 or 5"
+    )
+    keepalive: int = Field(default=30, ge=5, le=65535, description="Seconds")
+    connect_timeout: float = Field(default=5.0, gt=0, le=120, description="Seconds for TCP, TLS and CONNACK")
+    tls: MqttTls | None = None
+    reconnect: MqttReconnect = MqttReconnect()
+
+    @field_validator("client_id")
+    @classmethod
+    def _client_id(cls, value: str) -> str:
+        if any(ch in value for ch in "+#\x00") or any(ch.isspace() for ch in value):
+            raise ValueError(f"client_id {value!r} must not contain spaces, '+', '#' or NUL")
+        return value
+
+    @classmethod
+    def of_mqtt(cls, mqtt: MqttConfig) -> SparkplugBroker:
+        """The `mqtt:` section's broker, for a connection of the edge node's own."""
+        return cls(
+            host=mqtt.host,
+            port=mqtt.port,
+            client_id=f"{mqtt.client_id}{SUFFIX}" if mqtt.client_id else "",
+            username=mqtt.username,
+            password=mqtt.password,
+            protocol=mqtt.protocol,
+            keepalive=mqtt.keepalive,
+            connect_timeout=mqtt.connect_timeout,
+            tls=mqtt.tls,
+            reconnect=mqtt.reconnect,
+        )
+
+
+class SparkplugBuffer(Strict):
+    """Store-and-forward while the broker or the primary host is away."""
+
+    limit: int = Field(
+        default=10_000,
+        ge=1,
+        le=10_000_000,
+        description="DDATA messages kept (each holds one machine's changes of one publishing cycle); beyond "
+        "it the oldest are dropped and counted",
+    )
+    persist: bool = Field(
+        default=False,
+        description="Also keep them in <state_dir>/sparkplug-backlog.sqlite3: they survive a restart",
+    )
+
+
+def _sparkplug_id(what: str, value: str) -> str:
+    try:
+        return check_id(what, value)
+    except SparkplugError as exc:
+        raise ValueError(exc.message) from None
+
+
+class SparkplugConfig(Strict):
+    """The gateway as a Sparkplug B edge node (gateway file). Absent: no Sparkplug."""
+
+    group_id: str = Field(
+        default="cnc", description="Sparkplug group id: spBv1.0/<group_id>/…; a plant, a hall, a line"
+    )
+    edge_node_id: str = Field(
+        default="cnc-gateway",
+        description="This gateway's edge node id; unique in its group (each gateway of a fleet its own)",
+    )
+    primary_host_id: str | None = Field(
+        default=None,
+        description="The primary host application (Ignition's MQTT Engine: its Primary Host ID): births and "
+        "data wait until its STATE says online; meanwhile data is stored. Absent: publish at once",
+    )
+    broker: SparkplugBroker | None = Field(
+        default=None, description="Another broker than the mqtt: section's (needed without an mqtt: section)"
+    )
+    buffer: SparkplugBuffer = SparkplugBuffer()
+    max_pending_writes: int = Field(
+        default=64, ge=1, le=100_000, description="DCMD writes (and commands) queued per machine"
+    )
+
+    @field_validator("group_id")
+    @classmethod
+    def _group(cls, value: str) -> str:
+        _sparkplug_id("group_id", value)
+        if value == "STATE":
+            raise ValueError("group_id 'STATE' is where host applications publish their STATE")
+        return value
+
+    @field_validator("edge_node_id")
+    @classmethod
+    def _edge_node(cls, value: str) -> str:
+        return _sparkplug_id("edge_node_id", value)
+
+    @field_validator("primary_host_id")
+    @classmethod
+    def _host(cls, value: str | None) -> str | None:
+        return None if value is None else _sparkplug_id("primary_host_id", value)
+
+    def connection(self, mqtt: MqttConfig | None) -> SparkplugBroker:
+        """The broker to connect to: `broker`, else the `mqtt:` section's (ValueError without either)."""
+        if self.broker is not None:
+            return self.broker
+        if mqtt is None:
+            raise ValueError("no broker: give sparkplug.broker, or an mqtt: section to share")
+        return SparkplugBroker.of_mqtt(mqtt)
