@@ -127,11 +127,13 @@ class MqttClient:
         on_message: Callable[[Incoming], None],
         on_published: Callable[[int], None],
         on_lost: Callable[[str], None],
+        on_unsubscribed: Callable[[int], None] | None = None,
     ) -> None:
         self.settings = settings
         self.on_message = on_message
         self.on_published = on_published
         self.on_lost = on_lost
+        self.on_unsubscribed = on_unsubscribed
         self.v5 = settings.protocol == "5"
         protocol = MQTTProtocolVersion.MQTTv5 if self.v5 else MQTTProtocolVersion.MQTTv311
         kwargs: dict[str, Any] = {} if self.v5 else {"clean_session": True}
@@ -164,6 +166,7 @@ class MqttClient:
         client.on_publish = self._paho_publish
         client.on_message = self._paho_message
         client.on_subscribe = self._paho_subscribe
+        client.on_unsubscribe = self._paho_unsubscribe
         self._client = client
         self._configured = False
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -387,6 +390,12 @@ class MqttClient:
                 ", ".join(refused),
             )
 
+    def _paho_unsubscribe(
+        self, client: paho.Client, userdata: Any, mid: int, reasons: list[Any], properties: Any
+    ) -> None:
+        if self.on_unsubscribed is not None:
+            self.on_unsubscribed(mid)
+
     # --- operations --------------------------------------------------------------------------
 
     def publish(
@@ -416,6 +425,17 @@ class MqttClient:
         if rc != MQTTErrorCode.MQTT_ERR_SUCCESS:
             raise BrokerError(f"cannot subscribe: {paho.error_string(rc)}")
         self._pending_subs[mid] = filters
+
+    def unsubscribe(self, filters: list[str]) -> int:
+        """Queue an UNSUBSCRIBE; returns its message id, which `on_unsubscribed` gets with the UNSUBACK.
+
+        A broker answers the packets of one connection in order, so the UNSUBACK also says that it has
+        taken every message published before it: the one acknowledgement QoS 0 messages can have.
+        """
+        rc, mid = self._client.unsubscribe(filters)
+        if rc != MQTTErrorCode.MQTT_ERR_SUCCESS or mid is None:
+            raise BrokerError(f"cannot unsubscribe: {paho.error_string(rc)}")
+        return mid
 
     def take_back(self) -> int:
         """Forget every message paho still holds unacknowledged (the caller re-sends its own copies)."""
