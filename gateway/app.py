@@ -123,6 +123,15 @@ def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None 
         sinks.append(
             MqttSink(tree, config.gateway.mqtt, config.state_dir, config.mappings, base_dir=config.base_dir)
         )
+    if gw.sparkplug is not None:  # every machine a device of one Sparkplug B edge node
+        from gateway.sinks.sparkplug.sink import SparkplugSink
+
+        broker = gw.sparkplug.connection(gw.mqtt)
+        sinks.append(
+            SparkplugSink(
+                tree, gw.sparkplug, broker, config.state_dir, config.mappings, base_dir=config.base_dir
+            )
+        )
     if any(m.copydata is not None for m in config.machines):  # frames for nesting software
         from gateway.sinks.copydata.sink import CopydataSink
 

@@ -24,6 +24,7 @@ How paho meets asyncio here:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 import ssl
@@ -67,6 +68,9 @@ class BrokerSettings:
     tls: ssl.SSLContext | None = None
     tls_verify: bool = True
     will: Will | None = None
+    no_delay: bool = (
+        False  # TCP_NODELAY: small packets (a fence after a publish) go out at once, not after an ACK
+    )
 
     @property
     def address(self) -> str:
@@ -260,6 +264,9 @@ class MqttClient:
         loop = self._loop
         assert loop is not None
         self._sock = sock
+        if self.settings.no_delay:
+            with contextlib.suppress(OSError, AttributeError):  # not a TCP socket: nothing to turn off
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         loop.add_reader(sock, self._readable)
         if self._client.want_write():
             loop.add_writer(sock, self._writable)
