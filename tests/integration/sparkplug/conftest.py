@@ -33,26 +33,55 @@ from tests.integration.sparkplug.host import SparkplugHost
 from tests.waiting import free_port, wait_until
 
 MACHINE = "laser-sim"
-TYPES = ("Boolean", "SByte", "Byte", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Float", "Double",
-         "String", "DateTime")  # fmt: skip
+TYPES = (
+    "Boolean",
+    "SByte",
+    "Byte",
+    "Int16",
+    "UInt16",
+    "Int32",
+    "UInt32",
+    "Int64",
+    "UInt64",
+    "Float",
+    "Double",
+    "String",
+    "DateTime",
+)
 
 
 def typed_mapping(machine: str = "m1", *, writable: bool = True, role: str | None = None) -> MachineMapping:
     """A machine with a read-write variable of every type, scalar (`T/<type>`) and array (`A/<type>`)."""
     variables = [
-        {"path": f"{folder}/{name}", "source": f"{folder}.{name}", "type": name + suffix, "access": "readwrite",
-         **({"role": role} if role else {})}
-        for name in TYPES for folder, suffix in (("T", ""), ("A", "[]"))
-    ]  # fmt: skip
-    variables.append({"path": "Feed/Override", "source": "override", "type": "UInt16", "unit": "%",
-                      "access": "readwrite", "range": {"min": 0, "max": 150}})  # fmt: skip
+        {
+            "path": f"{folder}/{name}",
+            "source": f"{folder}.{name}",
+            "type": name + suffix,
+            "access": "readwrite",
+            **({"role": role} if role else {}),
+        }
+        for name in TYPES
+        for folder, suffix in (("T", ""), ("A", "[]"))
+    ]
+    variables.append(
+        {
+            "path": "Feed/Override",
+            "source": "override",
+            "type": "UInt16",
+            "unit": "%",
+            "access": "readwrite",
+            "range": {"min": 0, "max": 150},
+        }
+    )
     variables.append({"path": "Axes/X/Position", "source": "x", "type": "Double", "unit": "mm"})
-    return MachineMapping.model_validate({
-        "machine": machine,
-        "driver": {"endpoint": "opc.tcp://127.0.0.1:1"},
-        "variables": variables,
-        "mqtt": {"writable": writable},
-    })  # fmt: skip
+    return MachineMapping.model_validate(
+        {
+            "machine": machine,
+            "driver": {"endpoint": "opc.tcp://127.0.0.1:1"},
+            "variables": variables,
+            "mqtt": {"writable": writable},
+        }
+    )
 
 
 @pytest.fixture
@@ -86,9 +115,14 @@ def sparkplug_config(port: int, **overrides: Any) -> SparkplugConfig:
 
 
 def laser_config(
-    tmp_path: Path, sim_port: int, sparkplug: SparkplugConfig, *, mqtt: MqttConfig | None = None,
-    writable: bool = True, access: dict[str, Any] | None = None,
-) -> Config:  # fmt: skip
+    tmp_path: Path,
+    sim_port: int,
+    sparkplug: SparkplugConfig,
+    *,
+    mqtt: MqttConfig | None = None,
+    writable: bool = True,
+    access: dict[str, Any] | None = None,
+) -> Config:
     mapping = laser_mapping(sim_port)
     mapping = mapping.model_copy(update={"mqtt": MachineMqtt(writable=writable, commands=True)})
     gateway = GatewayConfig.model_validate(

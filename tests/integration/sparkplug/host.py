@@ -52,10 +52,14 @@ class Seen:
     def values(self) -> list[tuple[str, Any, int | None, bool]]:
         """(name, value, timestamp, historical) of every metric, names resolved through the births."""
         return [
-            (m.name or self.names.get(m.alias if m.alias is not None else -1, f"alias {m.alias}"), m.value,
-             m.timestamp, m.is_historical)
+            (
+                m.name or self.names.get(m.alias if m.alias is not None else -1, f"alias {m.alias}"),
+                m.value,
+                m.timestamp,
+                m.is_historical,
+            )
             for m in self.payload.metrics
-        ]  # fmt: skip
+        ]
 
 
 @dataclass

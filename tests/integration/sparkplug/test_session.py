@@ -19,9 +19,17 @@ from tests.unit.codecs.sparkplug import host as spec
 from tests.waiting import wait_until
 
 NODE_METRICS = {
-    "Gateway/Version", "Gateway/Machines", "Gateway/MachinesConnected", "Gateway/MqttDropped", "Sparkplug/Dropped",
-    "Sparkplug/Stored", "Sparkplug/CommandsRefused", "Jobs/QueueLength", "Jobs/Sending", "Jobs/FailedCount",
-}  # fmt: skip
+    "Gateway/Version",
+    "Gateway/Machines",
+    "Gateway/MachinesConnected",
+    "Gateway/MqttDropped",
+    "Sparkplug/Dropped",
+    "Sparkplug/Stored",
+    "Sparkplug/CommandsRefused",
+    "Jobs/QueueLength",
+    "Jobs/Sending",
+    "Jobs/FailedCount",
+}
 
 
 def online_birth(host: SparkplugHost) -> Seen | None:
@@ -94,8 +102,10 @@ async def test_births_after_connect_and_again_after_a_rebirth_request(
         mark = host.count()
         births = len(host.of("DBIRTH", MACHINE))
         host.rebirth()
-        await wait_until(lambda: len(host.of("NBIRTH")) == 2 and len(host.of("DBIRTH", MACHINE)) > births,
-                         message="the births again")  # fmt: skip
+        await wait_until(
+            lambda: len(host.of("NBIRTH")) == 2 and len(host.of("DBIRTH", MACHINE)) > births,
+            message="the births again",
+        )
         again = host.of("NBIRTH")[1]
         assert again.seq == 0 and again.metric("bdSeq").value == bdseq.value  # type: ignore[union-attr]
         reborn = host.of("DBIRTH", MACHINE)[-1]
@@ -113,8 +123,11 @@ async def test_ddata_by_alias_as_the_birth_bound_them(
     async with laser_sparkplug(tmp_path, sparkplug_config(mosquitto.port), loop_program="demo.nc"):
         await wait_until(lambda: online_birth(host), message="the DBIRTH of the machine online")
         mark = host.count()
-        await wait_until(lambda: sum(1 for s in host.since(mark) if s.kind == "DDATA") >= 20, timeout=30,
-                         message="20 DDATA of the running program")  # fmt: skip
+        await wait_until(
+            lambda: sum(1 for s in host.since(mark) if s.kind == "DDATA") >= 20,
+            timeout=30,
+            message="20 DDATA of the running program",
+        )
     birth = online_birth(host)
     assert birth is not None
     bound = {m.alias: (m.name, m.datatype) for m in birth.payload.metrics}
