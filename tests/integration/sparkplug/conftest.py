@@ -29,6 +29,7 @@ from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.sparkplug.sink import SparkplugSink
 from simulator.runner import Simulator
 from tests.integration.laser_rig import laser_mapping
+from tests.integration.mqtt.conftest import Mosquitto
 from tests.integration.sparkplug.host import SparkplugHost
 from tests.waiting import free_port, wait_until
 
@@ -82,6 +83,18 @@ def typed_mapping(machine: str = "m1", *, writable: bool = True, role: str | Non
             "mqtt": {"writable": writable},
         }
     )
+
+
+@pytest.fixture
+def queueing_broker(tmp_path: Path) -> Iterator[Mosquitto]:
+    """A Mosquitto that also queues QoS 0 messages for a persistent session while its client is away:
+    a host that reconnects after a broker restart then misses nothing the edge node sent meanwhile."""
+    broker = Mosquitto(tmp_path / "mosquitto", free_port(), extra="queue_qos0_messages true\n")
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.stop()
 
 
 @pytest.fixture
@@ -139,12 +152,31 @@ def laser_config(
 @dataclass
 class Laser:
     gateway: Gateway
-    sim: Simulator
+    sim: Simulator | None
     sink: SparkplugSink
+    sim_port: int
+    store: Path
+    loop_program: str | None = None
 
     @property
     def machine(self) -> Any:
         return self.gateway.tree.machines[MACHINE]
+
+    async def stop_sim(self) -> None:
+        sim, self.sim = self.sim, None
+        if sim is not None:
+            await sim.__aexit__(None, None, None)
+
+    async def start_sim(self) -> None:
+        sim = Simulator(
+            opcua_port=self.sim_port,
+            ftp_port=free_port(),
+            speed=20.0,
+            store=self.store,
+            loop_program=self.loop_program,
+        )
+        await sim.__aenter__()
+        self.sim = sim
 
 
 @asynccontextmanager
@@ -155,16 +187,13 @@ async def laser_sparkplug(
     sim_port = free_port()
     store = tmp_path / "store"
     store.mkdir(exist_ok=True)
-    sim = Simulator(
-        opcua_port=sim_port, ftp_port=free_port(), speed=20.0, store=store, loop_program=loop_program
-    )
-    await sim.__aenter__()
+    gw = Gateway(laser_config(tmp_path, sim_port, sparkplug, **kwargs))
+    laser = Laser(gw, None, gw.sink("sparkplug", SparkplugSink), sim_port, store, loop_program)
+    await laser.start_sim()
     try:
-        gw = Gateway(laser_config(tmp_path, sim_port, sparkplug, **kwargs))
         async with gw:
             task = asyncio.create_task(gw.run(), name="test:gateway")
             try:
-                laser = Laser(gw, sim, gw.sink("sparkplug", SparkplugSink))
                 await wait_until(
                     lambda: laser.machine.status.is_connected, timeout=15, message="the simulator"
                 )
@@ -173,7 +202,7 @@ async def laser_sparkplug(
                 task.cancel()
                 await asyncio.gather(task, return_exceptions=True)
     finally:
-        await sim.__aexit__(None, None, None)
+        await laser.stop_sim()
 
 
 # --- the sink alone ----------------------------------------------------------------------------------
