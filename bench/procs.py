@@ -172,6 +172,18 @@ class Mosquitto:
     def pid(self) -> int:
         return self.proc.pid if self.proc is not None else 0
 
+    async def restart(self) -> None:
+        """Stop the broker (SIGTERM) and start it again on the same port (every client loses its session)."""
+        await self.__aexit__()
+        conf = self.dir / "mosquitto.conf"
+        with (self.dir / "mosquitto.log").open("ab") as log:
+            self.proc = await asyncio.create_subprocess_exec(MOSQUITTO, "-c", str(conf), stdout=log, stderr=log)
+        deadline = time.monotonic() + 10
+        while not _listening(self.port):
+            if self.proc.returncode is not None or time.monotonic() > deadline:
+                raise BenchError(f"mosquitto did not start again (see {self.dir / 'mosquitto.log'})")
+            await asyncio.sleep(0.02)
+
     async def __aexit__(self, *exc: object) -> None:
         if self.proc is not None and self.proc.returncode is None:
             self.proc.send_signal(signal.SIGTERM)

@@ -1,4 +1,4 @@
-"""The targets tables of issues 7 and 13, judged against this run's figures (PASS/MISS for must and for aim).
+"""The targets tables of issues 7, 13 and 15, judged against this run's figures (PASS/MISS for must and aim).
 
 Issue 13's peer rows are judged like the raw-library ceilings: against Node-RED measured in the same run
 on the same load (bench/scenarios/peer.py), as the ratio gateway / Node-RED.
@@ -128,6 +128,55 @@ def judge(ctx: Context) -> None:
     ))  # fmt: skip
     r.targets = targets
     r.targets_13 = judge_13(ctx)
+    r.targets_15 = judge_15(ctx)
+
+
+def judge_15(ctx: Context) -> list[Target]:
+    """Sparkplug B (bench/scenarios/sparkplug.py): against the JSON sink measured in the same run."""
+    data: dict[str, Any] = ctx.results.details.get("sparkplug", {})
+    if not data:
+        return []
+    targets = []
+
+    # 1. changes/s delivered flat out, Sparkplug host / JSON subscriber (each sink alone, same load)
+    def flat(face: str) -> dict[str, Any]:
+        steps = data.get(face, {}).get("steps", [])
+        return next((st for st in steps if st["rate"] is None), {})
+
+    spb, js = flat("sparkplug"), flat("json")
+    a, b = spb.get("delivered"), js.get("delivered")
+    targets.append(Target(
+        "changes/s to a Sparkplug host relative to the JSON sink (same run, flat out)", 0.8, 1.2, "×",
+        value=_ratio(a, b),
+        source=f"Sparkplug {a or 0:,.0f}/s ({spb.get('messages') or 0:,.0f} DDATA/s) vs JSON {b or 0:,.0f}/s"
+        if spb and js else "no flat-out step",
+    ))  # fmt: skip
+
+    # 2. p99 latency source → Sparkplug host at 5,000 changes/s (median of the 1-s p99s, as issue 7's)
+    at_5000 = next((st for st in data.get("sparkplug", {}).get("steps", []) if st["rate"] == 5000), {})
+    p99 = at_5000.get("p99_median")
+    targets.append(Target(
+        "p99 latency source → Sparkplug host at 5,000 changes/s", 50, 20, "ms", higher_is_better=False,
+        value=p99, source=f"whole window: {(at_5000.get('latency') or {}).get('p99') or 0:.0f} ms; median of "
+        "the 1-s p99s" if at_5000 else "no 5,000/s step",
+    ))  # fmt: skip
+
+    # 3. rebirth: NCMD → NBIRTH and every DBIRTH
+    rebirth = data.get("rebirth", {})
+    targets.append(Target(
+        "NBIRTH + all DBIRTHs, 20 machines × 500 variables, from the rebirth request", 2.0, 0.5, "s",
+        higher_is_better=False, value=rebirth.get("median"),
+        source=f"median of {len(rebirth.get('seconds', []))}, max {rebirth.get('max') or 0:.2f} s",
+    ))  # fmt: skip
+
+    # 4. seq gaps within sessions over the broker restarts
+    restarts = data.get("restarts", {})
+    targets.append(Target(
+        f"sequence gaps over {restarts.get('restarts', '?')} broker restarts", 0, 0, "gaps",
+        higher_is_better=False, value=restarts.get("seq_gaps"),
+        source=f"{restarts.get('sessions', 0)} sessions, {restarts.get('messages', 0):,} messages",
+    ))  # fmt: skip
+    return targets
 
 
 def judge_13(ctx: Context) -> list[Target]:

@@ -29,6 +29,8 @@ async def main(args: argparse.Namespace) -> None:
     if args.inject:
         gateway.sources = []
         injector = Injector([n for m in gateway.tree.machines.values() for n in m.mapped])
+        for machine in gateway.tree.machines.values():  # the injector is their controller, and it is there
+            machine.status.connected()
     tasks: list[asyncio.Task[None]] = []
     async with gateway:
         tasks.append(asyncio.create_task(gateway.run(), name="bench:gateway"))

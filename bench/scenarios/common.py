@@ -45,6 +45,7 @@ def write_gateway(
     mqtt: dict[str, Any] | None = None,
     inbox: dict[str, Any] | None = None,
     opcua_port: int | None = None,
+    extra: dict[str, Any] | None = None,
 ) -> tuple[Path, str]:
     """A gateway file and its mapping files in `folder`; returns (gateway file, OPC UA endpoint)."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -62,6 +63,7 @@ def write_gateway(
     }
     if mqtt_port is not None:
         doc["mqtt"] = {"port": mqtt_port, "client_id": f"bench-gw-{folder.name}", **(mqtt or {})}
+    doc.update(extra or {})  # other sections of the gateway file (sparkplug:)
     path = folder / "gateway.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
     return path, endpoint
