@@ -32,6 +32,7 @@ from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
+from gateway.config.sparkplug import SparkplugConfig
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
 
@@ -68,7 +69,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="MQTT broker port (default 1883); when nothing "
         "answers there, the demo starts an embedded broker on it",
     )
-    p.add_argument("--no-mqtt", action="store_true", help="do not publish to MQTT")
+    p.add_argument("--no-mqtt", action="store_true", help="do not publish to MQTT (nor Sparkplug)")
+    p.add_argument(
+        "--no-sparkplug", action="store_true", help="do not publish Sparkplug B beside the JSON topics"
+    )
+    p.add_argument("--sparkplug-group", default="cnc", help="Sparkplug group id (default cnc)")
+    p.add_argument(
+        "--sparkplug-edge-node", default="cnc-gateway", help="Sparkplug edge node id (default cnc-gateway)"
+    )
+    p.add_argument(
+        "--sparkplug-primary-host",
+        default=None,
+        help="wait for this primary host's STATE before the births (default: publish at once)",
+    )
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
 
@@ -110,6 +123,7 @@ def handle(args: argparse.Namespace) -> int:
         state_dir=str(args.state_dir),
         inbox=demo_inbox(mapping, args),
         mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
+        sparkplug=demo_sparkplug(args),
         **demo_access(),
     )
     config = Config(gateway, (mapping,), Path.cwd(), base.files)
@@ -119,6 +133,17 @@ def handle(args: argparse.Namespace) -> int:
         log.error("cannot start: %s", exc)
         return 1
     return 0
+
+
+def demo_sparkplug(args: argparse.Namespace) -> SparkplugConfig | None:
+    """Sparkplug B beside the JSON topics, on the same broker (over a connection of its own)."""
+    if args.no_mqtt or args.no_sparkplug:
+        return None
+    return SparkplugConfig(
+        group_id=args.sparkplug_group,
+        edge_node_id=args.sparkplug_edge_node,
+        primary_host_id=args.sparkplug_primary_host,
+    )
 
 
 def demo_access() -> dict[str, Any]:
@@ -302,6 +327,7 @@ def print_banner(
             f"  watch            mosquitto_sub -v -t '{mqtt.prefix}/#'",
             f"  write            mosquitto_pub -t {mqtt.prefix}/{mapping.machine}/feed/override/set -m 50",
         ]
+    lines += sparkplug_banner(gw, mapping)
     if gw.jobs is not None and gw.jobs.inbox is not None:
         inbox = gw.jobs.inbox
         password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
@@ -320,6 +346,25 @@ def print_banner(
         )
     lines += ["  stop             Ctrl-C", ""]
     print("\n".join(lines), flush=True)
+
+
+def sparkplug_banner(gw: Gateway, mapping: MachineMapping) -> list[str]:
+    """The edge node's ids and topics, and how to watch them or point a Sparkplug host at them."""
+    sparkplug = gw.config.gateway.sparkplug
+    if sparkplug is None:
+        return []
+    group, edge, machine = sparkplug.group_id, sparkplug.edge_node_id, mapping.machine
+    host = sparkplug.primary_host_id
+    broker = sparkplug.connection(gw.config.gateway.mqtt)
+    waits = f"; births wait for primary host {host}'s STATE" if host else ""
+    node = f"spBv1.0/{group}/{{NBIRTH,NDATA,NDEATH,NCMD}}/{edge}"
+    device = f"spBv1.0/{group}/{{DBIRTH,DDATA,DDEATH,DCMD}}/{edge}/{machine}"
+    watch = f"cnc-gateway sparkplug watch --host {broker.host} --port {broker.port} --group {group}"
+    return [
+        f"  Sparkplug B      group {group}, edge node {edge}, device {machine} (same broker){waits}",
+        f"  topics           {node}, {device}",
+        f"  Sparkplug host   {watch}  (or Ignition's MQTT Engine: README, Sparkplug B)",
+    ]
 
 
 def copydata_banner(mapping: MachineMapping, mapping_file: str) -> list[str]:

@@ -7,9 +7,22 @@ import sys
 from collections.abc import Sequence
 
 from gateway import __version__
-from gateway.cli import alarms, audit, check, demo, discover, frames, jobs, passwords, programs, run, schema
+from gateway.cli import (
+    alarms,
+    audit,
+    check,
+    demo,
+    discover,
+    frames,
+    jobs,
+    passwords,
+    programs,
+    run,
+    schema,
+    sparkplug,
+)
 
-COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms)
+COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms, sparkplug)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -199,6 +199,20 @@ def _data(metrics: Sequence[Metric], seq: Seq, timestamp: int) -> bytes:
     return serialize(payload)
 
 
+# --- commands, as a host sends them -----------------------------------------------------------------
+
+
+def encode_command(metrics: Sequence[Metric], *, timestamp: int) -> bytes:
+    """An NCMD or DCMD as a host sends it (for tools and tests): each metric by alias, or by name when it
+    has none (`Node Control/Rebirth` never has one), without datatype, and no seq."""
+    if not metrics:
+        raise Unencodable("a command needs at least one metric")
+    payload = _payload(timestamp)
+    for metric in metrics:
+        _write_metric(payload.metrics.add(), metric, birth=False)
+    return serialize(payload)
+
+
 # --- store-and-forward --------------------------------------------------------------------------
 
 

@@ -14,14 +14,19 @@ from gateway.codecs.sparkplug import (
     Aliases,
     BadBirth,
     BdSeq,
+    Definition,
     MalformedPayload,
     Metric,
+    MetricTable,
     Property,
     Quality,
     Released,
     Seq,
     SparkplugType,
     Unencodable,
+    decode_dcmd,
+    decode_ncmd,
+    encode_command,
     encode_dbirth,
     encode_ddata,
     encode_ddeath,
@@ -404,3 +409,21 @@ def test_stored_bytes_that_are_no_payload_are_refused() -> None:
         release_stored(b"\xff", {}, seq=Seq())
     with pytest.raises(Unencodable):
         encode_stored([], timestamp=NOW)
+
+
+def test_a_command_as_a_host_sends_it_reads_back_as_the_edge_node_reads_it() -> None:
+    table = MetricTable([Definition("Feed/Override", T("UInt16"), 11)])
+    rebirth = Metric(REBIRTH, T("Boolean"), True, NOW)
+    assert decode_ncmd(encode_command([rebirth], timestamp=NOW), table).rebirth
+    raw = Payload.FromString(
+        encode_command([Metric("Feed/Override", T("UInt16"), 50, NOW, alias=11)], timestamp=NOW)
+    )
+    assert (
+        not raw.HasField("seq")
+        and not raw.metrics[0].HasField("name")
+        and not raw.metrics[0].HasField("datatype")
+    )
+    [write] = decode_dcmd(raw.SerializeToString(), table).writes
+    assert (write.metric.name, write.value) == ("Feed/Override", 50)
+    with pytest.raises(Unencodable):
+        encode_command([], timestamp=NOW)
