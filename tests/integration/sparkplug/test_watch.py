@@ -1,4 +1,4 @@
-"""`cnc-gateway sparkplug watch` against a running edge node: births and data, decoded, as the README shows."""
+"""`cnc-gateway sparkplug watch` against a running edge node: births and data, decoded (the README's)."""
 
 from __future__ import annotations
 
