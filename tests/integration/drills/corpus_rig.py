@@ -25,6 +25,7 @@ from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mqtt import MachineMqtt
+from gateway.config.sparkplug import SparkplugConfig
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.tcp import TcpServerTransport
 from simulator.runner import Simulator
@@ -52,6 +53,21 @@ def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
         if variable["path"] == "Laser/PowerSetpoint":
             variable["access"] = "readwrite"
     return data
+
+
+SPARKPLUG_MACHINE = "spb"
+
+
+def sparkplug_machine(sim_port: int) -> dict[str, Any]:
+    """A machine with the variables that tests/corpus/sparkplug/commands.yaml's births name: they need not
+    exist on the simulator, the refusals come before any write."""
+    from tests.integration.sparkplug.test_corpus import TYPES
+
+    variables = [{"path": "Machine/State", "source": "ns=2;s=::AsGlobalPV:gMachine.State", "type": "Int16"}]
+    variables += [{"path": path, "source": f"ns=2;s=::Corpus:{path}", "type": kind, "access": "readwrite"}
+                  for path, kind in TYPES.items()]  # fmt: skip
+    return {"machine": SPARKPLUG_MACHINE, "driver": {"endpoint": f"opc.tcp://127.0.0.1:{sim_port}"},
+            "variables": variables, "mqtt": {"writable": True}}  # fmt: skip
 
 
 def rules_machine(name: str, sim_port: int, ftp_port: int, rules: dict[str, Any]) -> dict[str, Any]:
@@ -110,7 +126,8 @@ async def corpus_rig(
     sim_port, ftp_port, opcua_port = free_port(), free_port(), free_port()
     store = tmp_path / "store"
     tmp_path.mkdir(parents=True, exist_ok=True)
-    files = [write_yaml(tmp_path / f"{MACHINE}.yaml", laser_sim_mapping(sim_port, ftp_port))]
+    files = [write_yaml(tmp_path / f"{MACHINE}.yaml", laser_sim_mapping(sim_port, ftp_port)),
+             write_yaml(tmp_path / f"{SPARKPLUG_MACHINE}.yaml", sparkplug_machine(sim_port))]  # fmt: skip
     machines: dict[str, str] = {}
     for index, rules in enumerate(rule_sets):
         name = f"gc{index}"
@@ -121,7 +138,7 @@ async def corpus_rig(
         "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway", "security": ["None"]},
         "state_dir": str(tmp_path / "state"),
         "inbox": {"host": "127.0.0.1", "port": 0, "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
-    }).model_copy(update={"mqtt": mqtt_config(mqtt_port)})  # fmt: skip
+    }).model_copy(update={"mqtt": mqtt_config(mqtt_port), "sparkplug": SparkplugConfig()})  # fmt: skip
     async with Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=store) as sim:
         for name in machines.values():
             (store / "DATA" / name).mkdir(parents=True, exist_ok=True)

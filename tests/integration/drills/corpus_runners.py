@@ -206,6 +206,52 @@ async def run_mqtt(rec: Recorder, kind: str, cases: list[dict[str, Any]]) -> lis
     return out
 
 
+# --- Sparkplug NCMD and DCMD ---------------------------------------------------------------------------
+
+
+def sparkplug_payload(case: dict[str, Any]) -> bytes:
+    if "parts" in case:
+        return b"".join(bytes.fromhex(part["hex"]) * part.get("times", 1) for part in case["parts"])
+    return bytes.fromhex(str(case["hex"]))
+
+
+async def run_sparkplug(rig: CorpusRig, rec: Recorder, cases: list[dict[str, Any]]) -> list[Outcome]:
+    """Each NCMD/DCMD from a real paho client to the gateway's edge node: refused, counted by its kind.
+
+    The corpus names the aliases of its own births; they are translated to the ones the edge node bound.
+    """
+    from gateway.sinks.sparkplug.sink import SparkplugSink
+    from tests.integration.drills.corpus_rig import SPARKPLUG_MACHINE
+    from tests.integration.sparkplug.test_corpus import DEVICE_ALIASES, translated
+
+    sink = rig.gateway.sink("sparkplug", SparkplugSink)
+    device = sink.devices[SPARKPLUG_MACHINE]
+    assert sink.node is not None and sink.requests is not None
+    aliases = {corpus: device.by_name[name] for corpus, name in DEVICE_ALIASES.items()}
+    aliases[1] = next(m.alias for m in sink.node.metrics if m.name == "Gateway/Version")
+    refusals = sink.requests.refusals
+    out = []
+    for case in cases:
+        kind = case["expect"]["kind"]
+        before = dict(refusals)
+        topic = f"spBv1.0/{sink.group_id}/{case['message']}/{sink.edge_node_id}"
+        if case["message"] == "DCMD":
+            topic += f"/{SPARKPLUG_MACHINE}"
+        data = sparkplug_payload(case)
+        rec.publish(topic, translated(data, aliases), qos=0)
+        try:
+            await wait_until(lambda b=before: sum(refusals.values()) > sum(b.values()), timeout=10,
+                             message=case["name"])  # fmt: skip
+        except AssertionError:
+            out.append(Outcome("sparkplug", case["name"], False, "not refused"))
+            continue
+        counted = {k: n - before.get(k, 0) for k, n in refusals.items() if n != before.get(k, 0)}
+        out.append(
+            Outcome("sparkplug", case["name"], counted == {kind: 1}, f"counted {counted}, expected {kind}")
+        )
+    return out
+
+
 # --- FTP paths and names -----------------------------------------------------------------------------
 
 

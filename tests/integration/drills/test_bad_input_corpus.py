@@ -4,7 +4,8 @@ gateway serves on afterwards.
 tests/corpus/ holds the inputs and, beside each, the answer it must get:
 mappings/ (`# expect:` headers; through the loader and one `cnc-gateway check`), gcode/ (`(expect: …)`
 headers; uploaded to the FTP inbox), mqtt/set.yaml and mqtt/commands.yaml (published with paho; answered on
-`…/result`), ftp/paths.yaml (ftplib sessions), copydata/frames.yaml (TCP connections to the COPYDATA target).
+`…/result`), ftp/paths.yaml (ftplib sessions), copydata/frames.yaml (TCP connections to the COPYDATA target),
+sparkplug/commands.yaml (NCMD and DCMD published with paho to the gateway's edge node; each counted by kind).
 The gateway (corpus_rig.py) runs the whole time, with the simulator and a real Mosquitto. At the end it must
 still serve: OPC UA values Good, an MQTT write carried out and mirrored, a valid job delivered, a valid
 COPYDATA frame written; and its log must hold no error and no traceback.
@@ -82,6 +83,8 @@ async def test_every_bad_input_gets_its_clear_error_and_the_gateway_serves_on(
         outcomes += await runners.run_copydata(
             rig, runners.load("copydata/frames.yaml"), mqtt, records.records
         )
+        await wait_until(lambda: rig.gateway.sink("sparkplug").online, timeout=10, message="Sparkplug born")
+        outcomes += await runners.run_sparkplug(rig, mqtt, runners.load("sparkplug/commands.yaml"))
         survived = await still_serving(rig, mqtt)
         assert not rig.run.done(), "the gateway stopped"
 
