@@ -68,10 +68,11 @@ def quality(status: str) -> Quality:
 
 
 def millis(ts: datetime) -> int:
-    """A timestamp as milliseconds since 1970 UTC (a naive one is UTC)."""
+    """A timestamp as milliseconds since 1970 UTC (a naive one is UTC; one before 1970, which a Sparkplug
+    timestamp cannot carry and no controller means, is 0)."""
     if ts.tzinfo is None:
         ts = ts.replace(tzinfo=UTC)
-    return (ts - EPOCH) // MS
+    return max(0, (ts - EPOCH) // MS)
 
 
 def now_ms() -> int:

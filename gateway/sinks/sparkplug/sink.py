@@ -544,11 +544,14 @@ class SparkplugSink:
         for node, device in self._late.items():  # variables that appeared since: in these births
             self._metric_of[node] = device.add(node)
         self._late.clear()
-        ts = now_ms()
-        self._send(
-            self.nbirth_topic,
-            encode_nbirth(self.node.current(ts), bdseq=self.bdseq, seq=self.seq, timestamp=ts),
+        ts, bdseq = now_ms(), self.bdseq
+        nbirth = self._encode_birth(
+            lambda ms: encode_nbirth(ms, bdseq=bdseq, seq=self.seq, timestamp=ts), self.node.current(ts)
         )
+        if nbirth is None:
+            log.error("Sparkplug: the NBIRTH cannot be encoded; nothing is published until a rebirth")
+            return
+        self._send(self.nbirth_topic, nbirth)
         self.born = True
         self.births += 1
         self._set_state(STATE_ONLINE, "")
@@ -559,29 +562,39 @@ class SparkplugSink:
         self._fence()
 
     def _dbirth(self, device: Device) -> None:
-        metrics = device.birth_metrics()
         ts = now_ms()
-        while True:
-            try:
-                payload = encode_dbirth(metrics, seq=self.seq, timestamp=ts)
-                break
-            except Unencodable as exc:  # a value its type cannot carry: a null, Bad, in the birth
-                if exc.metric is None or not any(m.name == exc.metric for m in metrics):
-                    log.error("Sparkplug: cannot publish the DBIRTH of %s: %s", device.name, exc)
-                    return
-                self._unencodable_once(exc)
-                bad = {**QUALITY_PROPERTY[Quality.BAD]}
-                metrics = [
-                    dataclasses.replace(m, value=None, properties={**m.properties, **bad})
-                    if m.name == exc.metric
-                    else m
-                    for m in metrics
-                ]
+        payload = self._encode_birth(
+            lambda ms: encode_dbirth(ms, seq=self.seq, timestamp=ts), device.birth_metrics()
+        )
+        if payload is None:
+            log.error("Sparkplug: the DBIRTH of %s cannot be encoded; the device is not born", device.name)
+            return
         self._send(device.dbirth, payload)
         device.birth_due = False
         device.alive = device.online
         if not device.online:
             self._send(device.ddeath, encode_ddeath(seq=self.seq, timestamp=ts))
+
+    def _encode_birth(self, encode: Callable[[list[Metric]], bytes], metrics: list[Metric]) -> bytes | None:
+        """A birth carries every metric: one whose value its type cannot carry goes as a null, Bad."""
+        nulled: set[str] = set()
+        bad = QUALITY_PROPERTY[Quality.BAD]
+        while True:
+            try:
+                return encode(metrics)
+            except Unencodable as exc:
+                name = exc.metric
+                if name is None or name in nulled or not any(m.name == name for m in metrics):
+                    log.error("Sparkplug: cannot encode a birth: %s", exc)
+                    return None
+                nulled.add(name)
+                self._unencodable_once(exc)
+                metrics = [
+                    dataclasses.replace(m, value=None, properties={**m.properties, **bad})
+                    if m.name == name
+                    else m
+                    for m in metrics
+                ]
 
     # --- the changes ----------------------------------------------------------------------------
 
@@ -857,6 +870,11 @@ class SparkplugSink:
                 self._send_ddata(device, command.metrics(now_ms(), birth=False))
                 self._fence()
 
+    def _ndata(self, node: NodeMetrics) -> bytes | None:
+        ts = now_ms()
+        payload, _ = self._encode(lambda ms: encode_ndata(ms, seq=self.seq, timestamp=ts), node.changed(ts))
+        return payload
+
     # --- once a second --------------------------------------------------------------------------
 
     async def _tick(self) -> None:
@@ -867,10 +885,9 @@ class SparkplugSink:
             await asyncio.sleep(1.0)
             node, backlog = self.node, self.backlog
             if node is not None and self.born:
-                ts = now_ms()
-                changed = node.changed(ts)
-                if changed:
-                    self._send(self.ndata_topic, encode_ndata(changed, seq=self.seq, timestamp=ts))
+                payload = self._ndata(node)
+                if payload is not None:
+                    self._send(self.ndata_topic, payload)
             if not self.born and backlog and loop.time() - last_reminder >= REMIND_EVERY:
                 last_reminder = loop.time()
                 log.warning(

@@ -7,6 +7,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from tests.integration.mqtt.conftest import Mosquitto
 from tests.integration.sparkplug.conftest import TYPES, sink_rig, sparkplug_config, start_host, typed_mapping
 from tests.integration.sparkplug.host import SparkplugHost
@@ -97,3 +99,24 @@ async def test_every_type_round_trips_both_ways(
         )
         assert rig.sink.refusals == {} and rig.sink.requests is not None
         assert rig.sink.requests.accepted == 2 * len(TYPES)
+
+
+async def test_a_value_its_type_cannot_carry_is_left_out_and_the_rest_goes_on(
+    mosquitto: Mosquitto, hosts: list[SparkplugHost], tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    host = start_host(hosts, mosquitto.port)
+    async with sink_rig(tmp_path, typed_mapping(), sparkplug_config(mosquitto.port)) as rig:
+        await wait_until(lambda: host.last("DBIRTH", "m1"), message="the DBIRTH")
+        machine = rig.tree.machines["m1"]
+        # A driver that hands a String variable a number, and a controller clock before 1970.
+        machine.ingest(machine.nodes["T/String"], 5, WHEN)
+        machine.ingest(machine.nodes["Axes/X/Position"], 1.25, datetime(1601, 1, 1, tzinfo=UTC))
+        await wait_until(lambda: host.value("m1", "Axes/X/Position") == 1.25, message="the rest of the cycle")
+        assert host.value("m1", "T/String") is None
+        host.rebirth()
+        await wait_until(lambda: len(host.of("DBIRTH", "m1")) == 2, message="the births again")
+        string = host.last("DBIRTH", "m1").metric("T/String")  # type: ignore[union-attr]
+        assert string is not None and string.is_null and string.properties["Quality"][1] == 0
+        x = host.last("DBIRTH", "m1").metric("Axes/X/Position")  # type: ignore[union-attr]
+        assert x is not None and x.value == 1.25 and x.timestamp == 0
+        assert rig.sink.born and "T/String" in caplog.text
