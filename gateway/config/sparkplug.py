@@ -37,7 +37,7 @@ class SparkplugBroker(Strict):
     port: int = Field(default=1883, ge=1, le=65535, description="1883, or usually 8883 with TLS")
     client_id: str = Field(
         default="",
-        max_length=128,
+        max_length=128 + len(SUFFIX),  # the mqtt: section's, with the suffix
         description="Default: cnc-gateway-<host name>-sparkplug; keep it stable for broker ACLs",
     )
     username: str | None = None
