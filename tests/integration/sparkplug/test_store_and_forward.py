@@ -153,3 +153,26 @@ async def test_a_clean_stop_publishes_the_ndeath_of_its_session(
     kinds = [s.kind for s in host.since(0)]
     assert kinds.count("NDEATH") >= 1 and kinds.index("NDEATH") < kinds.index("NBIRTH", 1)
     assert host.of("NDEATH")[0].payload.seq is None  # an NDEATH carries no seq
+
+
+async def test_stored_data_survives_a_restart_with_buffer_persist(
+    mosquitto: Mosquitto, hosts: list[SparkplugHost], tmp_path: Path
+) -> None:
+    host = start_host(hosts, mosquitto.port, host_id="scada", online=False)
+    config = sparkplug_config(mosquitto.port, primary_host_id="scada", buffer={"persist": True})
+    async with sink_rig(tmp_path, typed_mapping(), config) as rig:
+        await wait_until(lambda: rig.sink.connected, message="the broker connection")
+        await change(rig.tree.machines["m1"], range(20))
+        await wait_until(lambda: rig.sink.changes_stored >= 20, message="stored")
+    assert (tmp_path / "state" / "sparkplug-backlog.sqlite3").exists()
+    async with sink_rig(tmp_path, typed_mapping(), config) as rig:  # a new process, the same state directory
+        assert rig.sink.backlog is not None and len(rig.sink.backlog) > 0
+        await wait_until(lambda: rig.sink.connected, message="the broker connection")
+        host.publish_state(True)
+        await wait_until(
+            lambda: x_values(host.since(0), historical=True)[-1:] == [19.0],
+            message="the last run's changes, historical",
+        )
+        await wait_until(lambda: rig.sink.settled, message="delivered and fenced")
+        assert not rig.sink.backlog
+    assert x_values(host.since(0), historical=True) == [float(v) for v in range(20)]
