@@ -108,8 +108,9 @@ STABLE_AFTER = 10.0  # s a connection must last before the reconnect backoff sta
 SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to take what is in flight
 REMIND_EVERY = 60.0  # s between "still storing" log lines while there is no session
 
-STATE_CONNECTING, STATE_WAITING, STATE_ONLINE, STATE_DISCONNECTED = (
+STATE_CONNECTING, STATE_CONNECTED, STATE_WAITING, STATE_ONLINE, STATE_DISCONNECTED = (
     "connecting",
+    "connected",
     "connected, waiting for the primary host",
     "online",
     "disconnected",
@@ -446,6 +447,8 @@ class SparkplugSink:
         self.connects += 1
         self._ndeath_mid = None
         self._ndeath_acked.clear()
+        self._session_end.clear()  # what ended the last session (a loss while leaving it) is over
+        self._leaving = None
         try:
             client.subscribe(list(command_subscriptions(self.group_id, self.edge_node_id)), qos=1)
             if self.state_topic is not None:
@@ -454,7 +457,7 @@ class SparkplugSink:
             log.error("Sparkplug: %s; commands and the primary host's STATE will not arrive", exc.reason)
         if self.host is not None:
             self.host.reset()  # its retained STATE comes again with the subscription
-        self._set_state(STATE_ONLINE if self.host is None else STATE_WAITING, "")
+        self._set_state(STATE_CONNECTED if self.host is None else STATE_WAITING, "")
         stored = len(self.backlog) if self.backlog is not None else 0
         self._outage.recovered(
             "Sparkplug: connected to %s as %s (bdSeq %d)%s%s",
