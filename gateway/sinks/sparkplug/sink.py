@@ -26,7 +26,7 @@ lost without anyone knowing. The broker answers the packets of one connection in
 each cycle the sink sends an UNSUBSCRIBE of a topic it never subscribed to (`FENCE`): its UNSUBACK
 says the broker has taken everything before it. What was sent but not yet fenced when the
 connection drops goes back to the store, and out again, historical: a change may arrive twice
-(once live, once historical), never not at all. The NDEATH's PUBACK fences the same way.
+(once live, once historical), never not at all. A clean stop's NDEATH, at QoS 1, fences with its PUBACK.
 
 Ordering: the hot path (`_process`) never awaits. Births, device births and the outcome DDATA of
 a refused write first take whatever the hub holds (`_quiesce`) under the same lock as the
@@ -357,6 +357,7 @@ class SparkplugSink:
             try:
                 async with asyncio.timeout(SHUTDOWN_FLUSH / 2):
                     await self._ndeath_acked.wait()
+                self._confirm(len(self._unconfirmed))  # the broker took everything before the NDEATH
             except TimeoutError:
                 pass
         await client.disconnect()
@@ -471,7 +472,8 @@ class SparkplugSink:
         self._wake.set()
 
     async def _leave(self, client: MqttClient, reason: str) -> None:
-        """End the session on purpose: NDEATH (QoS 1), DISCONNECT; unfenced data goes back to the store."""
+        """End the session on purpose: NDEATH (QoS 1), DISCONNECT. What was not fenced goes back to the store,
+        even though the NDEATH's PUBACK says the broker has it: the primary host it was for had gone."""
         log.warning("Sparkplug: %s: NDEATH, disconnecting, and starting the session again", reason)
         async with self._lock:
             self.born = False
@@ -784,9 +786,8 @@ class SparkplugSink:
         self._commit()
 
     def _published(self, client: MqttClient, mid: int) -> None:
-        """A PUBACK: only the NDEATH goes at QoS 1, and it fences everything sent before it."""
+        """A PUBACK: only the NDEATH goes at QoS 1 (it also fences everything sent before it)."""
         if client is self._client and mid == self._ndeath_mid:
-            self._confirm(len(self._unconfirmed))
             self._ndeath_acked.set()
 
     def _replay(self) -> None:
