@@ -21,6 +21,7 @@ from gateway.config.base import Strict
 from gateway.config.jobs import InboxConfig
 from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
+from gateway.config.mtconnect import AgentConfig
 from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
 
 SecurityMode = SecurityName
@@ -73,6 +74,9 @@ class GatewayConfig(Strict):
     )
     mqtt: MqttConfig | None = Field(
         default=None, description="The MQTT broker to publish to; absent: no MQTT"
+    )
+    mtconnect: AgentConfig | None = Field(
+        default=None, description="The MTConnect agent (HTTP, port 5000 by default); absent: none"
     )
     # --- users, roles and access control (gateway/config/access.py) ---
     roles: list[str] = Field(
