@@ -143,7 +143,7 @@ class VariableMTConnect(Strict):
     def _value_keys(cls, value: object) -> object:
         """YAML keys may be numbers or booleans: compare them as the text the sink makes of a value."""
         if isinstance(value, dict):
-            return {value_key(k): v for k, v in value.items()}
+            return {_written_key(k): v for k, v in value.items()}
         return value
 
 
@@ -154,6 +154,19 @@ def value_key(value: object) -> str:
     if isinstance(value, float) and value.is_integer():
         return str(int(value))
     return str(value)
+
+
+def _written_key(key: object) -> str:
+    """A `values` key as written (the loader hands YAML keys over as text: "True", "0")."""
+    if isinstance(key, str):
+        if key.lower() in ("true", "false"):
+            return key.lower()
+        try:
+            number = float(key)
+        except ValueError:
+            return key
+        return value_key(number) if number.is_integer() else key
+    return value_key(key)
 
 
 def check_url(url: str) -> str:

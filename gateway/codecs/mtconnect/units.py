@@ -74,9 +74,12 @@ def native_units(unit: str) -> str | None:
     text = unit.strip()
     if not text:
         return None
-    if text.upper() == text and any(c.isalpha() for c in text):  # already an MTConnect name
+    known = NATIVE_NAMES.get(text.lower())
+    if known is not None:
+        return known
+    if len(text) > 2 and text.upper() == text and any(c.isalpha() for c in text):  # an MTConnect name
         return text
-    return NATIVE_NAMES.get(text.lower())
+    return None
 
 
 def standard_units(native: str) -> str:
