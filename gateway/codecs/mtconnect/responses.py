@@ -221,7 +221,10 @@ def parse_error(text: str | bytes) -> list[AgentError]:
 
 
 def parse_devices(text: str | bytes) -> DevicesDocument:
-    """An MTConnectDevices document as the codecs' own model (data items of DATA_SET/TABLE as VALUE)."""
+    """An MTConnectDevices document's Devices (not its Agent) as the codecs' own model.
+
+    Data items of representation DATA_SET or TABLE come as VALUE: their text is kept as it is.
+    """
     root = _parse(text)
     kind = _local(root.tag)
     if kind == "MTConnectError":
@@ -232,7 +235,7 @@ def parse_devices(text: str | bytes) -> DevicesDocument:
     devices: list[Device] = []
     container = _child(root, "Devices")
     for element in container if container is not None else ():
-        if _local(element.tag) not in ("Device", "Agent"):
+        if _local(element.tag) != "Device":  # 2.x agents list themselves first, as an Agent: not a machine
             continue
         devices.append(
             Device(
