@@ -149,7 +149,8 @@ def _device(
         target.items.append(item)
         bindings[node] = binding
     system = None
-    if mapping is not None and mapping.alarms is not None:
+    if mapping is not None and mapping.alarms is not None and mapping.alarms.source.type != "conditions":
+        # (alarms that are MTConnect conditions already are CONDITION items of their own)
         system = f"{dev_id}_system"
         controller = root.child("Controller", dev_id)
         controller.items.append(DataItem(system, Category.CONDITION, "SYSTEM", name="system"))

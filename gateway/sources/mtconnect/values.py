@@ -22,8 +22,8 @@ from gateway.model.types import DataType, TypeSpec
 log = logging.getLogger("gateway.sources.mtconnect")
 
 UNAVAILABLE_STATUS = "BadDataUnavailable"
-TRUE = frozenset({"true", "1", "yes", "on", "active", "armed", "closed"})
-FALSE = frozenset({"false", "0", "no", "off", "inactive", "triggered", "open"})
+TRUE = frozenset({"true", "1", "yes", "on", "active"})
+FALSE = frozenset({"false", "0", "no", "off", "inactive"})
 _INTEGERS = frozenset(
     {DataType.SBYTE, DataType.BYTE, DataType.INT16, DataType.UINT16, DataType.INT32, DataType.UINT32,
      DataType.INT64, DataType.UINT64}
