@@ -1,4 +1,4 @@
-"""A shop of laser cutters for the MTConnect tests and bench: laser-sim's mapping, N times, each grown to M items.
+"""A shop of laser cutters for the MTConnect tests and bench: laser-sim's mapping, N times, grown to M items.
 
 Each machine is mappings/laser-sim.yaml (its MTConnect profile included) renamed `laserNN`,
 plus filler variables (half SAMPLE TEMPERATURE, half unmapped) until it has `items`

@@ -125,7 +125,7 @@ conditions = st.builds(
         st.characters(blacklist_characters=':\r\n|\\"', blacklist_categories=("Cs", "Zs", "Cc")),
         min_size=1,
         max_size=8,
-    ),  # noqa: E501
+    ),
     native_severity=st.none() | st.sampled_from(["1", "2", "3"]),
     qualifier=st.none() | st.sampled_from(["HIGH", "LOW"]),
     text=st.text(st.characters(blacklist_categories=("Cs", "Cc")), max_size=30).map(str.strip),

@@ -1,4 +1,4 @@
-"""The agent without HTTP: the tree as devices, values as observations, every document kind valid (2.4 schemas).
+"""The agent without HTTP: the tree as devices, values as observations, every document valid (2.4 schemas).
 
 A shop of 20 laser cutters of 500 data items each (tests/mtconnect_shop.py): /probe,
 /current, /sample, /assets and MTConnectError documents validate against the official
@@ -11,8 +11,6 @@ import json
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime
 from typing import Any
-
-import pytest
 
 from gateway.codecs.mtconnect.documents import namespace
 from gateway.config.mtconnect import AgentConfig
@@ -147,7 +145,8 @@ def test_alarms_become_faults_and_warnings_and_clear_to_normal() -> None:
     agent.on_event(Event("laser01", "alarms/active", []))
     system = observations(agent.answer("/laser01/current").body)["laser01_system"]
     assert [e.tag.rpartition("}")[2] for e in system] == ["Normal"]
-    cleared = observations(agent.answer("/laser01/sample?path=//Controller&count=1000").body)["laser01_system"]
+    history = agent.answer("/laser01/sample?path=//Controller&count=1000").body
+    cleared = observations(history)["laser01_system"]
     assert ("Normal", "1001") in {(e.tag.rpartition("}")[2], e.get("nativeCode")) for e in cleared}
 
 
@@ -178,7 +177,7 @@ def test_sequence_edges_out_of_range_and_wrap() -> None:
     edge = ET.fromstring(agent.answer(f"/sample?from={first}&count=1").body)
     header = edge.find("m:Header", NS)
     assert header is not None and header.get("firstSequence") == str(first)
-    assert agent.answer(f"/sample?from={nxt}&count=5").status == 200  # from=nextSequence: empty, the polling case
+    assert agent.answer(f"/sample?from={nxt}&count=5").status == 200  # from=next: empty, polling
     for target in (f"/sample?from={first - 1}", f"/sample?from={nxt + 1}", "/sample?count=65",
                    f"/current?at={first - 1}", f"/sample?from={first}&to={first}"):  # fmt: skip
         answer = agent.answer(target)
