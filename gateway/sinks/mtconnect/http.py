@@ -27,11 +27,13 @@ from gateway.codecs.mtconnect.documents import streams_xml
 from gateway.codecs.mtconnect.errors import ErrorCode, OutOfRange, RequestError
 from gateway.codecs.mtconnect.json_documents import streams_json
 from gateway.codecs.mtconnect.multipart import encode_part
-from gateway.codecs.mtconnect.queries import Request
+from gateway.codecs.mtconnect.queries import MAX_TARGET, Request
 from gateway.errors import SinkError
 from gateway.sinks.mtconnect.agent import JSON, XML, Agent, Answer
 
 log = logging.getLogger("gateway.sinks.mtconnect")
+
+MAX_LINE = MAX_TARGET + 1024  # a long request line is answered with INVALID_URI, not aiohttp's bare 400
 
 
 class AgentServer:
@@ -54,9 +56,11 @@ class AgentServer:
     async def __aenter__(self) -> Self:
         app = web.Application()
         app.router.add_route("*", "/{tail:.*}", self.handle)
-        runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        runner = web.AppRunner(
+            app, access_log=None, handle_signals=False, shutdown_timeout=0.5, max_line_size=MAX_LINE
+        )
         await runner.setup()
-        site = web.TCPSite(runner, self.host, self.port, shutdown_timeout=0.5)
+        site = web.TCPSite(runner, self.host, self.port)
         try:
             await site.start()
         except OSError as exc:
