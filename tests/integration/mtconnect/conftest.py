@@ -14,7 +14,7 @@ from gateway.config.loader import Config
 from gateway.model.tree import VariableTree
 from gateway.sinks.mtconnect.sink import MTConnectSink
 from tests.mtconnect_shop import shop
-from tests.unit.codecs.mtconnect.conftest import assert_valid, schemas  # noqa: F401 - fixtures and helpers
+from tests.unit.codecs.mtconnect.conftest import assert_valid, schemas
 
 __all__ = ["Http", "agent_sink", "assert_valid", "fed", "schemas", "shop"]
 

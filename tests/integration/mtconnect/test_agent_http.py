@@ -17,7 +17,6 @@ from gateway.codecs.mtconnect.documents import namespace
 from gateway.codecs.mtconnect.responses import parse_streams
 from gateway.model.tree import VariableTree
 from tests.integration.mtconnect.conftest import agent_sink, assert_valid, fed, schemas, state_config  # noqa: F401
-from tests.waiting import wait_until
 
 NS = {"m": namespace("Streams")}
 T1 = datetime(2024, 5, 1, 12, 0, 1, tzinfo=UTC)
@@ -154,8 +153,8 @@ async def test_instance_id_and_sequences_after_a_restart_with_and_without_persis
         h = header(current)
         return int(h["instanceId"]), int(h["nextSequence"]), current
 
-    first_id, first_next, _ = await run_once(False, range(10))
-    second_id, second_next, _ = await run_once(False, range(10, 20))
+    first_id, _first_next, _ = await run_once(False, range(10))
+    second_id, _second_next, _ = await run_once(False, range(10, 20))
     assert second_id != first_id  # without persistence every start is a new numbering
     kept_id, kept_next, _ = await run_once(True, range(10))
     again_id, again_next, _ = await run_once(True, range(10, 20))
