@@ -176,7 +176,7 @@ async def test_an_unclean_stop_starts_a_new_numbering(tmp_path: Path) -> None:
     from gateway.sinks.mtconnect.store import ObservationStore, store_path
 
     config = state_config(tmp_path, machines=1, items=60, persist=True)
-    async with agent_sink(config) as (tree, _sink, http):
+    async with agent_sink(config) as (_tree, _sink, http):
         _, _, first = await http.get("/current")
     store = ObservationStore(store_path(config.state_dir)).open()
     with store._write() as db:  # what a killed process leaves: the file never marked clean
