@@ -97,6 +97,9 @@ class VariableMTConnect(Strict):
     significant_digits: int | None = Field(default=None, alias="significantDigits", ge=0, le=30)
     coordinate_system: Literal["MACHINE", "WORK"] | None = Field(default=None, alias="coordinateSystem")
     discrete: bool = False
+    representation: Literal["VALUE", "TIME_SERIES"] = Field(
+        default="VALUE", description="TIME_SERIES: a SAMPLE of several readings per observation (Double[])"
+    )
     values: dict[str, str] | None = Field(
         default=None,
         description="The variable's values as MTConnect words, e.g. {0: READY, 1: ACTIVE} or {true: ON}",

@@ -19,7 +19,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from gateway.codecs.mtconnect.model import Category, Component, DataItem, Description, Device
+from gateway.codecs.mtconnect.model import Category, Component, DataItem, Description, Device, Representation
 from gateway.codecs.mtconnect.units import factor, native_units, standard_units
 from gateway.config.mapping import MachineMapping
 from gateway.config.mtconnect import AgentConfig, VariableMTConnect
@@ -194,5 +194,6 @@ def _item(dev_id: str, node: VariableNode, s: VariableMTConnect) -> tuple[DataIt
         significant_digits=s.significant_digits,
         coordinate_system=s.coordinate_system,
         discrete=s.discrete,
+        representation=Representation(s.representation),
     )
     return item, Binding(item_id, category, s.values, scale, offset)

@@ -112,8 +112,8 @@ def render(url: str, device: Device, machine: str) -> str:
 
 def _flow(value: Any) -> str:
     if isinstance(value, dict):
-        return yaml.safe_dump(value, default_flow_style=True, sort_keys=False, width=math.inf).strip()
-    return yaml.safe_dump([value], default_flow_style=True, width=math.inf).strip()[1:-1]
+        return str(yaml.safe_dump(value, default_flow_style=True, sort_keys=False, width=math.inf)).strip()
+    return str(yaml.safe_dump([value], default_flow_style=True, width=math.inf)).strip()[1:-1]
 
 
 async def discover_agent(url: str, *, machine: str, device: str | None = None, wait: float = 5.0) -> str:

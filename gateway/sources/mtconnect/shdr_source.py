@@ -65,6 +65,8 @@ class ShdrSource:
                     self.kinds[key] = ItemKind.CONDITION
                 elif settings.type == "MESSAGE":
                     self.kinds[key] = ItemKind.MESSAGE
+                elif settings.representation == "TIME_SERIES":
+                    self.kinds[key] = ItemKind.TIME_SERIES
         self.junk = 0
         self.unmapped = 0
         self.changes = 0  # observations put into the tree
