@@ -1,4 +1,4 @@
-"""The SHDR driver over real TCP: the gateway on the simulator's adapter face, a silent adapter, junk on the line.
+"""The SHDR driver over real TCP: the gateway on the simulator's adapter, a silent adapter, junk on the line.
 
 The gateway runs mappings/laser-sim-shdr.yaml against a simulator whose SHDR face listens
 on a free port: values arrive converted to their types, alarms arrive as conditions and
