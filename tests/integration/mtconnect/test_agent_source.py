@@ -100,8 +100,8 @@ async def test_a_gateway_follows_another_gateways_agent_and_serves_it_everywhere
                 await wait_until(lambda: node.sample.value == a_node.sample.value, message="the same X")
                 assert b.tree.find("relay", paths["execution"]).sample.value in ("READY", "ACTIVE")
                 # MQTT and OPC UA show it Good
-                await wait_until(lambda: (rec.last_json(f"cnc/relay/{xact.lower()}") or {}).get("quality") == "good",
-                                 message="MQTT")  # fmt: skip
+                topic = f"cnc/relay/{xact.lower()}"
+                await wait_until(lambda: (rec.last_json(topic) or {}).get("quality") == "good", message="MQ")
                 client = Client(f"opc.tcp://127.0.0.1:{b_opcua}/cnc-gateway", timeout=5)
                 async with client:
                     dv = await client.get_node(f"ns=2;s=relay/{xact}").read_data_value()
