@@ -148,7 +148,7 @@ def parse_streams(text: str | bytes) -> StreamsDocument:
     root = _parse(text)
     kind = _local(root.tag)
     if kind == "MTConnectError":
-        raise AgentErrors(_errors(root))
+        raise AgentErrors(_errors(root), _instance(root))
     if kind != "MTConnectStreams":
         raise ResponseError(f"expected MTConnectStreams, got {kind}")
     header = _header(root)
@@ -193,8 +193,9 @@ def _observation(element: ET.Element, category: Category, uuid: str) -> Observed
 class AgentErrors(ResponseError):
     """The agent answered with an MTConnectError document."""
 
-    def __init__(self, errors: list[AgentError]) -> None:
+    def __init__(self, errors: list[AgentError], instance_id: int | None = None) -> None:
         self.errors = errors
+        self.instance_id = instance_id  # the agent's, from the document's header (whose numbering refused us)
         super().__init__("; ".join(f"{e.code}: {e.message}" for e in errors) or "MTConnectError")
 
     @property
@@ -208,6 +209,15 @@ def _errors(root: ET.Element) -> list[AgentError]:
         if _local(element.tag) == "Error":
             found.append(AgentError(element.get("errorCode", ""), (element.text or "").strip()))
     return found
+
+
+def _instance(root: ET.Element) -> int | None:
+    header = _child(root, "Header")
+    text = header.get("instanceId") if header is not None else None
+    try:
+        return int(text) if text is not None else None
+    except ValueError:
+        return None
 
 
 def parse_error(text: str | bytes) -> list[AgentError]:
@@ -228,7 +238,7 @@ def parse_devices(text: str | bytes) -> DevicesDocument:
     root = _parse(text)
     kind = _local(root.tag)
     if kind == "MTConnectError":
-        raise AgentErrors(_errors(root))
+        raise AgentErrors(_errors(root), _instance(root))
     if kind != "MTConnectDevices":
         raise ResponseError(f"expected MTConnectDevices, got {kind}")
     header = _header(root)

@@ -199,6 +199,10 @@ class MTConnectSource:
             try:
                 document = parse_streams(part)
             except AgentErrors as exc:
+                if exc.instance_id is not None and exc.instance_id != self.instance_id:
+                    raise Restarted(
+                        f"the agent restarted (instanceId {self.instance_id} -> {exc.instance_id})"
+                    ) from None
                 if "OUT_OF_RANGE" in exc.codes:
                     raise Gap(f"the agent no longer holds sequence {self.next_sequence} ({exc})") from None
                 raise SourceError(f"{d.endpoint}: {exc}") from None
