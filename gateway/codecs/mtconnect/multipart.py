@@ -22,9 +22,13 @@ def boundary_of(content_type: str) -> str | None:
     return m.group(1) if m else None
 
 
+def part_head(boundary: str, length: int, content_type: str = "text/xml") -> bytes:
+    """What goes before a part's body (the body is followed by CRLF)."""
+    return f"--{boundary}\r\nContent-type: {content_type}\r\nContent-length: {length}\r\n\r\n".encode("ascii")
+
+
 def encode_part(boundary: str, body: bytes, content_type: str = "text/xml") -> bytes:
-    head = f"--{boundary}\r\nContent-type: {content_type}\r\nContent-length: {len(body)}\r\n\r\n"
-    return head.encode("ascii") + body + b"\r\n"
+    return part_head(boundary, len(body), content_type) + body + b"\r\n"
 
 
 class MultipartReader:

@@ -18,6 +18,7 @@ import asyncio
 import contextlib
 import logging
 import secrets
+from collections import OrderedDict
 from typing import Self
 
 from aiohttp import web
@@ -26,13 +27,14 @@ from gateway.codecs.mtconnect.buffer import ObservationBuffer
 from gateway.codecs.mtconnect.documents import streams_xml
 from gateway.codecs.mtconnect.errors import ErrorCode, OutOfRange, RequestError
 from gateway.codecs.mtconnect.json_documents import streams_json
-from gateway.codecs.mtconnect.multipart import encode_part
+from gateway.codecs.mtconnect.multipart import encode_part, part_head
 from gateway.codecs.mtconnect.queries import MAX_TARGET, Request
 from gateway.errors import SinkError
 from gateway.sinks.mtconnect.agent import JSON, XML, Agent, Answer
 
 log = logging.getLogger("gateway.sinks.mtconnect")
 
+CHUNKS_KEPT = 32
 MAX_LINE = MAX_TARGET + 1024  # a long request line is answered with INVALID_URI, not aiohttp's bare 400
 
 
@@ -46,6 +48,10 @@ class AgentServer:
         self.max_streams = max_streams
         self.streams: set[asyncio.Task[object]] = set()
         self.parts_sent = 0
+        self.parts_shared = 0  # chunks rendered once for several streams at the same place
+        # The last chunks rendered, by (items, from, to, count, format): streams that follow the
+        # agent together ask for the same chunk, and render it once between them.
+        self.chunks: OrderedDict[tuple[object, ...], tuple[bytes, int, bool]] = OrderedDict()
         self._runner: web.AppRunner | None = None
 
     @property
@@ -154,8 +160,33 @@ class _Stream:
         self.next = start
 
     async def send(self, body: str) -> None:
-        await self.response.write(encode_part(self.boundary, body.encode("utf-8"), self.content_type))
+        await self.send_bytes(body.encode("utf-8"))
+
+    async def send_bytes(self, body: bytes) -> None:
+        if len(body) < 65536:
+            await self.response.write(encode_part(self.boundary, body, self.content_type))
+        else:  # a large shared chunk goes out as it is, not copied into one part per stream
+            await self.response.write(part_head(self.boundary, len(body), self.content_type))
+            await self.response.write(body)
+            await self.response.write(b"\r\n")
         self.server.parts_sent += 1
+
+    def chunk(self, buffer: ObservationBuffer) -> tuple[bytes, int, bool]:
+        """The next chunk from `self.next`: (document, next sequence, whether it has observations)."""
+        request = self.request
+        key = (buffer.instance_id, self.items, self.next, buffer.next_sequence, request.count, request.format)
+        cache = self.server.chunks
+        found = cache.get(key)
+        if found is not None:
+            self.server.parts_shared += 1
+            return found
+        result = buffer.sample(self.items, from_=self.next, count=request.count)
+        nxt = result.window.next_sequence
+        made = (self.document(list(result.entries), nxt).encode("utf-8"), nxt, bool(result.entries))
+        cache[key] = made
+        while len(cache) > CHUNKS_KEPT:
+            cache.popitem(last=False)
+        return made
 
     def document(self, entries: list[object], next_sequence: int) -> str:
         buffer: ObservationBuffer = self.agent.buffer
@@ -187,13 +218,12 @@ class _Stream:
                 return
             now = loop.time()
             if self.next < buffer.next_sequence:
-                result = buffer.sample(self.items, from_=self.next, count=request.count)
-                self.next = result.window.next_sequence
-                if result.entries or now - last >= heartbeat:
-                    await self.send(self.document(list(result.entries), self.next))
+                body, self.next, full = self.chunk(buffer)
+                if full or now - last >= heartbeat:
+                    await self.send_bytes(body)
                     last = now
-                if interval > 0:
-                    await asyncio.sleep(interval)
+                if interval > 0:  # on a grid: streams of one interval wake together and share their chunks
+                    await asyncio.sleep(interval - loop.time() % interval)
                 else:
                     await asyncio.sleep(0)
                 continue
