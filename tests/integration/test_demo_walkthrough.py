@@ -97,7 +97,7 @@ async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[str]:
     gw_port = free_port()
     ports = {
         flag: free_port()
-        for flag in ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port")
+        for flag in ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port", "--mtconnect-port")
     }
     env = {k: v for k, v in os.environ.items() if k != "CNC_DEMO_PASSWORD"}  # the README's passwords
     log = tmp_path / "demo.log"
