@@ -45,7 +45,7 @@ DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the 
 DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("demo", help="run the simulator and the gateway together on the default ports")
     p.add_argument("--mapping", type=Path, default=None, help="default: mappings/laser-sim.yaml")
     p.add_argument("--opcua-port", type=int, default=4840, help="gateway OPC UA port (default 4840)")
@@ -364,7 +364,7 @@ def mtconnect_banner(gw: Gateway, args: argparse.Namespace, external: bool) -> l
         agent = None
     if agent is not None:
         url = getattr(agent, "url", f"http://127.0.0.1:{args.mtconnect_port}")
-        lines.append(f"  MTConnect agent  {url}/probe  (curl {url}/current; /sample?interval=1000; ?format=json)")
+        lines.append(f"  MTConnect agent  {url}/probe  (curl {url}/current; /sample?interval=1000; JSON)")
     if not external and args.sim_shdr_port is not None:
         lines.append(
             f"  SHDR adapter     shdr://127.0.0.1:{args.sim_shdr_port}  (the simulator's; "
