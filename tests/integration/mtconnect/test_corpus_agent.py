@@ -31,7 +31,8 @@ CURRENT = (
     '<DeviceStream name="d" uuid="u"><ComponentStream component="Device" componentId="d"><Events>'
     '<Availability dataItemId="avail" sequence="1" timestamp="2024-05-01T12:00:00Z">'
     "AVAILABLE</Availability>"
-    '</Events><Condition><Normal dataItemId="sys" type="SYSTEM" sequence="2" timestamp="2024-05-01T12:00:00Z"/>'
+    '</Events><Condition><Normal dataItemId="sys" type="SYSTEM" sequence="2" '
+    'timestamp="2024-05-01T12:00:00Z"/>'
     "</Condition></ComponentStream></DeviceStream></Streams></MTConnectStreams>"
 )
 
@@ -101,8 +102,10 @@ async def test_junk_from_an_agent_is_reported_and_the_driver_recovers(
             )
             assert not tree.find("far", "Avail").sample.good
             fake.case = None  # the agent gets well: the driver must read it
-            await wait_until(lambda: tree.find("far", "Avail").sample.value == "AVAILABLE"
-                             and tree.find("far", "Avail").sample.good, timeout=10, message="recovered")  # fmt: skip
+            avail = tree.find("far", "Avail")
+            await wait_until(
+                lambda: avail.sample.good and avail.sample.value == "AVAILABLE", message="recovered"
+            )
             assert tree.find("far", "System").sample.value == []
             assert not task.done()
         finally:
