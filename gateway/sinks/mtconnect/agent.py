@@ -157,7 +157,7 @@ class Agent:
         self._connected[machine] = up
         if up:
             self.buffer.add_value(items.availability, ts, "AVAILABLE")
-            if items.system is not None and was is False:
+            if items.system is not None and was is not True:  # the alarms as last heard, now known again
                 self._set_conditions(items.system, self._alarms.get(machine, []), ts)
         else:
             self.buffer.add_value(items.availability, ts, None)

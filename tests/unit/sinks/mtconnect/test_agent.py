@@ -211,3 +211,18 @@ def test_programs_of_the_job_queue_are_file_assets(schemas: dict[str, Any]) -> N
     assert agent.answer("/asset/J000002").status == 404
     parsed = json.loads(agent.answer("/assets?removed=true", "application/json").body)
     assert parsed["MTConnectAssets"]["Assets"]["File"][0]["assetId"] == "J000001"
+
+
+def test_alarms_heard_before_the_controller_connects_show_once_it_does() -> None:
+    tree, agent = build()
+    agent.on_event(Event("laser01", "alarms/active", [
+        {"id": "1001", "text": "Soft limit", "severity": 700, "class": 3, "active": True},
+    ]))  # fmt: skip
+    system = observations(agent.answer("/laser01/current").body)["laser01_system"]
+    assert [e.tag.rpartition("}")[2] for e in system] == ["Unavailable"]  # not connected: not known
+    running(tree, agent)
+    system = observations(agent.answer("/laser01/current").body)["laser01_system"]
+    assert [(e.tag.rpartition("}")[2], e.get("nativeCode")) for e in system] == [("Fault", "1001")]
+    running(tree, agent, "laser02")  # no alarm heard of: Normal
+    system = observations(agent.answer("/laser02/current").body)["laser02_system"]
+    assert [e.tag.rpartition("}")[2] for e in system] == ["Normal"]
