@@ -177,7 +177,9 @@ class Mosquitto:
         await self.__aexit__()
         conf = self.dir / "mosquitto.conf"
         with (self.dir / "mosquitto.log").open("ab") as log:
-            self.proc = await asyncio.create_subprocess_exec(MOSQUITTO, "-c", str(conf), stdout=log, stderr=log)
+            self.proc = await asyncio.create_subprocess_exec(
+                MOSQUITTO, "-c", str(conf), stdout=log, stderr=log
+            )
         deadline = time.monotonic() + 10
         while not _listening(self.port):
             if self.proc.returncode is not None or time.monotonic() > deadline:

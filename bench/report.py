@@ -77,6 +77,7 @@ class Results:
         default_factory=list
     )  # issue 13's: against the peer (Node-RED), tighter scale
     targets_15: list[Target] = field(default_factory=list)  # issue 15's: Sparkplug B beside the JSON sink
+    targets_17: list[Target] = field(default_factory=list)  # issue 17's: MTConnect
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -118,6 +119,7 @@ class Results:
             "targets": [t.as_dict() for t in self.targets],
             "targets_13": [t.as_dict() for t in self.targets_13],
             "targets_15": [t.as_dict() for t in self.targets_15],
+            "targets_17": [t.as_dict() for t in self.targets_17],
             "details": self.details,
             "errors": self.errors,
         }
@@ -179,6 +181,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 13)", _targets(results.targets_13)]
     if results.targets_15:
         out += ["", "Targets (issue 15)", _targets(results.targets_15)]
+    if results.targets_17:
+        out += ["", "Targets (issue 17)", _targets(results.targets_17)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -24,7 +24,7 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, jobs, mirror, naive, peer, scale, sparkplug
+from bench.scenarios import baselines, jobs, mirror, mtconnect, naive, peer, scale, sparkplug
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -37,6 +37,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "scale": scale.run,
     "jobs": jobs.run,
     "sparkplug": sparkplug.run,
+    "mtconnect": mtconnect.run,
 }
 
 

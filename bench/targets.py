@@ -129,6 +129,7 @@ def judge(ctx: Context) -> None:
     r.targets = targets
     r.targets_13 = judge_13(ctx)
     r.targets_15 = judge_15(ctx)
+    r.targets_17 = judge_17(ctx)
 
 
 def judge_15(ctx: Context) -> list[Target]:
@@ -177,6 +178,35 @@ def judge_15(ctx: Context) -> list[Target]:
         source=f"{restarts.get('sessions', 0)} sessions, {restarts.get('messages', 0):,} messages",
     ))  # fmt: skip
     return targets
+
+
+def judge_17(ctx: Context) -> list[Target]:
+    """Issue 17 (MTConnect), from bench/scenarios/mtconnect.py; nothing when the scenario did not run."""
+    m: dict[str, Any] = ctx.results.details.get("mtconnect", {})
+    if not m:
+        return []
+    current, stream = m.get("current", {}), m.get("streaming", {})
+    shdr, mirror = m.get("shdr", {}), m.get("mirror", {})
+    cpu, floor = current.get("p50_cpu_ms") or 0, current.get("join_floor_ms") or 0
+    five, none = mirror.get("clients_5") or 0, mirror.get("clients_0") or 0
+    return [
+        Target(
+            "/current, 20 machines x 500 data items, p50 server time", 100, 25, "ms", higher_is_better=False,
+            value=current.get("p50_ms"), source=f"CPU p50 {cpu:.1f} ms, join floor {floor:.1f} ms",
+        ),
+        Target(
+            "/sample streaming to one client", 10_000, 50_000, "obs/s", value=stream.get("received_per_s"),
+            source=f"render ceiling {stream.get('render_per_s') or 0:,.0f}/s",
+        ),
+        Target(
+            "SHDR source, changes/s into the tree from one adapter", 10_000, 30_000, "changes/s",
+            value=shdr.get("changes_per_s"), source=f"reader alone {shdr.get('reader_per_s') or 0:,.0f}/s",
+        ),
+        Target(
+            "mirror changes/s with 5 streaming clients, relative to none", 0.9, 0.97, "x",
+            value=mirror.get("ratio"), source=f"{five:,.0f}/s vs {none:,.0f}/s (window medians)",
+        ),
+    ]  # fmt: skip
 
 
 def judge_13(ctx: Context) -> list[Target]:

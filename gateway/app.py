@@ -136,6 +136,10 @@ def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None 
         from gateway.sinks.copydata.sink import CopydataSink
 
         sinks.append(CopydataSink(tree, config.mappings))
+    if gw.mtconnect is not None:  # the MTConnect agent (HTTP)
+        from gateway.sinks.mtconnect.sink import MTConnectSink
+
+        sinks.append(MTConnectSink(tree, gw.mtconnect, config.mappings, config.state_dir))
     return sinks
 
 

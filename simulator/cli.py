@@ -7,19 +7,23 @@ import asyncio
 import contextlib
 import logging
 import math
+import os
 import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from simulator.dnc import DncOptions
-from simulator.dnc.options import add_dnc_arguments, dnc_banner, dnc_options
+from simulator.dnc.options import _port_or_off, add_dnc_arguments, dnc_banner, dnc_options
 from simulator.errors import SimulatorError
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
+from simulator.shdr import DEFAULT_PORT as SHDR_PORT
 from simulator.variables import NAMESPACE_URI
 
 log = logging.getLogger("simulator")
+
+SHDR_ENV = "CNC_SIM_SHDR_PORT"
 
 NOISY = ("asyncua", "aioftp")
 
@@ -73,8 +77,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a gateway mapping file for the noise variables to FILE at start",
     )  # fmt: skip
     add_dnc_arguments(p)
+    p.add_argument(
+        "--shdr-port", type=_port_or_off, default=_shdr_default(), metavar="PORT",
+        help=f"MTConnect adapter (SHDR) port (default ${SHDR_ENV} or {SHDR_PORT}; 'off')",
+    )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
+
+
+def _shdr_default() -> int | None:
+    text = os.environ.get(SHDR_ENV)
+    if text is None:
+        return SHDR_PORT
+    try:
+        return _port_or_off(text)
+    except argparse.ArgumentTypeError:
+        return SHDR_PORT
 
 
 def _rate(text: str) -> float:
@@ -150,6 +168,7 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         opcua_password=args.opcua_password,
         noise=_noise(args),
         dnc=dnc,
+        shdr_port=args.shdr_port,
     )
     try:
         async with simulator:
@@ -189,6 +208,11 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
         f"  speed    {sim.speed:g}x" + (f", looping {sim.loop_program}" if sim.loop_program else ""),
         *(_noise_banner(sim, args) if sim.noise is not None else []),
         *(dnc_banner(sim.dnc) if sim.dnc is not None else []),
+        *(
+            [f"  MTConnect {sim.shdr.url}  (SHDR adapter: mappings/laser-sim-shdr.yaml reads it)"]
+            if sim.shdr
+            else []
+        ),
         "  stop     Ctrl-C",
         "",
     ]

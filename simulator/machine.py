@@ -132,6 +132,7 @@ class Machine:
     program: ProgramStatus = field(default_factory=ProgramStatus)
     alarms: list[Alarm] = field(default_factory=list)
     ignore_start: bool = False  # test hook: Start is accepted and ignored
+    emergency_stop: bool = False  # the e-stop button is pressed (no motion; the tests press it)
     sim_time: float = 0.0
     starvations: int = 0  # times a drip-fed program ran out of blocks while running
     _run: _Run | None = field(default=None, init=False, repr=False)

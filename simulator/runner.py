@@ -28,6 +28,7 @@ from simulator.ftp_store import FtpStore
 from simulator.machine import Machine, MachineState
 from simulator.noise import Noise, NoiseSpec
 from simulator.opcua_server import PlcServer, utcnow
+from simulator.shdr import ShdrFace
 from simulator.store import DirectoryStore
 from simulator.variables import Variable, build_variables
 
@@ -59,6 +60,7 @@ class Simulator:
         clock: Callable[[], datetime] = utcnow,
         noise: NoiseSpec | None = None,
         dnc: DncOptions | None = None,
+        shdr_port: int | None = None,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -87,6 +89,9 @@ class Simulator:
             self.dnc = DncFace(dnc.spec, self.machine, self.programs, host=host, tcp_port=dnc.tcp_port,
                                rfc2217_port=dnc.rfc2217_port, pty=dnc.pty, speed=speed)  # fmt: skip
             self.variables += self.dnc.variables
+        # The MTConnect adapter face (simulator/shdr.py): off unless a port is given (0: any free one).
+        self.shdr_port = shdr_port
+        self.shdr: ShdrFace | None = None
         self._opcua_auth = (opcua_user, opcua_password)
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
@@ -144,6 +149,10 @@ class Simulator:
         self.ftp_port = ftp.port
         if self.dnc is not None:
             await stack.enter_async_context(self.dnc)
+        if self.shdr_port is not None:
+            self.shdr = await stack.enter_async_context(
+                ShdrFace(self.machine, host=self.host, port=self.shdr_port, clock=self.clock)
+            )
         if self.loop_program:
             try:
                 self.machine.select_program(self.loop_program)
@@ -180,6 +189,8 @@ class Simulator:
                 self.machine.step((now - last) * self.speed)
                 self._keep_looping(now)
                 await self._opcua.publish()
+                if self.shdr is not None:
+                    self.shdr.publish()
             except Exception:  # a model bug must not stop the server; say so loudly, once per tick
                 log.exception("simulator tick failed")
             last = now

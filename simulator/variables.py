@@ -181,6 +181,12 @@ def build_variables() -> list[Variable]:
             description="0 Auto, 1 Manual, 2 MDA",
         ),
         Variable(g + "gMachine.ModeText", "String", lambda m: m.mode.text),
+        Variable(
+            g + "gMachine.EmergencyStop",
+            "Boolean",
+            lambda m: m.emergency_stop,
+            description="The emergency stop button is pressed",
+        ),
         Variable(g + "gProgram.Name", "String", lambda m: m.program.name, description="Selected program"),
         Variable(
             g + "gProgram.Block", "UInt32", lambda m: m.program.block, description="Line of the current block"

@@ -15,6 +15,7 @@ settings.load_profile("shared-machine")
 # A simulator started by a test (in-process or `cnc-simulator`) takes no fixed DNC port unless asked to.
 os.environ.setdefault("CNC_SIM_DNC_PORT", "off")
 os.environ.setdefault("CNC_SIM_DNC_RFC2217_PORT", "off")
+os.environ.setdefault("CNC_SIM_SHDR_PORT", "off")  # and no fixed SHDR (MTConnect adapter) port either
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`

@@ -19,7 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import replace
 from datetime import datetime
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -70,11 +70,18 @@ def who(ctx: WriteContext) -> str:
 class AlarmManager:
     """The alarms of one machine with an `alarms:` section."""
 
-    def __init__(self, machine: Machine, config: AlarmsConfig, store: AlarmStore, db: DbCall) -> None:
+    def __init__(
+        self,
+        machine: Machine,
+        config: AlarmsConfig,
+        store: AlarmStore,
+        db: DbCall,
+        variables: Sequence[Any] = (),
+    ) -> None:
         self.machine = machine
         self.config = config
         self.store = store
-        self.source = source_for(machine, config)
+        self.source = source_for(machine, config, variables)  # the mapping's variables: a source's defaults
         self.records: dict[int, AlarmRecord] = {}  # retained occurrences by number
         self.quality = Quality.UNCERTAIN
         self.reason = "waiting for the controller's alarm list"

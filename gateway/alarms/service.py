@@ -33,7 +33,7 @@ class AlarmService:
         self.store = AlarmStore(store_path(state_dir))
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="alarms-db")
         self.managers: dict[str, AlarmManager] = {
-            name: AlarmManager(tree.machines[name], mapping.alarms, self.store, self.db)
+            name: AlarmManager(tree.machines[name], mapping.alarms, self.store, self.db, mapping.variables)
             for name, mapping in mappings.items()
             if mapping.alarms is not None
         }

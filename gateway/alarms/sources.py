@@ -14,7 +14,8 @@ from datetime import datetime
 from typing import TYPE_CHECKING, Any, Protocol
 
 from gateway.alarms.records import ActiveAlarm, AlarmRecord
-from gateway.config.alarms import AlarmsConfig, ArraySource
+from gateway.codecs.mtconnect.conditions import parse_condition_text
+from gateway.config.alarms import AlarmsConfig, ArraySource, ConditionSource, condition_variables
 
 if TYPE_CHECKING:
     from gateway.model.tree import Machine, VariableNode
@@ -114,5 +115,52 @@ def _list(value: Any) -> list[Any]:
     return list(value) if isinstance(value, (list, tuple)) else []
 
 
-def source_for(machine: Machine, config: AlarmsConfig) -> AlarmSource:
+class ConditionAlarmSource:
+    """The active Warnings and Faults of MTConnect CONDITION variables (String[] lists, codecs/mtconnect).
+
+    An alarm's id is the condition's id (else its native code); where two data items use the
+    same id, the second one's alarm is `<path>:<id>`. Its severity class is the level's
+    (`classes`), its text the condition's message, and the native severity, qualifier, level
+    and data item go along as parameters.
+    """
+
+    def __init__(self, machine: Machine, config: AlarmsConfig, paths: Sequence[str]) -> None:
+        source = config.source
+        assert isinstance(source, ConditionSource)
+        self.classes: dict[str, int] = {str(level): cls for level, cls in source.classes.items()}
+        self.items = [machine.nodes[path] for path in paths]
+        self.nodes = frozenset(self.items)
+
+    def read(self) -> Reading:
+        for node in self.items:
+            sample = node.sample
+            if not sample.good:
+                return Reading(None, sample.source_ts, True, sample.status, sample.reason or sample.status)
+        alarms: list[ActiveAlarm] = []
+        seen: set[str] = set()
+        for node in self.items:
+            for text in _list(node.sample.value):
+                try:
+                    condition = parse_condition_text(str(text))
+                except ValueError:
+                    continue
+                alarm_id = condition.condition_id or condition.native_code or node.path
+                if alarm_id in seen:
+                    alarm_id = f"{node.path}:{alarm_id}"
+                seen.add(alarm_id)
+                parameters: dict[str, Any] = {"level": condition.level, "item": node.path}
+                if condition.native_severity is not None:
+                    parameters["native_severity"] = condition.native_severity
+                if condition.qualifier is not None:
+                    parameters["qualifier"] = condition.qualifier
+                text_out = condition.text or f"{condition.level.capitalize()} {alarm_id}"
+                alarms.append(ActiveAlarm(alarm_id, text_out, self.classes.get(condition.level), parameters))
+        ts = max(n.sample.source_ts for n in self.items)
+        return Reading(alarms, ts)
+
+
+def source_for(machine: Machine, config: AlarmsConfig, variables: Sequence[Any] = ()) -> AlarmSource:
+    """The machine's alarm source; `variables` (the mapping's) resolve a conditions source's default list."""
+    if isinstance(config.source, ConditionSource):
+        return ConditionAlarmSource(machine, config, condition_variables(config.source, variables))
     return ArrayAlarmSource(machine, config)

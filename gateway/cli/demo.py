@@ -32,6 +32,7 @@ from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
+from gateway.config.mtconnect import AgentConfig
 from gateway.config.sparkplug import SparkplugConfig
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
@@ -45,7 +46,7 @@ DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the 
 DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("demo", help="run the simulator and the gateway together on the default ports")
     p.add_argument("--mapping", type=Path, default=None, help="default: mappings/laser-sim.yaml")
     p.add_argument("--opcua-port", type=int, default=4840, help="gateway OPC UA port (default 4840)")
@@ -59,6 +60,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=5020,
         help="port of the mapping's COPYDATA tcp-server target (default 5020)",
     )
+    p.add_argument(
+        "--mtconnect-port", type=_port_or_off, default=5000, help="MTConnect agent port (default 5000; 'off')"
+    )
+    p.add_argument(
+        "--sim-shdr-port", type=_port_or_off, default=_sim_shdr_default(),
+        help="simulator's MTConnect adapter (SHDR) port (default $CNC_SIM_SHDR_PORT or 7878; 'off')",
+    )  # fmt: skip
     p.add_argument("--speed", type=float, default=1.0, help="simulator speed factor (default 1)")
     p.add_argument("--state-dir", type=Path, default=Path("state/demo"))
     p.add_argument("--mqtt-host", default="127.0.0.1", help="MQTT broker (default 127.0.0.1)")
@@ -84,6 +92,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
+
+
+def _port_or_off(text: str) -> int | None:
+    if text.strip().lower() in ("off", "none", "no"):
+        return None
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number (or 'off')") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port {port} is outside 0..65535")
+    return port
+
+
+def _sim_shdr_default() -> int | None:
+    try:
+        return _port_or_off(os.environ.get("CNC_SIM_SHDR_PORT", "7878"))
+    except argparse.ArgumentTypeError:
+        return 7878
 
 
 def find_mapping(given: Path | None) -> Path:
@@ -124,6 +151,7 @@ def handle(args: argparse.Namespace) -> int:
         inbox=demo_inbox(mapping, args),
         mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
         sparkplug=demo_sparkplug(args),
+        mtconnect=None if args.mtconnect_port is None else AgentConfig(port=args.mtconnect_port),
         **demo_access(),
     )
     config = Config(gateway, (mapping,), Path.cwd(), base.files)
@@ -258,7 +286,11 @@ class SimulatorSwitch:
         args = self.args
         self.store.mkdir(parents=True, exist_ok=True)
         sim = Simulator(
-            opcua_port=args.sim_opcua_port, ftp_port=args.sim_ftp_port, speed=args.speed, store=self.store
+            opcua_port=args.sim_opcua_port,
+            ftp_port=args.sim_ftp_port,
+            speed=args.speed,
+            store=self.store,
+            shdr_port=args.sim_shdr_port,
         )
         await sim.__aenter__()
         self._sim = sim
@@ -340,6 +372,7 @@ def print_banner(
             "the program starts when the machine is idle",
         ]
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
+    lines += mtconnect_banner(gw, args, external)
     if not external:
         lines.append(
             "  outage drill     press Enter (or kill -USR1 <pid>) to stop the simulator, again to restart it"
@@ -365,6 +398,24 @@ def sparkplug_banner(gw: Gateway, mapping: MachineMapping) -> list[str]:
         f"  topics           {node}, {device}",
         f"  Sparkplug host   {watch}  (or Ignition's MQTT Engine: README, Sparkplug B)",
     ]
+
+
+def mtconnect_banner(gw: Gateway, args: argparse.Namespace, external: bool) -> list[str]:
+    """Where the MTConnect agent answers, and the simulator's adapter for an MTConnect-in gateway."""
+    lines = []
+    try:
+        agent = gw.sink("mtconnect")
+    except KeyError:
+        agent = None
+    if agent is not None:
+        url = getattr(agent, "url", f"http://127.0.0.1:{args.mtconnect_port}")
+        lines.append(f"  MTConnect agent  {url}/probe  (curl {url}/current; /sample?interval=1000; JSON)")
+    if not external and args.sim_shdr_port is not None:
+        lines.append(
+            f"  SHDR adapter     shdr://127.0.0.1:{args.sim_shdr_port}  (the simulator's; "
+            "mappings/laser-sim-shdr.yaml reads it: README, MTConnect)"
+        )
+    return lines
 
 
 def copydata_banner(mapping: MachineMapping, mapping_file: str) -> list[str]:

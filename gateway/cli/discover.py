@@ -1,4 +1,5 @@
-"""`cnc-gateway discover opc.tcp://…`: browse a controller and print a starting mapping file."""
+"""`cnc-gateway discover opc.tcp://…` (or `http://agent:5000`): a starting mapping file from a controller
+(browsed over OPC UA) or from an MTConnect agent's /probe."""
 
 from __future__ import annotations
 
@@ -13,11 +14,17 @@ from gateway.errors import SourceError
 from gateway.logconfig import configure
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
-        "discover", help="browse a controller's OPC UA server and print a starting mapping file"
+        "discover",
+        help="browse a controller's OPC UA server (or an MTConnect agent) and print a starting mapping file",
     )
-    p.add_argument("endpoint", help="opc.tcp://host:port of the controller")
+    p.add_argument(
+        "endpoint", help="opc.tcp://host:port of the controller, or http://host:port of an MTConnect agent"
+    )
+    p.add_argument(
+        "--device", default=None, help="MTConnect: the device's name or uuid, when the agent has several"
+    )
     p.add_argument("--machine", default="my-machine", help="machine name for the generated file")
     p.add_argument("--user", default=None)
     p.add_argument("--password", default=None, help="or set CNC_DISCOVER_PASSWORD")
@@ -36,6 +43,8 @@ def handle(args: argparse.Namespace) -> int:
     from gateway.sources.opcua_discover import discover
 
     configure("warning")
+    if args.endpoint.startswith(("http://", "https://")):
+        return _mtconnect(args)
     try:
         check_endpoint(args.endpoint)
     except ValueError as exc:
@@ -59,6 +68,23 @@ def handle(args: argparse.Namespace) -> int:
     except (SourceError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    return _write(args, text)
+
+
+def _mtconnect(args: argparse.Namespace) -> int:
+    from gateway.sources.mtconnect.discover import discover_agent
+
+    try:
+        text = asyncio.run(
+            discover_agent(args.endpoint, machine=args.machine, device=args.device, wait=args.timeout)
+        )
+    except (SourceError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return _write(args, text)
+
+
+def _write(args: argparse.Namespace, text: str) -> int:
     if args.output:
         args.output.write_text(text, encoding="utf-8")
         print(f"wrote {args.output}", file=sys.stderr)

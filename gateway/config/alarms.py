@@ -24,9 +24,9 @@ Cross-checks against the mapping's variables (paths exist, types fit) run in
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Discriminator, Field, Tag, field_validator
 
 from gateway.config.access import check_role_name
 from gateway.config.base import Strict
@@ -57,8 +57,42 @@ class ArraySource(Strict):
         return value
 
 
-# A union of one for now; a driver-supplied source joins it with its own `type`.
-AlarmSource = ArraySource
+ConditionLevel = Literal["WARNING", "FAULT"]
+DEFAULT_CLASSES: dict[ConditionLevel, int] = {"WARNING": 2, "FAULT": 3}
+
+
+class ConditionSource(Strict):
+    """MTConnect conditions: the active Warnings and Faults of CONDITION variables (an MTConnect driver's).
+
+    Each variable is a String[] of active conditions (gateway/codecs/mtconnect/conditions.py), as
+    the MTConnect and SHDR drivers keep them; every Warning or Fault becomes an alarm, with the
+    condition's id (or native code) as its id and its level as its severity class.
+    """
+
+    type: Literal["conditions"]
+    variables: list[str] | None = Field(
+        default=None,
+        description="The CONDITION variables to follow; default: every variable whose mtconnect "
+        "category is CONDITION",
+    )
+    classes: dict[ConditionLevel, int] = Field(
+        default_factory=lambda: dict(DEFAULT_CLASSES),
+        description="Severity class of each level (graded by `severity` like a controller's classes)",
+    )
+
+
+def _source_type(value: Any) -> str:
+    """Which source model an `alarms.source` section is; files from before `conditions` have no `type`."""
+    if isinstance(value, dict):
+        return str(value.get("type", "arrays"))
+    return str(getattr(value, "type", "arrays"))
+
+
+SOURCE_TAGS = ("arrays", "conditions")
+AlarmSource = Annotated[
+    Annotated[ArraySource, Tag("arrays")] | Annotated[ConditionSource, Tag("conditions")],
+    Discriminator(_source_type),
+]
 
 
 class AlarmsConfig(Strict):
@@ -106,6 +140,8 @@ def alarms_issues(alarms: AlarmsConfig, variables: Sequence[Any]) -> list[tuple[
     """(location below `alarms`, message) for every source path that is missing or of the wrong type."""
     by_path = {v.path: v for v in variables}
     source = alarms.source
+    if isinstance(source, ConditionSource):
+        return condition_issues(source, variables)
     wanted: list[tuple[tuple[str | int, ...], str | None, str]] = [
         (("source", "ids"), source.ids, "ids"),
         (("source", "texts"), source.texts, "texts"),
@@ -131,4 +167,33 @@ def alarms_issues(alarms: AlarmsConfig, variables: Sequence[Any]) -> list[tuple[
             issues.append((loc, f"{path} is {spec}; alarm texts must be String[]"))
         elif role == "severities" and not spec.is_integer:
             issues.append((loc, f"{path} is {spec}; severity classes must be an integer array"))
+    return issues
+
+
+def condition_variables(source: ConditionSource, variables: Sequence[Any]) -> list[str]:
+    """The paths a conditions source follows: the ones it names, else every CONDITION variable."""
+    if source.variables is not None:
+        return list(source.variables)
+    return [v.path for v in variables if v.mtconnect is not None and v.mtconnect.category == "CONDITION"]
+
+
+def condition_issues(
+    source: ConditionSource, variables: Sequence[Any]
+) -> list[tuple[tuple[str | int, ...], str]]:
+    by_path = {v.path: v for v in variables}
+    issues: list[tuple[tuple[str | int, ...], str]] = []
+    paths = condition_variables(source, variables)
+    if not paths:
+        issues.append(
+            (("source",), "no CONDITION variable to follow (give mtconnect: {category: CONDITION})")
+        )
+    for index, path in enumerate(paths):
+        loc: tuple[str | int, ...] = (
+            ("source", "variables", index) if source.variables is not None else ("source",)
+        )
+        var = by_path.get(path)
+        if var is None:
+            issues.append((loc, f"{path!r} is not a variable of this mapping"))
+        elif str(var.type) != "String[]":
+            issues.append((loc, f"{path} is {var.type}; a condition's active list is String[]"))
     return issues

@@ -21,6 +21,7 @@ from gateway.config.base import Strict
 from gateway.config.jobs import InboxConfig
 from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
+from gateway.config.mtconnect import AgentConfig
 from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
 from gateway.config.sparkplug import SparkplugConfig
 
@@ -78,6 +79,9 @@ class GatewayConfig(Strict):
     sparkplug: SparkplugConfig | None = Field(
         default=None,
         description="Publish every machine as a Sparkplug B device of this edge node; absent: no Sparkplug",
+    )
+    mtconnect: AgentConfig | None = Field(
+        default=None, description="The MTConnect agent (HTTP, port 5000 by default); absent: none"
     )
     # --- users, roles and access control (gateway/config/access.py) ---
     roles: list[str] = Field(

@@ -22,8 +22,9 @@ from pydantic import BaseModel, ValidationError
 
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
+from gateway.config.alarms import SOURCE_TAGS
 from gateway.config.gateway import GatewayConfig
-from gateway.config.mapping import MachineMapping, tree_conflicts
+from gateway.config.mapping import DRIVER_TAGS, MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
 
@@ -175,9 +176,19 @@ def issues_from(exc: ValidationError, located: Located) -> list[ConfigIssue]:
         loc = tuple(err["loc"])
         # pydantic adds the tag of a function validator or a union member to the location
         loc = tuple(p for p in loc if not (isinstance(p, str) and ("[" in p or p.startswith("function-"))))
+        loc = _untagged(loc)
         message = _message(err)
         issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
     return issues
+
+
+def _untagged(loc: Loc) -> Loc:
+    """Without the member names pydantic puts after a tagged union (`driver.opcua.endpoint`)."""
+    for at, tags in ((("driver",), DRIVER_TAGS), (("alarms", "source"), SOURCE_TAGS)):
+        n = len(at)
+        if len(loc) > n and loc[:n] == at and loc[n] in tags:
+            return (*at, *loc[n + 1 :])
+    return loc
 
 
 def _message(err: Mapping[str, Any]) -> str:

@@ -16,7 +16,7 @@ import re
 from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
-from pydantic import Field, SecretStr, ValidationInfo, field_validator, model_validator
+from pydantic import Discriminator, Field, SecretStr, Tag, ValidationInfo, field_validator, model_validator
 
 from gateway.config.access import check_role_name
 from gateway.config.alarms import AlarmsConfig, alarms_issues
@@ -25,6 +25,7 @@ from gateway.config.commands import CommandName, CommandSpec, command_issues, lo
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.config.jobs import JobsConfig
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
+from gateway.config.mtconnect import READ_ONLY_DRIVERS, MTConnectDriver, ShdrDriver, VariableMTConnect
 from gateway.model.definitions import MachineDefinition, Range, VariableDefinition
 from gateway.model.types import TypeSpec
 
@@ -120,6 +121,11 @@ class VariableSpec(Strict):
     role: str | None = Field(
         default=None,
         description="Lowest role that may write it (access: readwrite); default: defaults.write_role",
+    )
+    mtconnect: VariableMTConnect | None = Field(
+        default=None,
+        description="How it appears in the MTConnect agent: {category: SAMPLE, type: POSITION, subType: "
+        "ACTUAL, component: Axes/Linear[X]}",
     )
 
     @field_validator("path")
@@ -256,6 +262,22 @@ class OpcUaDriver(Strict):
         return check_endpoint(url)
 
 
+def _driver_type(value: Any) -> str:
+    """Which driver model a `driver:` section is; files from before the other drivers have no `type`."""
+    if isinstance(value, dict):
+        return str(value.get("type", "opcua"))
+    return str(getattr(value, "type", "opcua"))
+
+
+DRIVER_TAGS = ("opcua", "mtconnect", "shdr")
+Driver = Annotated[
+    Annotated[OpcUaDriver, Tag("opcua")]
+    | Annotated[MTConnectDriver, Tag("mtconnect")]
+    | Annotated[ShdrDriver, Tag("shdr")],
+    Discriminator(_driver_type),
+]
+
+
 class VariableDefaults(Strict):
     sampling_interval: float = Field(default=100.0, ge=0, description="Milliseconds")
     queue_size: int = Field(default=1, ge=1, le=10000)
@@ -276,7 +298,7 @@ class MachineMapping(Strict):
 
     machine: Annotated[str, Field(description="Machine name: lower-case letters, digits, '-' and '_'")]
     description: str = ""
-    driver: OpcUaDriver
+    driver: Driver
     defaults: VariableDefaults = VariableDefaults()
     variables: list[VariableSpec] = Field(min_length=1)
     mqtt: MachineMqtt | None = Field(
@@ -305,6 +327,16 @@ class MachineMapping(Strict):
                 f"machine name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', starting with a letter or digit"
             )
         return name
+
+    @field_validator("variables")
+    @classmethod
+    def _read_only_driver(cls, variables: list[VariableSpec], info: ValidationInfo) -> list[VariableSpec]:
+        """MTConnect (an agent or an adapter) cannot be written: its variables are `access: read`."""
+        driver = info.data.get("driver")
+        if driver is not None and driver.type in READ_ONLY_DRIVERS:
+            message = f"a {driver.type} driver is read-only (MTConnect has no writes): use access: read"
+            located_errors([((i, "access"), message) for i, var in enumerate(variables) if var.writable])
+        return variables
 
     @field_validator("jobs")
     @classmethod

@@ -43,4 +43,12 @@ def create_source(machine: Machine, mapping: MachineMapping) -> Source:
         from gateway.sources.opcua_client import OpcUaSource
 
         return OpcUaSource(machine, mapping)
+    if driver.type == "mtconnect":
+        from gateway.sources.mtconnect.agent_source import MTConnectSource
+
+        return MTConnectSource(machine, mapping)
+    if driver.type == "shdr":
+        from gateway.sources.mtconnect.shdr_source import ShdrSource
+
+        return ShdrSource(machine, mapping)
     raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable

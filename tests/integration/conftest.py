@@ -16,8 +16,9 @@ import pytest
 from tests.integration.mqtt.conftest import Mosquitto, Recorder
 from tests.waiting import free_port
 
-# Gateway OPC UA, simulator OPC UA, FTP inbox, simulator FTP, COPYDATA. (1883 is the system broker's.)
-DEFAULT_PORTS = (4840, 4841, 2121, 2122, 5020)
+# Gateway OPC UA, simulator OPC UA, FTP inbox, simulator FTP, COPYDATA, MTConnect agent, simulator SHDR.
+# (1883 is the system broker's.)
+DEFAULT_PORTS = (4840, 4841, 2121, 2122, 5020, 5000, 7878)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -95,10 +95,8 @@ def broker(tmp_path: Path) -> Iterator[Mosquitto]:
 async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[str]:
     """`cnc-gateway demo` on free ports, publishing to the test broker; yields its OPC UA endpoint."""
     gw_port = free_port()
-    ports = {
-        flag: free_port()
-        for flag in ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port")
-    }
+    flags = ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port", "--mtconnect-port")
+    ports = {flag: free_port() for flag in flags}
     env = {k: v for k, v in os.environ.items() if k != "CNC_DEMO_PASSWORD"}  # the README's passwords
     log = tmp_path / "demo.log"
     with log.open("w") as out:  # a file, not a pipe: nobody reads the demo's log while it runs

@@ -252,6 +252,7 @@ class ObservationBuffer:
         self.checkpoint_every = checkpoint_every or max(1, size // 8)
         self._ring: list[Entry | None] = [None] * size
         self._next = 1
+        self._floor = 1  # the oldest sequence ever held (above 1 after `restore` or `resume_at`)
         self._latest = Checkpoint()
         self._first = Checkpoint()  # state of everything before first_sequence
         self._checkpoints: list[tuple[int, Checkpoint]] = []  # (sequence covered up to, state)
@@ -269,7 +270,7 @@ class ObservationBuffer:
 
     @property
     def first_sequence(self) -> int:
-        return max(1, self._next - self.size)
+        return max(self._floor, self._next - self.size)
 
     def window(self, next_sequence: int | None = None) -> Window:
         return Window(
@@ -394,6 +395,37 @@ class ObservationBuffer:
             if entry is not None:
                 added.append(entry)
         return added
+
+    def restore(self, entries: Iterable[Entry]) -> None:
+        """Refill an empty buffer with observations kept from an earlier run, with their own sequences.
+
+        The first entry's sequence becomes the buffer's starting point; the rest must follow it
+        without a gap (what `entries_between` gave, stored in order). Their `info` must come from
+        this buffer's catalog. Raises ValueError otherwise (the caller then starts afresh).
+        """
+        if self._next != 1:
+            raise ValueError("restore needs an empty buffer")
+        expected: int | None = None
+        for entry in entries:
+            if expected is None:
+                if entry.sequence < 1:
+                    raise ValueError(f"sequence {entry.sequence} is not a sequence number")
+                self._next = self._floor = expected = entry.sequence
+            elif entry.sequence != expected:
+                raise ValueError(f"sequence {entry.sequence} follows {expected - 1}: a gap in what was kept")
+            if self.catalog.items.get(entry.info.item.id) is not entry.info:
+                raise ValueError(f"{entry.info.item.id} is not a data item of this catalog")
+            entry.xml_cache = entry.json_cache = None
+            self._append(entry, dedupe=False)
+            expected += 1
+
+    def resume_at(self, next_sequence: int) -> None:
+        """Start an empty buffer's numbering at `next_sequence` (a kept sequence, nothing to restore)."""
+        if self._next != 1:
+            raise ValueError("resume_at needs an empty buffer")
+        if next_sequence < 1:
+            raise ValueError("sequences start at 1")
+        self._next = self._floor = next_sequence
 
     def _append(self, entry: Entry, dedupe: bool) -> Entry | None:
         if dedupe and self._latest.is_duplicate(entry):

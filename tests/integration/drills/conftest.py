@@ -26,6 +26,7 @@ if SCALE not in ("small", "soak"):
 COUNTS: dict[str, tuple[int, int]] = {
     "broker_restarts": (3, 30),
     "controller_restarts": (3, 30),
+    "mtconnect_restarts": (3, 30),  # per mode: an SHDR adapter, an upstream agent
     "gateway_kills": (5, 50),
     "slow_consumers": (10_000, 150_000),  # changes that stream past the stalled consumers
 }

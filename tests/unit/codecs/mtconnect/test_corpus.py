@@ -101,3 +101,16 @@ def test_bad_requests_are_refused_with_their_error_code_and_reason(case: dict[st
 )
 def test_the_same_checks_let_good_requests_through(target: str) -> None:
     assert answer(target, state()).kind in ("probe", "current", "sample", "assets")
+
+
+@pytest.mark.parametrize("case", cases("responses.yaml"), ids=lambda c: c["name"])
+def test_junk_answers_of_an_agent_are_refused_with_their_reason(case: dict[str, Any]) -> None:
+    from gateway.codecs.mtconnect.responses import ResponseError, parse_devices, parse_streams
+
+    parse = parse_streams if case.get("probe") else parse_devices
+    try:
+        document = parse(case["body"])
+    except ResponseError as exc:
+        assert case["error"] in str(exc)
+        return
+    assert case["error"] == "describes no device" and not getattr(document, "devices", [1])
