@@ -113,7 +113,8 @@ class AlarmStore(SqliteFile):
         with self._write() as db:
             for occurrence, when, retained in cleared:
                 db.execute(
-                    "UPDATE occurrences SET cleared_at = ?, retained = ? WHERE occurrence = ? AND cleared_at IS NULL",
+                    "UPDATE occurrences SET cleared_at = ?, retained = ?"
+                    " WHERE occurrence = ? AND cleared_at IS NULL",
                     (iso(when), int(retained), occurrence),
                 )
                 db.execute(
@@ -122,8 +123,9 @@ class AlarmStore(SqliteFile):
                 )
             for entry, severity in raised:
                 cur = db.execute(
-                    "INSERT INTO occurrences (machine, alarm_id, text, severity, class, parameters, raised_at) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT INTO occurrences"
+                    " (machine, alarm_id, text, severity, class, parameters, raised_at)"
+                    " VALUES (?, ?, ?, ?, ?, ?, ?)",
                     (
                         machine,
                         entry.id,

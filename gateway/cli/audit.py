@@ -1,4 +1,4 @@
-"""`cnc-gateway audit list`: who wrote, called, acknowledged or confirmed what, from the state directory's audit table.
+"""`cnc-gateway audit list`: who wrote, called, acknowledged or confirmed what (the audit table).
 
 Reads `<state_dir>/audit.sqlite3` directly, so it works whether the gateway runs
 or not (entries reach the table within a moment of the write).
@@ -23,7 +23,8 @@ KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "audit",
-        help="the audit trail: every write, method call and alarm acknowledge/confirm, who, what, and the result",
+        help="the audit trail: every write, method call and alarm acknowledge/confirm, "
+        "who, what, and the result",
     )
     audit = p.add_subparsers(dest="audit_command", metavar="ACTION", required=True)
     q = audit.add_parser("list", help="audit entries, newest first")

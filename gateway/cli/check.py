@@ -155,7 +155,7 @@ def _label(cond: Condition, value: Any) -> str:
 
 
 def print_copydata(mapping: MachineMapping, out: TextIO, writer: str | None = None) -> None:
-    """One line per COPYDATA target: where it sends and the variable ids it gets (the tree shows each id's variable).
+    """One line per COPYDATA target: where it sends, the variable ids it gets (the tree shows their names).
 
     `writer` is the role writes from a target act with, while access control is on.
     """

@@ -74,8 +74,13 @@ def add_layout_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--encoding", default=None, help="text encoding of String values (default utf-8)")
     p.add_argument("--max-cbdata", type=int, default=None, help="largest lpData accepted (default 1048576)")
-    p.add_argument("--types", action="append", default=[], metavar="ID=TYPE[:NAME],…",
-                   help="ids and types without a mapping, e.g. 1=Double:Axes/X/Position,5=UInt32")  # fmt: skip
+    p.add_argument(
+        "--types",
+        action="append",
+        default=[],
+        metavar="ID=TYPE[:NAME],…",
+        help="ids and types without a mapping, e.g. 1=Double:Axes/X/Position,5=UInt32",
+    )
 
 
 def settings_from(args: argparse.Namespace) -> Settings:

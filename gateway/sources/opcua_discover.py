@@ -116,7 +116,7 @@ class _Browser:
             strict = False
             objects: list[_Item] = []
             variables: list[_Item] = []
-            for item, refs in zip(frontier, results):
+            for item, refs in zip(frontier, results, strict=True):
                 for position, ref in enumerate(refs):
                     target = ref.NodeId
                     if getattr(target, "ServerIndex", 0):
@@ -150,7 +150,7 @@ class _Browser:
                         else:
                             depth_cut = True
             frontier = objects
-            for item, found in zip(variables, await self._describe(variables)):
+            for item, found in zip(variables, await self._describe(variables), strict=True):
                 if found.type is not None:
                     if emitted >= self.max_variables:
                         truncated = True
@@ -192,7 +192,7 @@ class _Browser:
                     for nid in batch
                 ],
             )
-            for nid, result in zip(batch, await self.session.browse(params)):
+            for nid, result in zip(batch, await self.session.browse(params), strict=True):
                 if result.StatusCode.is_bad():
                     if strict:
                         raise SourceError(f"cannot browse {nid.to_string()}: {result.StatusCode.name}")
@@ -279,7 +279,7 @@ class _Browser:
                 ]
             )
             (browsed,) = await self.session.browse(params)
-            parents = [r for r in browsed.References or []] if browsed.StatusCode.is_good() else []
+            parents = list(browsed.References or []) if browsed.StatusCode.is_good() else []
             if parents:
                 base, label = await self._type_name(_plain(parents[0].NodeId))
                 result = (base, label if base is not None else f"{key} (a {label})")
@@ -292,7 +292,7 @@ class _Browser:
         if not self._properties:
             return
         values = await self._read([(nid, ua.AttributeIds.Value) for _, _, nid in self._properties])
-        for (found, name, _), dv in zip(self._properties, values):
+        for (found, name, _), dv in zip(self._properties, values, strict=True):
             value = _value(dv)
             if found.type is None:
                 continue
@@ -341,7 +341,7 @@ async def discover(
         client = await open_client(
             endpoint, timeout=timeout, username=username, password=password, security=security
         )
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - asyncua's failures, translated by describe_error
         raise SourceError(f"cannot connect to {endpoint}: {describe_error(exc)[1]}") from None
     try:
         namespaces = list(await client.get_namespace_array())
@@ -365,7 +365,8 @@ async def discover(
     mapped = sorted((f for f in browser.found if f.type is not None), key=lambda f: f.order)
     if not mapped:
         raise SourceError(
-            f"found no variables of a supported type under {start_label} on {endpoint}; try --start or --max-depth"
+            f"found no variables of a supported type under {start_label} on {endpoint}; "
+            "try --start or --max-depth"
         )
     emitted = {k for f in mapped for k in f.keys}
     skipped = sorted(
@@ -456,7 +457,7 @@ def render(
         "",
         "variables:",
     ]
-    for path, found in zip(paths, variables):
+    for path, found in zip(paths, variables, strict=True):
         entry: dict[str, Any] = {"path": path, "source": found.source, "type": found.type}
         if found.unit:
             entry["unit"] = found.unit

@@ -123,7 +123,7 @@ class Metric:
 
 
 def encode_nbirth(metrics: Sequence[Metric], *, bdseq: int, seq: Seq, timestamp: int) -> bytes:
-    """An NBIRTH: the node's own metrics with bdSeq and Node Control/Rebirth beside them; seq restarts at 0."""
+    """An NBIRTH: the node's own metrics, bdSeq and Node Control/Rebirth beside them; seq restarts at 0."""
     _check_bdseq(bdseq)
     for metric in metrics:
         if metric.name in _RESERVED_NAMES:

@@ -181,7 +181,8 @@ class _FastReader:
         moved = False
         simple = self.simple()
         unit, (ox, oy, oz) = est.unit, est.offset  # known (not None) whenever `simple`
-        px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed = self.load()  # fmt: skip
+        (px, py, pz, lox, loy, loz, hix, hiy, hiz,
+         motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed) = self.load()  # fmt: skip
         for row in rows:
             g, x, y, z, i, j, rr, f, m, _s, other = row
             plain = not other and row != _BLANK
@@ -260,7 +261,8 @@ class _FastReader:
                     continue
             # The general path, with the state as it was before this row.
             if n:
-                self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
+                self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz,
+                           motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
                 n, moved = 0, False
             if not plain:
                 if not pending:
@@ -276,9 +278,11 @@ class _FastReader:
             simple = self.simple()
             if simple:
                 unit, (ox, oy, oz) = est.unit, est.offset
-                px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed = self.load()  # fmt: skip
+                (px, py, pz, lox, loy, loz, hix, hiy, hiz,
+                 motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed) = self.load()  # fmt: skip
         if n:
-            self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
+            self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz,
+                       motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
         if pending:
             self.general(pending, pending_line)
 
@@ -293,7 +297,9 @@ class _FastReader:
     def store(self, n: int, first: int, last: int, moved: bool, *state: Any) -> None:
         """Write the locals of `rows` back: n fast blocks read, lines first to last."""
         est, asm, reading = self.est, self.reading.assembler, self.reading
-        px, py, pz, lox, loy, loz, hix, hiy, hiz, est.motion, est.feed, est.cut_mm, est.rapid_mm, est.cut_s, est.rapid_s, est.timed = state  # fmt: skip
+        (px, py, pz, lox, loy, loz, hix, hiy, hiz,
+         est.motion, est.feed, est.cut_mm, est.rapid_mm,
+         est.cut_s, est.rapid_s, est.timed) = state  # fmt: skip
         est.pos = [px, py, pz]
         est.lo = [lox, loy, loz]
         est.hi = [hix, hiy, hiz]

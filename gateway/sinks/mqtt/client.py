@@ -24,6 +24,7 @@ How paho meets asyncio here:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 import ssl
@@ -432,7 +433,7 @@ class MqttClient:
         client.disconnect()
         deadline = loop.time() + timeout
         # paho closes the socket once DISCONNECT is written; give the writer a few turns.
-        while self._sock is not None and loop.time() < deadline:
+        while self._sock is not None and loop.time() < deadline:  # noqa: ASYNC110 - paho's socket has no event
             await asyncio.sleep(0.01)
         self._drop_socket()
 
@@ -453,10 +454,8 @@ def _resolve(fut: asyncio.Future[BaseException | None], error: BaseException | N
 
 def _close_quietly(sock: Any) -> None:
     if sock is not None:
-        try:
+        with contextlib.suppress(OSError):
             sock.close()
-        except OSError:
-            pass
 
 
 def _reason_text(reason: Any) -> str:

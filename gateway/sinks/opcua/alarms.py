@@ -188,7 +188,7 @@ class OpcUaAlarms:
         self._by_occurrence.pop(condition.occurrence, None)
         try:
             await self.server.delete_nodes([nodeid])
-        except Exception as exc:  # a node left behind is untidy, not harmful
+        except Exception as exc:  # noqa: BLE001 - asyncua raises anything; a node left behind is only untidy
             log.warning("cannot remove the ended alarm condition %s: %s", nodeid.to_string(), exc)
 
     # --- Acknowledge and Confirm -------------------------------------------------------------

@@ -82,7 +82,7 @@ class SharedAttributes:
         self._canonical: dict[tuple[Any, ...], Any] = {}
 
     def share(self, nodeids: Any = None) -> int:
-        """Share the constant attributes of these nodes (all nodes if None); how many DataValues were dropped."""
+        """Share the constant attributes of these nodes (all if None); how many DataValues were dropped."""
         nodes = self._nodes
         targets = list(nodes.values()) if nodeids is None else [nodes[n] for n in nodeids if n in nodes]
         canonical, dropped = self._canonical, 0

@@ -132,7 +132,7 @@ def check_inputs(
         return None, ua.CallMethodResult(StatusCode=_status("BadTooManyArguments"))
     results: list[ua.StatusCode] = []
     values: list[Any] = []
-    for arg, variant in zip(expected, inputs):
+    for arg, variant in zip(expected, inputs, strict=True):
         kind = value_kind(arg.type)
         is_array = bool(getattr(variant, "is_array", False)) or isinstance(variant.Value, (list, tuple))
         if (
@@ -157,7 +157,7 @@ def encode_outputs(method: Method, outputs: Sequence[Any]) -> list[ua.Variant]:
         raise ValueMismatch(
             f"{method.object}.{method.name} returned {len(outputs)} outputs, declares {len(method.outputs)}"
         )
-    return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs)]
+    return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs, strict=True)]
 
 
 class ArgumentsRefused(CallError):

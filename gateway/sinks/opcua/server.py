@@ -65,6 +65,9 @@ from gateway.sinks.opcua.writes import write_node
 
 log = logging.getLogger(__name__)
 
+# The caller AttributeService.write assumes when it is given none (asyncua's own default: every right).
+_ADMIN = User(role=UserRole.Admin)
+
 ADD_BATCH = 2000  # AddNodesItems per call; the loop gets a turn between batches
 YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
 # Notifications kept per monitored item for a client that does not collect them; a client's "0: as many as
@@ -233,9 +236,7 @@ class _GatewayAttributeService(AttributeService):
                     results[index] = answer
         return results
 
-    async def write(
-        self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)
-    ) -> list[ua.StatusCode]:
+    async def write(self, params: ua.WriteParameters, user: User = _ADMIN) -> list[ua.StatusCode]:
         owned = self._sink._owned
         items = params.NodesToWrite
         if user is self._internal_user or not any(wv.NodeId in owned for wv in items):
@@ -245,11 +246,11 @@ class _GatewayAttributeService(AttributeService):
         others = [(i, wv) for i, wv in enumerate(items) if wv.NodeId not in owned]
         if others:
             theirs = await super().write(ua.WriteParameters(NodesToWrite=[wv for _, wv in others]), user)
-            for (i, _), status in zip(others, theirs):
+            for (i, _), status in zip(others, theirs, strict=True):
                 results[i] = status
         name, role = self._sink.user_name(user), self._sink.user_role(user)
         statuses = await asyncio.gather(*(self._sink._client_write(wv, name, role) for _, wv in ours))
-        for (i, _), status in zip(ours, statuses):
+        for (i, _), status in zip(ours, statuses, strict=True):
             results[i] = status
         return results
 
@@ -319,10 +320,11 @@ class OpcUaSink:
         for start in range(0, len(items), ADD_BATCH):
             chunk = list(items[start : start + ADD_BATCH])
             results = await isession.add_nodes(chunk)
-            for item, result in zip(chunk, results):
+            for item, result in zip(chunk, results, strict=True):
                 if not result.StatusCode.is_good():
                     raise SinkError(
-                        f"OPC UA server refused node {item.RequestedNewNodeId.to_string()}: {result.StatusCode.name}"
+                        f"OPC UA server refused node {item.RequestedNewNodeId.to_string()}: "
+                        f"{result.StatusCode.name}"
                     )
                 added.append(result.AddedNodeId)
             if self._shared is not None:
@@ -422,7 +424,8 @@ class OpcUaSink:
         server.manufacturer_name = "cnc-gateway"
         await server.init()
         self._shared = SharedAttributes(server)
-        self._shared.share()  # the standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py)
+        # The standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py).
+        self._shared.share()
         await server.set_application_uri(self.application_uri)
         await server.set_build_info(
             server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()
@@ -546,7 +549,7 @@ class OpcUaSink:
         try:
             plan.add_variable(node)
             await self.add_nodes(plan.take())
-        except Exception as exc:  # a refused node must not stop the value loop
+        except Exception as exc:  # noqa: BLE001 - a refused node, whatever asyncua raised, must not stop the loop
             self._unplaceable.add(node)
             log.error("cannot add %s to the OPC UA address space: %s", node.full_path, exc)
             return None

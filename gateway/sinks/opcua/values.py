@@ -269,10 +269,7 @@ class ValueKind:
     def datavalue(self, sample: Sample, server_ts: datetime) -> ua.DataValue:
         """The DataValue for a Sample. Bad samples carry no value, as OPC UA requires."""
         status = status_code(sample.status)
-        if status.is_bad():
-            variant = _NULL
-        else:
-            variant = self.variant(sample.value)
+        variant = _NULL if status.is_bad() else self.variant(sample.value)
         return ua.DataValue(variant, status, SourceTimestamp=sample.source_ts, ServerTimestamp=server_ts)
 
     def mismatch(self, sample: Sample, server_ts: datetime) -> ua.DataValue:
