@@ -24,7 +24,6 @@ import yaml
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.mqtt import MachineMqtt
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.tcp import TcpServerTransport
 from simulator.runner import Simulator
@@ -34,7 +33,6 @@ from tests.integration.mqtt.conftest import mqtt_config
 from tests.waiting import free_port
 
 MACHINE = "laser-sim"
-COMMANDS = "commands" in MachineMqtt.model_fields  # MQTT command requests have landed
 
 
 def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
@@ -45,7 +43,7 @@ def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
     data["jobs"]["retry"] = {"initial": 0.05, "max": 0.5, "factor": 2}
     target = data["copydata"]["targets"][0]
     target.update(bind="127.0.0.1", port=0)
-    data["mqtt"] = {"writable": True, **({"commands": True} if COMMANDS else {})}
+    data["mqtt"] = {"writable": True, "commands": True}
     for variable in data["variables"]:
         if variable["path"] == "Machine/Mode":
             variable["mqtt"] = {"writable": False}
