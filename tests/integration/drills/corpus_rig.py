@@ -56,7 +56,9 @@ def rules_machine(name: str, sim_port: int, ftp_port: int, rules: dict[str, Any]
     return {
         "machine": name,
         "driver": {"endpoint": f"opc.tcp://127.0.0.1:{sim_port}"},
-        "variables": [{"path": "Machine/State", "source": "ns=2;s=::AsGlobalPV:gMachine.State", "type": "Int16"}],
+        "variables": [
+            {"path": "Machine/State", "source": "ns=2;s=::AsGlobalPV:gMachine.State", "type": "Int16"}
+        ],
         "jobs": {
             "controller": {"host": "127.0.0.1", "port": ftp_port, "user": "cnc", "password": "simulator",
                            "folder": f"/DATA/{name}", "timeout": 5},
@@ -118,7 +120,8 @@ async def corpus_rig(
     gateway = GatewayConfig.model_validate({
         "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway", "security": ["None"]},
         "state_dir": str(tmp_path / "state"),
-        "inbox": {"host": "127.0.0.1", "port": 0, "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
+        "inbox": {"host": "127.0.0.1", "port": 0,
+                  "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
     }).model_copy(update={"mqtt": mqtt_config(mqtt_port)})  # fmt: skip
     async with Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=store) as sim:
         for name in machines.values():

@@ -102,7 +102,7 @@ async def test_every_bad_input_gets_its_clear_error_and_the_gateway_serves_on(
 
 
 async def still_serving(rig: CorpusRig, mqtt: Recorder) -> list[str]:
-    """After the corpus: OPC UA Good, an MQTT write, a valid job, a valid COPYDATA frame. Returns what passed."""
+    """After the corpus: OPC UA Good, an MQTT write, a valid job, a valid COPYDATA frame; what passed."""
     machine = rig.gateway.tree.machines[MACHINE]
     passed = []
     client = Client(f"opc.tcp://127.0.0.1:{rig.opcua_port}/cnc-gateway", timeout=5)

@@ -156,7 +156,7 @@ def test_override_zero_holds_the_path_while_running() -> None:
 
 def test_override_range_and_mode() -> None:
     m = Machine(MemoryStore())
-    with pytest.raises(OutOfRange, match="outside 0..200"):
+    with pytest.raises(OutOfRange, match=r"outside 0\.\.200"):
         m.set_override(201)
     m.set_override(200)
     assert m.override == 200
