@@ -34,7 +34,8 @@ from typing import Any
 
 from asyncua import ua
 
-from gateway.sinks.opcua.asyncua_tuning import keep_written_values
+from gateway.shims.asyncua_server import keep_written_values
+from gateway.shims.ua import new_data_value, new_node_id
 from simulator.variables import NAMESPACE_URI, Variable
 
 CHUNK = 1000  # writes between turns for the rest of the event loop (the gateway's session, FTP)...
@@ -156,10 +157,10 @@ class Noise(Pacer):
         # Every DataValue below is fresh: no need for asyncua's deep copy per subscriber.
         keep_written_values()
         write = server.write_attribute_value
-        node_ids = [ua.NodeId(v.node_id, ns) for v in self.variables]
+        node_ids = [new_node_id(v.node_id, ns) for v in self.variables]
         count = len(node_ids)
         double = ua.VariantType.Double
-        variant, datavalue = ua.Variant, ua.DataValue
+        variant, datavalue = ua.Variant, new_data_value
         while True:
             due = await self.owed()
             stamp = datetime.now(UTC)

@@ -19,7 +19,7 @@ from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ConfigError
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("check", help="validate mapping/gateway files and print each machine's variable tree")
     p.add_argument("files", nargs="+", type=Path, metavar="FILE")
     p.set_defaults(handler=handle)

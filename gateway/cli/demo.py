@@ -44,7 +44,7 @@ DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the 
 DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("demo", help="run the simulator and the gateway together on the default ports")
     p.add_argument("--mapping", type=Path, default=None, help="default: mappings/laser-sim.yaml")
     p.add_argument("--opcua-port", type=int, default=4840, help="gateway OPC UA port (default 4840)")

@@ -13,7 +13,7 @@ from gateway.errors import SourceError
 from gateway.logconfig import configure
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "discover", help="browse a controller's OPC UA server and print a starting mapping file"
     )

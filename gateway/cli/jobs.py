@@ -24,7 +24,7 @@ from gateway.jobs.queue.store import Job, JobQueue, JobState, parse_job_id
 PASSWORD_ENV = "CNC_INBOX_PASSWORD"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("jobs", help="list, inspect, retry, cancel and submit jobs of the FTP job queue")
     jobs = p.add_subparsers(dest="jobs_command", metavar="ACTION", required=True)
 

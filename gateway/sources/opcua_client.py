@@ -49,6 +49,7 @@ from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 from gateway.reconnect import Backoff, OutageLog
+from gateway.shims.ua import new_node_id, new_status_error
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
 
@@ -326,7 +327,7 @@ class OpcUaSource:
                 self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.definition.source}: {exc}")
                 problems.append(f"{node.path} (BadNodeIdUnknown)")
                 continue
-            self._node_ids[node] = ua.NodeId(address.identifier, index, _NODE_ID_TYPES[address.kind])
+            self._node_ids[node] = new_node_id(address.identifier, index, _NODE_ID_TYPES[address.kind])
         return problems
 
     def _subscription_parameters(self) -> ua.CreateSubscriptionParameters:
@@ -454,7 +455,7 @@ class OpcUaSource:
                 return
             header_status = response.ResponseHeader.ServiceResult.value
             if header_status & 0x80000000:
-                lost(*describe_error(UaStatusCodeError(header_status))[:2])
+                lost(*describe_error(new_status_error(header_status))[:2])
                 return
             result = response.Parameters
             message = result.NotificationMessage
@@ -505,7 +506,7 @@ class OpcUaSource:
             elif isinstance(notification, ua.StatusChangeNotification):
                 code = notification.Status.value
                 if code & 0x80000000:
-                    status, reason, _ = describe_error(UaStatusCodeError(code))
+                    status, reason, _ = describe_error(new_status_error(code))
                     lost(status, reason)
 
     def _ingest_failed(self, node: VariableNode, value: Any, exc: Exception) -> None:

@@ -24,6 +24,7 @@ from asyncua.ua.uaerrors import UaError
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.mapping import MACHINE_RE, check_endpoint
 from gateway.errors import AddressError, SourceError
+from gateway.shims.ua import new_node_id
 from gateway.sources.browse_paths import Key, assign_paths
 from gateway.sources.opcua_client import close_client, open_client
 from gateway.sources.opcua_status import describe_error
@@ -32,9 +33,9 @@ BROWSE_BATCH = 100  # nodes per Browse request
 READ_BATCH = 1000  # attributes per Read request
 MAX_SKIP_COMMENTS = 200
 
-_HIERARCHICAL = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
-_HAS_PROPERTY = ua.NodeId(ua.ObjectIds.HasProperty)
-_HAS_SUBTYPE = ua.NodeId(ua.ObjectIds.HasSubtype)
+_HIERARCHICAL = new_node_id(ua.ObjectIds.HierarchicalReferences)
+_HAS_PROPERTY = new_node_id(ua.ObjectIds.HasProperty)
+_HAS_SUBTYPE = new_node_id(ua.ObjectIds.HasSubtype)
 _BASE_TYPES = {
     1: "Boolean", 2: "SByte", 3: "Byte", 4: "Int16", 5: "UInt16", 6: "Int32", 7: "UInt32",
     8: "Int64", 9: "UInt64", 10: "Float", 11: "Double", 12: "String", 13: "DateTime",
@@ -261,10 +262,11 @@ class _Browser:
         if key in self._types:
             return self._types[key]
         result: tuple[str | None, str]
-        if data_type.NamespaceIndex == 0 and data_type.Identifier in _BASE_TYPES:
-            result = (_BASE_TYPES[data_type.Identifier], _BASE_TYPES[data_type.Identifier])
-        elif data_type.NamespaceIndex == 0 and data_type.Identifier in _UNSUPPORTED_TYPES:
-            result = (None, _UNSUPPORTED_TYPES[data_type.Identifier])
+        ident = data_type.Identifier if data_type.NamespaceIndex == 0 else None  # built-in types: numeric ids
+        if isinstance(ident, int) and ident in _BASE_TYPES:
+            result = (_BASE_TYPES[ident], _BASE_TYPES[ident])
+        elif isinstance(ident, int) and ident in _UNSUPPORTED_TYPES:
+            result = (None, _UNSUPPORTED_TYPES[ident])
         else:
             self._types[key] = (None, key)  # guards against cycles while we look upwards
             params = ua.BrowseParameters(
@@ -348,11 +350,11 @@ async def discover(
         if start:
             try:
                 address = parse_address(start)
-                start_id = ua.NodeId(address.identifier, address.resolve(namespaces))
+                start_id = new_node_id(address.identifier, address.resolve(namespaces))
             except AddressError as exc:
                 raise SourceError(f"start node: {exc}") from None
         else:
-            start_id = ua.NodeId(ua.ObjectIds.ObjectsFolder)
+            start_id = new_node_id(ua.ObjectIds.ObjectsFolder)
         browser = _Browser(client, max_depth=max_depth, max_variables=max_variables)
         await browser.walk(start_id)
     except SourceError:

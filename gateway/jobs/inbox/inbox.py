@@ -41,8 +41,8 @@ from gateway.jobs.inbox.server import (
     Submit,
     Upload,
     UploadReply,
-    close_server,
 )
+from gateway.shims.aioftp_server import close_server
 
 __all__ = ["STAGING", "Inbox", "Submit", "Upload", "UploadReply", "tls_context"]
 

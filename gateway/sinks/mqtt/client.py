@@ -32,7 +32,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode, MQTTProtocolVersion
@@ -41,6 +41,9 @@ from paho.mqtt.properties import Properties
 
 from gateway.config.mqtt import MqttTls
 from gateway.errors import BrokerError, BrokerRefused, SinkError
+
+# paho's Properties() has no annotations, which mypy --strict will not call; this is its signature.
+_properties = cast(Callable[[int], Properties], Properties)
 
 log = logging.getLogger(__name__)
 
@@ -396,7 +399,7 @@ class MqttClient:
         """Queue one message on the socket; returns its message id (for `on_published`)."""
         props = None
         if correlation_data is not None and self.v5:
-            props = Properties(PacketTypes.PUBLISH)
+            props = _properties(PacketTypes.PUBLISH)
             props.CorrelationData = correlation_data
         try:
             info = self._client.publish(topic, payload, qos, retain, props)
@@ -414,7 +417,7 @@ class MqttClient:
         if not filters:
             return
         rc, mid = self._client.subscribe([(f, qos) for f in filters])
-        if rc != MQTTErrorCode.MQTT_ERR_SUCCESS:
+        if rc != MQTTErrorCode.MQTT_ERR_SUCCESS or mid is None:
             raise BrokerError(f"cannot subscribe: {paho.error_string(rc)}")
         self._pending_subs[mid] = filters
 

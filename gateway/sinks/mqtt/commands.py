@@ -97,9 +97,10 @@ def read_body(payload: bytes) -> dict[str, Any]:
         body = json.loads(text)
     except RecursionError:
         raise MalformedRequest("malformed JSON: nested too deeply") from None
-    except ValueError as exc:
-        where = f" at character {exc.pos}" if isinstance(getattr(exc, "pos", None), int) else ""
-        raise MalformedRequest(f"malformed JSON: {getattr(exc, 'msg', exc)}{where}") from None
+    except json.JSONDecodeError as exc:
+        raise MalformedRequest(f"malformed JSON: {exc.msg} at character {exc.pos}") from None
+    except ValueError as exc:  # json's other refusals (an integer too long to convert, say)
+        raise MalformedRequest(f"malformed JSON: {exc}") from None
     if not isinstance(body, dict):
         raise MalformedRequest('expected a JSON object with the arguments by name, e.g. {"name": "part.nc"}')
     return body

@@ -46,8 +46,10 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.shims.asyncua_server import keep_written_values
+from gateway.shims.ua import new_node_id, new_status_code
 from gateway.sinks.opcua.address_space import AddressSpacePlan
-from gateway.sinks.opcua.asyncua_tuning import SharedAttributes, keep_written_values
+from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -74,8 +76,8 @@ YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
 # you allow" is revised to this. asyncua's own cap, 10,000, lets one stalled client (no Publish requests)
 # hold about 270 bytes x 10,000 x every variable it watches (tests/integration/drills/test_slow_consumers.py).
 MAX_QUEUE_PER_ITEM = 100
-SERVER_OBJECT = ua.NodeId(ua.ObjectIds.Server)
-HAS_NOTIFIER = ua.NodeId(ua.ObjectIds.HasNotifier)
+SERVER_OBJECT = new_node_id(ua.ObjectIds.Server)
+HAS_NOTIFIER = new_node_id(ua.ObjectIds.HasNotifier)
 
 # The session user of the Call request being served: asyncua does not pass it to method callbacks.
 _CALLER: ContextVar[Any] = ContextVar("opcua_caller", default=None)
@@ -417,7 +419,7 @@ class OpcUaSink:
     async def _start(self) -> None:
         self._vars, self._by_id, self._owned = {}, {}, set()
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
-        keep_written_values()  # no deep copy of every value per subscribed item (asyncua_tuning.py)
+        keep_written_values()  # no deep copy of every value per subscribed item (shims/asyncua_server.py)
         server = Server()
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
@@ -627,7 +629,7 @@ class OpcUaSink:
     async def _client_write(self, wv: ua.WriteValue, user: str | None, role: str | None) -> ua.StatusCode:
         var = self._by_id.get(wv.NodeId)
         if var is None:  # one of our folders, objects or properties
-            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+            return new_status_code(ua.StatusCodes.BadNotWritable)
         status = await write_node(var.node, var.kind, wv, user, role)
         if status.is_good():  # read-your-writes: the controller's read-back is served before the answer
             await self._push([(var.node, var.node.sample)])
