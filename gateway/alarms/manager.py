@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from gateway.alarms.records import AlarmChange, AlarmRecord, Kind, Quality
 from gateway.alarms.sources import Reading, diff, source_for
-from gateway.alarms.store import AlarmStore, AlarmStoreError
+from gateway.alarms.store import AlarmStore
 from gateway.config.alarms import AlarmsConfig
-from gateway.errors import CallError, InvalidState, RequestError
+from gateway.errors import AlarmStoreError, CallError, InvalidState, RequestError
 from gateway.model.audit import as_text
 from gateway.model.context import WriteContext
 from gateway.model.events import Event

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.alarms.records import ActiveAlarm, AlarmRecord, Kind, iso, parse_iso
-from gateway.errors import GatewayError
+from gateway.errors import AlarmStoreError
 from gateway.sqlite_file import SqliteFile
 
 SCHEMA_VERSION = 1
@@ -57,10 +57,6 @@ CREATE TABLE IF NOT EXISTS transitions (
 );
 CREATE INDEX IF NOT EXISTS transitions_occurrence ON transitions (occurrence);
 """
-
-
-class AlarmStoreError(GatewayError):
-    """The alarm file cannot be opened or written."""
 
 
 def store_path(state_dir: Path) -> Path:

@@ -18,10 +18,11 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from gateway.alarms.records import AlarmRecord
-from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.alarms.store import AlarmStore, store_path
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
 from gateway.cli.state_dir import resolve_state_dir
+from gateway.errors import AlarmStoreError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -30,7 +30,7 @@ from gateway.codecs.copydata import (
 from gateway.config.copydata import CopydataTarget, check_encoding
 from gateway.config.loader import load_mapping
 from gateway.config.mapping import MachineMapping
-from gateway.errors import ConfigError
+from gateway.errors import ConfigError, GatewayError
 from gateway.model.types import TypeSpec
 from gateway.sinks.copydata.feedback import plain
 
@@ -38,7 +38,7 @@ DWDATA_NAMES = {1: "one variable", 2: "several variables"}
 _HEX_JUNK = re.compile(r"0x|[\s:,\-_]", re.IGNORECASE)
 
 
-class UsageError(Exception):
+class UsageError(GatewayError):
     """Bad command-line input: printed as `error: …`, exit status 2."""
 
 

@@ -14,6 +14,7 @@ from typing import Any
 
 from asyncua import ua
 
+from gateway.errors import CodecError
 from gateway.model.sample import Sample
 from gateway.model.types import FLOAT32_MAX, INT_BOUNDS, DataType, TypeSpec
 from gateway.shims.ua import NULL_ARRAY, new_data_value, new_node_id, new_status_code
@@ -176,7 +177,7 @@ _NULL = ua.Variant(None, ua.VariantType.Null)  # Variants are immutable: one nul
 _TYPE_MISMATCH = new_status_code(ua.StatusCodes.BadTypeMismatch)
 
 
-class ValueMismatch(ValueError):
+class ValueMismatch(CodecError):
     """A value that cannot be carried by its variable's VariantType."""
 
 

@@ -4,9 +4,8 @@ import math
 
 import pytest
 
-from gateway.errors import OutOfRange
+from gateway.errors import InvalidArgument, InvalidState, OutOfRange
 from simulator.alarms import PROGRAM_ERROR, PROGRAM_NOT_FOUND, SOFT_LIMIT
-from simulator.errors import InvalidArgument, InvalidState
 from simulator.machine import AMBIENT, GAS_ON, Machine, MachineState, Mode
 from simulator.store import MemoryStore
 
