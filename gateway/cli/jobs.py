@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from gateway.cli.state_dir import load_config, resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, load_config, resolve_state_dir
 from gateway.errors import JobError
 from gateway.jobs.queue.store import Job, JobQueue, JobState, parse_job_id
 
@@ -28,16 +28,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("jobs", help="list, inspect, retry, cancel and submit jobs of the FTP job queue")
     jobs = p.add_subparsers(dest="jobs_command", metavar="ACTION", required=True)
 
-    def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument(
-            "-c",
-            "--config",
-            type=Path,
-            action="append",
-            metavar="FILE",
-            help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
-        )
-        q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+    common = add_state_dir_options
 
     q = jobs.add_parser("list", help="recent jobs, newest first")
     common(q)
