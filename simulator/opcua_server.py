@@ -26,6 +26,7 @@ from typing import Any, Self
 from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AttributeService
+from asyncua.server.user_managers import UserManager
 
 from gateway.errors import RequestError
 from gateway.shims.ua import new_data_value, new_node_id, new_status_code
@@ -49,7 +50,7 @@ def variant_type(type_name: str) -> tuple[ua.VariantType, bool]:
     return getattr(ua.VariantType, type_name.removesuffix("[]")), array
 
 
-class _PasswordUsers:
+class _PasswordUsers(UserManager):
     """One user name and password; everything else (anonymous included) is refused."""
 
     def __init__(self, user: str, password: str) -> None:
@@ -129,7 +130,7 @@ class PlcServer:
 
     async def __aenter__(self) -> Self:
         users = _PasswordUsers(*self._auth) if self._auth else None
-        server = Server(user_manager=users)  # type: ignore[arg-type]
+        server = Server(user_manager=users)
         self._server = server
         await server.init()
         server.set_endpoint(f"opc.tcp://{self.host}:{self.port}")

@@ -19,6 +19,7 @@ import os
 import signal
 import socket
 import sys
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -201,14 +202,16 @@ async def _run_demo(
     machine = gw.tree.machines[mapping.machine]
     jobs = gw.jobs
     busy = (lambda: jobs.machine_busy(machine.name)) if jobs is not None else (lambda: False)
-    tasks: list[tuple[str, object]] = [("demo:driver", lambda: keep_program_running(machine, busy))]
+    tasks: list[tuple[str, Callable[[], Coroutine[object, object, None]]]] = [
+        ("demo:driver", lambda: keep_program_running(machine, busy))
+    ]
     if switch is None:
         log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
     else:
         tasks.append(("demo:simulator", switch.run))
         _install_toggle(toggle)
     print_banner(gw, mapping, args, switch is None, broker)
-    await gw.run(*tasks)  # type: ignore[arg-type]
+    await gw.run(*tasks)
 
 
 class SimulatorSwitch:
