@@ -1,9 +1,22 @@
-FROM python:3.11-slim
-WORKDIR /app
-COPY pyproject.toml README.md ./
+# Validation's compiled reader (gateway/jobs/validation/_plain.c, built by setup.py) needs a C compiler,
+# which the image that runs the gateway does without: the wheel is built in a stage of its own, and the
+# build fails if the reader is not in it (setup.py marks the extension optional for installs elsewhere).
+FROM python:3.11-slim AS build
+RUN apt-get update && apt-get install -y --no-install-recommends gcc libc6-dev \
+    && rm -rf /var/lib/apt/lists/*
+WORKDIR /src
+COPY pyproject.toml setup.py README.md ./
 COPY gateway ./gateway
 COPY simulator ./simulator
+RUN pip wheel --no-cache-dir --no-deps --wheel-dir /wheels . \
+    && python -c "import glob, sys, zipfile; \
+names = zipfile.ZipFile(glob.glob('/wheels/*.whl')[0]).namelist(); \
+sys.exit(0 if any('validation/_plain' in n for n in names) else 'the wheel has no compiled reader')"
+
+FROM python:3.11-slim
+WORKDIR /app
+COPY --from=build /wheels /wheels
+RUN pip install --no-cache-dir /wheels/*.whl && rm -rf /wheels
 COPY mappings ./mappings
-RUN pip install --no-cache-dir .
 EXPOSE 4840 4841 2121 2122 5020
 CMD ["cnc-gateway", "run", "mappings/laser-sim.yaml"]

@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test unit integration install system-deps schema soak bench clean sparkplug-proto
+.PHONY: demo test lint unit integration install system-deps schema soak bench clean sparkplug-proto
 
 # setup.py builds gateway/jobs/validation/_plain.c (validation's compiled reader) in place; a change to it reinstalls.
 $(STAMP): pyproject.toml setup.py gateway/jobs/validation/_plain.c
@@ -39,8 +39,24 @@ system-deps:
 demo: $(STAMP)
 	$(BIN)/cnc-gateway demo
 
+# The checks first: a finding fails `make test` (and so CI) before any test runs.
 test: $(STAMP) system-deps
+	@$(MAKE) --no-print-directory lint || { echo "make test: stopped, the checks above failed (run make lint)"; exit 1; }
 	$(BIN)/pytest tests
+
+# ruff (lint and format) over the code and its tests, mypy --strict on gateway/ and simulator/, and the
+# import contracts in pyproject.toml (layers, no cycles; docs/architecture.md). Each runs even if one before
+# it failed, so one pass lists every finding; well under a minute.
+LINT_PATHS := gateway simulator bench tests
+
+lint: $(STAMP)
+	@failed=""; \
+	echo "== ruff check"; $(BIN)/ruff check $(LINT_PATHS) || failed="$$failed ruff-check"; \
+	echo "== ruff format --check"; $(BIN)/ruff format --check $(LINT_PATHS) || failed="$$failed ruff-format"; \
+	echo "== mypy --strict"; $(BIN)/mypy --strict gateway simulator || failed="$$failed mypy"; \
+	echo "== import contracts"; $(BIN)/lint-imports --no-cache --no-logo || failed="$$failed import-contracts"; \
+	if [ -n "$$failed" ]; then echo "make lint: FAILED:$$failed (the findings are above)"; exit 1; fi; \
+	echo "make lint: ruff, ruff format, mypy --strict and the import contracts pass"
 
 unit: $(STAMP)
 	$(BIN)/pytest tests --ignore=tests/integration

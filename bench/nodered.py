@@ -243,8 +243,9 @@ class NodeRed:
         })  # fmt: skip
         with self.log.open("ab") as log:
             self.proc = await asyncio.create_subprocess_exec(
-                str(NODE), str(RED), "--settings", str(settings), "--userDir", str(user_dir), "--no-telemetry",
-                str(flows), stdin=asyncio.subprocess.DEVNULL, stdout=log, stderr=log, env=env, cwd=str(self.folder),
+                str(NODE), str(RED), "--settings", str(settings), "--userDir", str(user_dir),
+                "--no-telemetry", str(flows),
+                stdin=asyncio.subprocess.DEVNULL, stdout=log, stderr=log, env=env, cwd=str(self.folder),
             )  # fmt: skip
         return self
 

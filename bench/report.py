@@ -157,10 +157,7 @@ def fmt(value: float | None, unit: str = "") -> str:
         return f"{value:.0f} %"
     if unit in ("ms", "s") and abs(value) < 10:
         return f"{value:.2f} {unit}" if unit == "s" else f"{value:.1f} {unit}"
-    if abs(value) >= 100 or float(value).is_integer():
-        text = f"{value:,.0f}"
-    else:
-        text = f"{value:.2f}"
+    text = f"{value:,.0f}" if abs(value) >= 100 or float(value).is_integer() else f"{value:.2f}"
     return f"{text} {unit}".rstrip()
 
 
@@ -204,13 +201,13 @@ def _columns(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
     for row in rows:
         for i, cell in enumerate(row):
             widths[i] = max(widths[i], len(cell))
-    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip()]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
     lines.append("  ".join("-" * w for w in widths))
     for row in rows:
         lines.append(
             "  ".join(
                 c.ljust(w) if i == 0 else c.rjust(w) if i < 4 else c.ljust(w)
-                for i, (c, w) in enumerate(zip(row, widths))
+                for i, (c, w) in enumerate(zip(row, widths, strict=False))
             ).rstrip()
         )
     return "\n".join(lines)

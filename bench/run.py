@@ -57,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--profile",
         action="store_true",
-        help="sample the gateway with py-spy during each mirror configuration's last step (flat out by default) and report where time goes",
+        help="sample the gateway with py-spy during each mirror configuration's last step "
+        "(flat out by default) and report where time goes",
     )
     p.add_argument("--keep", action="store_true", help="keep the work directory (logs, configs, profiles)")
     p.add_argument("--window", type=float, default=None, help="seconds per measurement window")
@@ -138,7 +139,8 @@ def _print_profiles(ctx: Context) -> None:
         if not prof or "own" not in prof:
             continue
         print(
-            f"\nWhere the gateway's time goes ({name}, flat out; py-spy, {prof['samples']} samples), own time:"
+            f"\nWhere the gateway's time goes ({name}, flat out; py-spy, {prof['samples']} samples), "
+            "own time:"
         )
         for func, share in prof["own"][:12]:
             print(f"  {share:5.1f} %  {func}")

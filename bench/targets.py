@@ -258,8 +258,8 @@ def judge_13(ctx: Context) -> list[Target]:
     age = (flat.get("latency") or {}).get("p99")
     targets.append(Target(
         "p99 age of delivered values under overload (source flat out)", 250, 50, "ms", higher_is_better=False,
-        value=age, source=(f"gateway flat out: source wrote {flat['offered']:,.0f}/s, {flat['delivered']:,.0f} "
-                           f"msgs/s delivered" if flat else "no flat-out peer step"),
+        value=age, source=(f"gateway flat out: source wrote {flat['offered']:,.0f}/s, "
+                           f"{flat['delivered']:,.0f} msgs/s delivered" if flat else "no flat-out peer step"),
     ))  # fmt: skip
 
     # 6-7. scale, tighter than issue 7's

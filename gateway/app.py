@@ -67,7 +67,7 @@ def settled_heap() -> Iterator[None]:
 
 
 def configure_access(config: Config, tree: VariableTree) -> None:
-    """Roles, whether they are enforced, and the roles of callers without a login (gateway/model/access.py)."""
+    """Roles, whether they are enforced, the roles of callers without a login (gateway/model/access.py)."""
     gw = config.gateway
     access = gw.access
 
@@ -250,10 +250,8 @@ async def run_until_signalled(main: Awaitable[None]) -> None:
         task.cancel()
 
     for sig in signals:
-        try:
+        with contextlib.suppress(NotImplementedError, RuntimeError):  # pragma: no cover - Windows
             loop.add_signal_handler(sig, stop, sig)
-        except (NotImplementedError, RuntimeError):  # pragma: no cover - Windows
-            pass
     try:
         await task
     except asyncio.CancelledError:
@@ -261,7 +259,5 @@ async def run_until_signalled(main: Awaitable[None]) -> None:
             raise
     finally:
         for sig in signals:
-            try:
+            with contextlib.suppress(NotImplementedError, RuntimeError):  # pragma: no cover - Windows
                 loop.remove_signal_handler(sig)
-            except (NotImplementedError, RuntimeError):  # pragma: no cover - Windows
-                pass

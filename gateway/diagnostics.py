@@ -11,13 +11,24 @@ from __future__ import annotations
 
 import gc
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any, Protocol
 
-if TYPE_CHECKING:
-    from gateway.app import Gateway
+from gateway.model.tree import VariableTree
+from gateway.sinks.base import Sink
 
 
-def snapshot(gateway: Gateway) -> dict[str, Any]:
+class Observed(Protocol):
+    """What a snapshot reads of a running gateway (gateway.app.Gateway is one)."""
+
+    @property
+    def tree(self) -> VariableTree: ...
+
+    @property
+    def sinks(self) -> Sequence[Sink]: ...
+
+
+def snapshot(gateway: Observed) -> dict[str, Any]:
     """Counters of the change hub, the sinks and the machines, as plain JSON-ready data."""
     tree = gateway.tree
     hub = {

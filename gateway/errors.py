@@ -183,6 +183,21 @@ class BrokerRefused(BrokerError):
     """The broker answered, and refused us: bad credentials, not authorised, client id rejected."""
 
 
+# --- durable stores (gateway/sqlite_file.py) ---------------------------------------------------
+
+
+class StoreError(GatewayError):
+    """A state file (SQLite) cannot be opened, read or written; the message names the file."""
+
+
+class AlarmStoreError(StoreError):
+    """The alarm file cannot be opened or written (gateway/alarms/store.py)."""
+
+
+class AuditStoreError(StoreError):
+    """The audit table cannot be opened or written (a missing one, opened with create=False, too)."""
+
+
 # --- jobs --------------------------------------------------------------------------------------
 
 

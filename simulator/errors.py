@@ -1,25 +1,17 @@
-"""The simulator's refusals, in the gateway's error hierarchy.
+"""The simulator's own errors, in the gateway's error hierarchy.
 
-A refused command write carries the OPC UA status name the simulator's server
-answers with, exactly as a controller would (gateway.errors gives the rest:
-OutOfRange, TypeMismatch, NotWritable).
+A refused command write is one of gateway.errors' RequestErrors and carries the OPC UA status name the
+simulator's server answers with, exactly as a controller would: InvalidState (Start while running,
+nothing selected), InvalidArgument (a program not in the store), OutOfRange, TypeMismatch, NotWritable.
 """
 
 from __future__ import annotations
 
-from gateway.errors import GatewayError, WriteError
+from gateway.errors import GatewayError
 
 
-class InvalidState(WriteError):
-    """The command does not fit the machine's state (Start while running, nothing selected, ...)."""
-
-    status = "BadInvalidState"
-
-
-class InvalidArgument(WriteError):
-    """The command's argument names nothing the machine knows (a program not in the store)."""
-
-    status = "BadInvalidArgument"
+class ProgramNotFound(GatewayError, LookupError):
+    """No program of that name in the store."""
 
 
 class SimulatorError(GatewayError):

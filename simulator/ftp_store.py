@@ -9,8 +9,8 @@ There is one user and no anonymous access.
 Two aioftp habits would put tracebacks in the log for ordinary events: it logs
 every client that disconnects without QUIT as an exception, and closing the
 server cancels connection tasks, which Python 3.11's asyncio reports as an
-"exception in callback". `FtpStore` filters the first, and stops with the
-gateway inbox's `close_server` (gateway/jobs/inbox/server.py), which closes
+"exception in callback". `FtpStore` filters the first, and stops with
+`close_server` (gateway/shims/aioftp_server.py, as the gateway's inbox does), which closes
 client connections gracefully before closing the server.
 """
 
@@ -22,10 +22,20 @@ from pathlib import Path, PurePosixPath
 from typing import Self
 
 import aioftp
-from aioftp.common import END_OF_LINE
-from aioftp.server import Connection, ConnectionConditions, PathConditions, PathPermissions, worker
+from aioftp.common import END_OF_LINE, Connection
+from aioftp.server import PathConditions, PathPermissions
 
-from gateway.jobs.inbox.server import close_server
+from gateway.shims.aioftp_server import (
+    DATA_CONNECTION_MADE,
+    LOGIN_REQUIRED,
+    PASSIVE_SERVER_STARTED,
+    RENAME_FROM_REQUIRED,
+    close_server,
+    connection_conditions,
+    path_conditions,
+    path_permissions,
+    worker,
+)
 from simulator.errors import SimulatorError
 
 log = logging.getLogger("simulator.ftp")
@@ -58,17 +68,17 @@ class ProgramFtpServer(aioftp.Server):
         self.commands_mapping["size"] = self.size
         self.commands_mapping["nlst"] = self.nlst
 
-    @ConnectionConditions(ConnectionConditions.login_required)
-    @PathConditions(PathConditions.path_must_exists, PathConditions.path_must_be_file)
-    @PathPermissions(PathPermissions.readable)
+    @connection_conditions(LOGIN_REQUIRED)
+    @path_conditions(PathConditions.path_must_exists, PathConditions.path_must_be_file)
+    @path_permissions(PathPermissions.readable)
     async def size(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         real_path, _virtual = self.get_paths(connection, rest)
         stat = await connection.path_io.stat(real_path)
         connection.response("213", str(stat.st_size))
         return True
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.rename_from_required)
-    @PathPermissions(PathPermissions.writable)
+    @connection_conditions(LOGIN_REQUIRED, RENAME_FROM_REQUIRED)
+    @path_permissions(PathPermissions.writable)
     async def rnto(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         real_path, _virtual = self.get_paths(connection, rest)
         rename_from = connection.rename_from
@@ -81,14 +91,14 @@ class ProgramFtpServer(aioftp.Server):
         connection.response("250", "")
         return True
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.passive_server_started)
-    @PathConditions(PathConditions.path_must_exists)
-    @PathPermissions(PathPermissions.readable)
+    @connection_conditions(LOGIN_REQUIRED, PASSIVE_SERVER_STARTED)
+    @path_conditions(PathConditions.path_must_exists)
+    @path_permissions(PathPermissions.readable)
     async def nlst(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         """Names only, one per line (what `ftplib.FTP.nlst` and `curl --list-only` ask for)."""
 
-        @ConnectionConditions(
-            ConnectionConditions.data_connection_made,
+        @connection_conditions(
+            DATA_CONNECTION_MADE,
             wait=True,
             fail_code="425",
             fail_info="Can't open data connection",
@@ -110,7 +120,7 @@ class ProgramFtpServer(aioftp.Server):
             return True
 
         real_path, _virtual = self.get_paths(connection, rest)
-        task: asyncio.Task[bool] = asyncio.create_task(nlst_worker(self, connection, rest))  # type: ignore[arg-type]
+        task: asyncio.Task[bool] = asyncio.create_task(nlst_worker(self, connection, rest))
         connection.extra_workers.add(task)
         connection.response("150", "list transfer started")
         return True

@@ -32,18 +32,19 @@ class Line:
 
     def at(self, s: float) -> Point:
         f = 0.0 if self.length == 0 else min(max(s / self.length, 0.0), 1.0)
-        return tuple(a + (b - a) * f for a, b in zip(self.start, self.end, strict=True))  # type: ignore[return-value]
+        (x0, y0, z0), (x1, y1, z1) = self.start, self.end
+        return (x0 + (x1 - x0) * f, y0 + (y1 - y0) * f, z0 + (z1 - z0) * f)
 
     def tangent(self, s: float) -> Point:
         length = self.length
         if length == 0:
             return (0.0, 0.0, 0.0)
-        return tuple((b - a) / length for a, b in zip(self.start, self.end, strict=True))  # type: ignore[return-value]
+        (x0, y0, z0), (x1, y1, z1) = self.start, self.end
+        return ((x1 - x0) / length, (y1 - y0) / length, (z1 - z0) / length)
 
     def bounds(self) -> tuple[Point, Point]:
-        lo = tuple(min(a, b) for a, b in zip(self.start, self.end, strict=True))
-        hi = tuple(max(a, b) for a, b in zip(self.start, self.end, strict=True))
-        return lo, hi  # type: ignore[return-value]
+        (x0, y0, z0), (x1, y1, z1) = self.start, self.end
+        return (min(x0, x1), min(y0, y1), min(z0, z1)), (max(x0, x1), max(y0, y1), max(z0, z1))
 
 
 @dataclass(frozen=True, slots=True)

@@ -336,7 +336,7 @@ class StreamPlanner:
         return self._planner.total
 
     def feed(self, raw: str) -> tuple[list[Action], bool]:
-        """The actions of the next line; True when they end the program (their last is ProgramEnd or Fault)."""
+        """The actions of the next line; True if they end the program (their last is ProgramEnd or Fault)."""
         self._line += 1
         item: Block | GcodeError
         try:

@@ -15,9 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from gateway.errors import OutOfRange
+from gateway.errors import InvalidArgument, InvalidState, OutOfRange
 from simulator.alarms import Alarm, program_not_found
-from simulator.errors import InvalidArgument, InvalidState
+from simulator.errors import ProgramNotFound
 from simulator.interpreter import (
     SOFT_LIMITS,
     Action,
@@ -31,7 +31,7 @@ from simulator.interpreter import (
     SetPower,
     plan_program,
 )
-from simulator.store import ProgramNotFound, ProgramStore, check_name
+from simulator.store import ProgramStore, check_name
 
 RAPID = 30000.0  # mm/min, G0 and the cap for any feed
 AMBIENT = 25.0  # degC

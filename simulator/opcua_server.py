@@ -26,8 +26,10 @@ from typing import Any, Self
 from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AttributeService
+from asyncua.server.user_managers import UserManager
 
 from gateway.errors import RequestError
+from gateway.shims.ua import new_data_value, new_node_id, new_status_code
 from simulator.errors import SimulatorError
 from simulator.machine import Machine
 from simulator.variables import GLOBAL_FOLDER, NAMESPACE_URI, PLC_FOLDER, TASKS_FOLDER, Variable
@@ -48,7 +50,7 @@ def variant_type(type_name: str) -> tuple[ua.VariantType, bool]:
     return getattr(ua.VariantType, type_name.removesuffix("[]")), array
 
 
-class _PasswordUsers:
+class _PasswordUsers(UserManager):
     """One user name and password; everything else (anonymous included) is refused."""
 
     def __init__(self, user: str, password: str) -> None:
@@ -128,7 +130,7 @@ class PlcServer:
 
     async def __aenter__(self) -> Self:
         users = _PasswordUsers(*self._auth) if self._auth else None
-        server = Server(user_manager=users)  # type: ignore[arg-type]
+        server = Server(user_manager=users)
         self._server = server
         await server.init()
         server.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
@@ -173,24 +175,24 @@ class PlcServer:
         assert self._server is not None
         ns = self.ns
         objects = self._server.nodes.objects
-        plc = await objects.add_folder(ua.NodeId(PLC_FOLDER, ns), ua.QualifiedName("PLC", ns))
+        plc = await objects.add_folder(new_node_id(PLC_FOLDER, ns), ua.QualifiedName("PLC", ns))
         nodes = {PLC_FOLDER: plc}
         for folder_id, name in ((GLOBAL_FOLDER, "Global"), (TASKS_FOLDER, "Tasks")):
-            nodes[folder_id] = await plc.add_folder(ua.NodeId(folder_id, ns), ua.QualifiedName(name, ns))
+            nodes[folder_id] = await plc.add_folder(new_node_id(folder_id, ns), ua.QualifiedName(name, ns))
         self._objects = {n.nodeid for n in nodes.values()}
         for var in self.variables:
             parent = plc
             for node_id, name in var.ancestors:
                 if node_id not in nodes:
                     nodes[node_id] = await parent.add_object(
-                        ua.NodeId(node_id, ns), ua.QualifiedName(name, ns)
+                        new_node_id(node_id, ns), ua.QualifiedName(name, ns)
                     )
                     self._objects.add(nodes[node_id].nodeid)
                 parent = nodes[node_id]
             vtype, array = variant_type(var.type)
             initial = var.read(self.machine)
             node = await parent.add_variable(
-                ua.NodeId(var.node_id, ns),
+                new_node_id(var.node_id, ns),
                 ua.QualifiedName(var.name, ns),
                 ua.Variant(initial, vtype, is_array=array),
                 datatype=ua.NodeId(getattr(ua.ObjectIds, vtype.name)),
@@ -226,7 +228,7 @@ class PlcServer:
                 if self._cache.get(node_id, _UNSET) == value:
                     continue
                 self._cache[node_id] = value
-                dv = ua.DataValue(
+                dv = new_data_value(
                     ua.Variant(value, vtype, is_array=array), SourceTimestamp=stamp, ServerTimestamp=utcnow()
                 )
                 await server.write_attribute_value(node_id, dv)
@@ -236,13 +238,13 @@ class PlcServer:
         entry = self._by_id.get(wv.NodeId)
         if entry is None:
             if wv.NodeId in self._objects:
-                return ua.StatusCode(ua.StatusCodes.BadNotWritable)
-            return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+                return new_status_code(ua.StatusCodes.BadNotWritable)
+            return new_status_code(ua.StatusCodes.BadNodeIdUnknown)
         var, vtype, array = entry
         if wv.AttributeId != ua.AttributeIds.Value or var.write is None:
-            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+            return new_status_code(ua.StatusCodes.BadNotWritable)
         if wv.IndexRange:
-            return ua.StatusCode(ua.StatusCodes.BadWriteNotSupported)
+            return new_status_code(ua.StatusCodes.BadWriteNotSupported)
         variant = wv.Value.Value if wv.Value is not None else None
         if (
             variant is None
@@ -252,20 +254,20 @@ class PlcServer:
         ):
             got = "null" if variant is None else variant.VariantType.name + ("[]" if variant.is_array else "")
             log.info("write to %s refused: expected %s, got %s", var.node_id, var.type, got)
-            return ua.StatusCode(ua.StatusCodes.BadTypeMismatch)
+            return new_status_code(ua.StatusCodes.BadTypeMismatch)
         try:
             var.write(self.machine, variant.Value)
         except RequestError as exc:
             log.info("write %s = %r refused: %s (%s)", var.node_id, variant.Value, exc.reason, exc.status)
-            return ua.StatusCode(getattr(ua.StatusCodes, exc.status, ua.StatusCodes.BadInternalError))
+            return new_status_code(getattr(ua.StatusCodes, exc.status, ua.StatusCodes.BadInternalError))
         log.info("write %s = %r accepted", var.node_id, variant.Value)
         async with self._lock:
             # Show what the client wrote (a command bit reads true) until the next tick
             # puts the machine's own value back, as a PLC cycle would.
             stamp = self._clock()
-            dv = ua.DataValue(variant, SourceTimestamp=stamp, ServerTimestamp=utcnow())
+            dv = new_data_value(variant, SourceTimestamp=stamp, ServerTimestamp=utcnow())
             assert self._server is not None
             await self._server.write_attribute_value(wv.NodeId, dv)
             self._cache[wv.NodeId] = _UNSET
         await self.publish(skip=wv.NodeId)  # the command's effects show at once
-        return ua.StatusCode(ua.StatusCodes.Good)
+        return new_status_code(ua.StatusCodes.Good)

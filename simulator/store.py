@@ -15,14 +15,12 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Protocol
 
+from simulator.errors import ProgramNotFound
+
 log = logging.getLogger("simulator.store")
 
 PROGRAMS_DIR = ("DATA", "Programs")
 MAX_NAME = 255
-
-
-class ProgramNotFound(LookupError):
-    """No program of that name in the store."""
 
 
 class ProgramStore(Protocol):

@@ -1,5 +1,6 @@
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,15 @@ os.environ.setdefault("CNC_SIM_SHDR_PORT", "off")  # and no fixed SHDR (MTConnec
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`
+
+
+@pytest.fixture(autouse=True)
+def _gc_state() -> Iterator[None]:
+    """Every test leaves the garbage collector as it found it (tests/gc_state.py)."""
+    from tests.gc_state import gc_state_kept
+
+    with gc_state_kept():
+        yield
 
 
 @pytest.fixture

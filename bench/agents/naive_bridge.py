@@ -79,7 +79,9 @@ async def main(args: argparse.Namespace) -> None:
         uri, ident = text.removeprefix("nsu=").split(";s=", 1)
         source_ids.append(ua.NodeId(ident, namespaces.index(uri), ua.NodeIdType.String))
     handler = Handler(
-        dict(zip(source_ids, mirrors)), {nid: f"naive/v{i:05d}" for i, nid in enumerate(source_ids)}, mqtt
+        dict(zip(source_ids, mirrors, strict=True)),
+        {nid: f"naive/v{i:05d}" for i, nid in enumerate(source_ids)},
+        mqtt,
     )
     subscription = await client.create_subscription(args.interval, handler)
     await subscription.subscribe_data_change(

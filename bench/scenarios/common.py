@@ -83,7 +83,7 @@ def expected_last(written: int, count: int, first: int = 0, total: int | None = 
 
 
 def matches(seen: Sequence[float | None], expected: Sequence[float]) -> int:
-    return sum(1 for a, b in zip(seen, expected) if a is not None and a == b)
+    return sum(1 for a, b in zip(seen, expected, strict=False) if a is not None and a == b)
 
 
 # --- profiles -------------------------------------------------------------------------------------

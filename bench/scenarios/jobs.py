@@ -61,7 +61,8 @@ async def run(ctx: Context) -> None:
     details: dict[str, Any] = {"small_count": s.jobs_small, "large_size": s.jobs_large_size}
     r.details["jobs"] = details
     ctx.log(
-        f"jobs: generating {s.jobs_small} programs of {s.jobs_small_size:,} B and one of {s.jobs_large_size:,} B"
+        f"jobs: generating {s.jobs_small} programs of {s.jobs_small_size:,} B "
+        f"and one of {s.jobs_large_size:,} B"
     )
     small = [laser_program(s.jobs_small_size, seed=k + 1, number=2000 + k) for k in range(s.jobs_small + 1)]
     large_file = folder / "R9999.nc"  # the raw copies' name; the gateway gets O9999.nc, O9998.nc, ...

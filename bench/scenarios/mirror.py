@@ -87,7 +87,7 @@ class Step:
         return self.opcua >= OPCUA_SHARE * self.opcua_expected
 
     def as_dict(self) -> dict[str, Any]:
-        out = {k: v for k, v in self.__dict__.items()}
+        out = dict(self.__dict__)
         out["rate"] = None if math.isinf(self.rate) else self.rate
         out["sustained"] = self.sustained
         out["p99_median"] = self.p99_median
@@ -148,12 +148,14 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
             ids = ids_file(folder / "ids.txt", GATEWAY_URI, gateway_ids(MACHINE, paths))
             mqtt_sub = await Agent.start(
                 f"mqtt-sub-{folder.name}", "bench.agents.mqtt_sub",
-                ["--port", str(broker.port), "--topic", f"cnc/{MACHINE}/noise/#", "--qos", str(qos)], ctx.workdir,
+                ["--port", str(broker.port), "--topic", f"cnc/{MACHINE}/noise/#", "--qos", str(qos)],
+                ctx.workdir,
             )  # fmt: skip
             agents.append(mqtt_sub)
             opcua_sub = await Agent.start(
                 f"opcua-sub-{folder.name}", "bench.agents.opcua_sub",
-                ["--endpoint", gw_endpoint, "--ids", str(ids), "--interval", str(OPCUA_SUB_INTERVAL)], ctx.workdir,
+                ["--endpoint", gw_endpoint, "--ids", str(ids), "--interval", str(OPCUA_SUB_INTERVAL)],
+                ctx.workdir,
             )  # fmt: skip
             agents.append(opcua_sub)
             driver = sim if sim is not None else gw
@@ -174,8 +176,8 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
                 steps.append(step)
                 ctx.log(
                     f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  in {step.received:8,.0f}/s  "
-                    f"mqtt {step.mqtt:8,.0f}/s  opcua {step.opcua:8,.0f}/s  p99 {_ms(step.latency.get('p99'))} "
-                    f"({_ms(step.p99_median)})  "
+                    f"mqtt {step.mqtt:8,.0f}/s  opcua {step.opcua:8,.0f}/s  "
+                    f"p99 {_ms(step.latency.get('p99'))} ({_ms(step.p99_median)})  "
                     f"cpu {step.cpu:3.0f}% (sim {step.source_cpu:3.0f}%, subs+broker "
                     f"{sum(step.others_cpu.values()):3.0f}%)  {'backlog GROWS' if step.growing else ''}"
                     + (f"  gc {step.gc['passes']} {step.gc['paused_ms']:.0f} ms" if step.gc else "")

@@ -54,7 +54,8 @@ async def run(ctx: Context) -> None:
             agents.append(mqtt_sub)
             opcua_sub = await Agent.start(
                 "naive-opcua-sub", "bench.agents.opcua_sub",
-                ["--endpoint", bridge.ready["endpoint"], "--ids", str(mirror_ids), "--interval", str(OPCUA_SUB_INTERVAL)],
+                ["--endpoint", bridge.ready["endpoint"], "--ids", str(mirror_ids),
+                 "--interval", str(OPCUA_SUB_INTERVAL)],
                 ctx.workdir,
             )  # fmt: skip
             agents.append(opcua_sub)
@@ -62,8 +63,9 @@ async def run(ctx: Context) -> None:
                 step = await measure(ctx, sim, bridge, mqtt_sub, opcua_sub, rate)
                 steps.append(step)
                 ctx.log(
-                    f"  {rate_label(rate):>9}: offered {step['offered']:8,.0f}/s  mqtt {step['mqtt']:8,.0f}/s  "
-                    f"opcua {step['opcua']:8,.0f}/s  p99 {step['latency'].get('p99') or 0:.0f} ms  "
+                    f"  {rate_label(rate):>9}: offered {step['offered']:8,.0f}/s  "
+                    f"mqtt {step['mqtt']:8,.0f}/s  opcua {step['opcua']:8,.0f}/s  "
+                    f"p99 {step['latency'].get('p99') or 0:.0f} ms  "
                     f"cpu {step['cpu']:.0f}%"
                 )
                 await sim.ask("rate", rate=0)

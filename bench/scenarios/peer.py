@@ -93,7 +93,8 @@ async def run(ctx: Context) -> None:
         installed_versions()
     )  # before anything starts: a clear error when make bench did not install it
     ctx.log(
-        f"peer: Node-RED {versions['node-red']}, node-red-contrib-opcua {versions['node-red-contrib-opcua']}, "
+        f"peer: Node-RED {versions['node-red']}, "
+        f"node-red-contrib-opcua {versions['node-red-contrib-opcua']}, "
         f"Node.js {versions['node']}; N = {N:,}, MQTT QoS {QOS} JSON"
     )
     details: dict[str, Any] = {
@@ -129,9 +130,12 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
             if name == "gateway"
             else _nodered(folder, sim, broker.port)
         )
-        sub = await Agent.start(f"peer-mqtt-sub-{name}", "bench.agents.mqtt_sub",
-                                ["--port", str(broker.port), "--topic", f"{party.prefix}#", "--qos", str(QOS)],
-                                ctx.workdir)  # fmt: skip
+        sub = await Agent.start(
+            f"peer-mqtt-sub-{name}",
+            "bench.agents.mqtt_sub",
+            ["--port", str(broker.port), "--topic", f"{party.prefix}#", "--qos", str(QOS)],
+            ctx.workdir,
+        )
         stack.push_async_callback(sub.stop)
         stack.push_async_callback(party.stop)
         started = time.monotonic()
@@ -164,14 +168,17 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
             step.notes = notes
             out["steps"].append(step.as_dict())
             ctx.log(
-                f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  delivered {step.delivered:8,.0f} msg/s  "
+                f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  "
+                f"delivered {step.delivered:8,.0f} msg/s  "
                 f"cpu {step.cpu:3.0f}% ({_num(step.cpu_per_1000)} ms/1,000 msgs)  p50/p99 "
-                f"{_num(step.latency.get('p50'))}/{_num(step.latency.get('p99'))} ms  rss {step.rss / 1e6:4.0f} MB"
+                f"{_num(step.latency.get('p50'))}/{_num(step.latency.get('p99'))} ms  "
+                f"rss {step.rss / 1e6:4.0f} MB"
                 f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else "")
             )
             await drain(sim, sub)
             restart = restart or (name == "nodered" and _expired(sim) > seen_expired)  # in the pause
-        # Node-RED with an expired subscription will not catch up (the gateway's driver resubscribes by itself)
+        # Node-RED with an expired subscription will not catch up (the gateway's driver resubscribes by
+        # itself)
         last_expired = seen_expired
         out["final"] = await final_values(
             sim, sub, party, gave_up=lambda: name == "nodered" and _expired(sim) > last_expired

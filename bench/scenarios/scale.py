@@ -74,9 +74,7 @@ async def run(ctx: Context) -> None:
             agents.append(sub)
             log = (ctx.workdir / "scale-gateway.log").open("ab")
             exe = Path(sys.executable).with_name("cnc-gateway")
-            command = (
-                [str(exe)] if exe.exists() else [sys.executable, "-c", "from gateway.cli import main; main()"]
-            )
+            command = [str(exe)] if exe.exists() else [sys.executable, "-m", "gateway.cli.main"]
             started = time.time()
             proc = await asyncio.create_subprocess_exec(
                 *command, "run", str(config), stdout=log, stderr=log, env=child_env(), cwd=str(ROOT)

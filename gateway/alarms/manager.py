@@ -5,8 +5,8 @@ time the list changes it compares it with the active occurrences (`diff`) and
 records the raises and clears in the store, in one transaction, before anyone
 hears of them. Acknowledge and Confirm (from any sink, with the caller's role
 checked) are recorded the same way, and go to the audit trail like writes and
-calls (kind "acknowledge"/"confirm", target `Alarms/<id>#<occurrence>`), refusals too. Listeners (the OPC UA conditions) and the
-event bus (MQTT: `alarms/events`, and the retained `alarms/active` list) learn
+calls (kind "acknowledge"/"confirm", target `Alarms/<id>#<occurrence>`), refusals too. Listeners (the OPC UA
+conditions) and the event bus (MQTT: `alarms/events`, and the retained `alarms/active` list) learn
 of every change afterwards, in order.
 
 A controller that drops does not clear anything: the occurrences are kept as
@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from gateway.alarms.records import AlarmChange, AlarmRecord, Kind, Quality
 from gateway.alarms.sources import Reading, diff, source_for
-from gateway.alarms.store import AlarmStore, AlarmStoreError
+from gateway.alarms.store import AlarmStore
 from gateway.config.alarms import AlarmsConfig
-from gateway.errors import CallError, InvalidState, RequestError
+from gateway.errors import AlarmStoreError, CallError, InvalidState, RequestError
 from gateway.model.audit import as_text
 from gateway.model.context import WriteContext
 from gateway.model.events import Event
@@ -153,7 +153,7 @@ class AlarmManager:
                     numbers = await self._db(
                         self.store.apply,
                         self.name,
-                        list(zip(raised, severities)),
+                        list(zip(raised, severities, strict=True)),
                         [(r.occurrence, r.cleared_at, r.retained(confirm)) for r in gone],
                         ts,
                     )
@@ -164,7 +164,7 @@ class AlarmManager:
             for record in gone:
                 changes.append(self._put(Kind.CLEARED, record, record.cleared_at or ts))
             self.quality, self.reason = Quality.GOOD, ""
-            for number, entry, severity in zip(numbers, raised, severities):
+            for number, entry, severity in zip(numbers, raised, severities, strict=True):
                 record = AlarmRecord(
                     occurrence=number,
                     machine=self.name,
@@ -223,7 +223,7 @@ class AlarmManager:
     async def confirm(
         self, occurrence: int, ctx: WriteContext, comment: str = "", *, check: Check | None = None
     ) -> AlarmRecord:
-        """Record that the cause has been dealt with (after the acknowledgement); `check` as for acknowledge."""
+        """Record that the cause has been dealt with (after the acknowledgement); `check` as above."""
         return await self._audited("confirm", occurrence, ctx, comment, check, self._confirm)
 
     async def _audited(
@@ -235,7 +235,7 @@ class AlarmManager:
         check: Check | None,
         action: Callable[[int, WriteContext, str, Check | None], Awaitable[AlarmRecord]],
     ) -> AlarmRecord:
-        """Carry out an acknowledge or confirm and put it in the audit trail, refusals and failures included."""
+        """Carry out an acknowledge or confirm and audit it, refusals and failures included."""
         started, at = time.monotonic(), utcnow()
         known = self.records.get(occurrence)  # read first: an alarm that ends with this call leaves `records`
         target = f"{OBJECT}/{known.id if known is not None else ''}#{occurrence}"

@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any, Self, TypeVar
 
 from gateway.alarms.manager import AlarmManager
-from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.alarms.store import AlarmStore, store_path
 from gateway.config.mapping import MachineMapping
-from gateway.errors import SinkError
+from gateway.errors import AlarmStoreError, SinkError
 from gateway.model.tree import VariableTree
 
 log = logging.getLogger("gateway.alarms")

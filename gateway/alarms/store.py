@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.alarms.records import ActiveAlarm, AlarmRecord, Kind, iso, parse_iso
-from gateway.errors import GatewayError
+from gateway.errors import AlarmStoreError
 from gateway.sqlite_file import SqliteFile
 
 SCHEMA_VERSION = 1
@@ -57,10 +57,6 @@ CREATE TABLE IF NOT EXISTS transitions (
 );
 CREATE INDEX IF NOT EXISTS transitions_occurrence ON transitions (occurrence);
 """
-
-
-class AlarmStoreError(GatewayError):
-    """The alarm file cannot be opened or written."""
 
 
 def store_path(state_dir: Path) -> Path:
@@ -113,7 +109,8 @@ class AlarmStore(SqliteFile):
         with self._write() as db:
             for occurrence, when, retained in cleared:
                 db.execute(
-                    "UPDATE occurrences SET cleared_at = ?, retained = ? WHERE occurrence = ? AND cleared_at IS NULL",
+                    "UPDATE occurrences SET cleared_at = ?, retained = ?"
+                    " WHERE occurrence = ? AND cleared_at IS NULL",
                     (iso(when), int(retained), occurrence),
                 )
                 db.execute(
@@ -122,8 +119,9 @@ class AlarmStore(SqliteFile):
                 )
             for entry, severity in raised:
                 cur = db.execute(
-                    "INSERT INTO occurrences (machine, alarm_id, text, severity, class, parameters, raised_at) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT INTO occurrences"
+                    " (machine, alarm_id, text, severity, class, parameters, raised_at)"
+                    " VALUES (?, ?, ?, ?, ?, ?, ?)",
                     (
                         machine,
                         entry.id,

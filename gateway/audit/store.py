@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
-from gateway.errors import GatewayError
+from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
 from gateway.sqlite_file import SqliteFile
 
@@ -63,10 +63,6 @@ class AuditRow:
 
     id: int
     entry: AuditEntry
-
-
-class AuditStoreError(GatewayError):
-    """The audit table cannot be opened or written (a missing one, opened with create=False, too)."""
 
 
 class AuditStore(SqliteFile):

@@ -96,7 +96,7 @@ class AuditTrail:
         try:
             store = AuditStore(self.path)
             pruned = store.prune(self.retention_days)
-        except Exception as exc:  # reported to __aenter__
+        except Exception as exc:  # noqa: BLE001 - any failure to open the trail is reported to __aenter__
             self._ready.set_exception(exc)
             return
         if pruned:

@@ -1,5 +1,1 @@
-"""The `cnc-gateway` command line. Each command group lives in its own module."""
-
-from gateway.cli.main import main
-
-__all__ = ["main"]
+"""The `cnc-gateway` command line (`gateway.cli.main:main`). Each command group lives in its own module."""

@@ -18,25 +18,18 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from gateway.alarms.records import AlarmRecord
-from gateway.alarms.store import AlarmStore, AlarmStoreError, store_path
+from gateway.alarms.store import AlarmStore, store_path
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
-from gateway.cli.state_dir import resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
+from gateway.errors import AlarmStoreError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("alarms", help="the alarm history kept in the state directory")
     alarms = p.add_subparsers(dest="alarms_command", metavar="ACTION", required=True)
     q = alarms.add_parser("list", help="alarm occurrences, newest first")
-    q.add_argument(
-        "-c",
-        "--config",
-        type=Path,
-        action="append",
-        metavar="FILE",
-        help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
-    )
-    q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+    add_state_dir_options(q)
     q.add_argument("--machine", default=None)
     q.add_argument(
         "--since", default=None, type=since_arg, metavar="WHEN", help=f"{SINCE_HELP} (default: everything)"
@@ -103,4 +96,4 @@ def print_table(records: list[AlarmRecord], out: TextIO) -> None:
         )
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]
     for row in rows:
-        print("  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[-1], file=out)
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=False)) + "  " + row[-1], file=out)

@@ -1,4 +1,4 @@
-"""`cnc-gateway audit list`: who wrote, called, acknowledged or confirmed what, from the state directory's audit table.
+"""`cnc-gateway audit list`: who wrote, called, acknowledged or confirmed what (the audit table).
 
 Reads `<state_dir>/audit.sqlite3` directly, so it works whether the gateway runs
 or not (entries reach the table within a moment of the write).
@@ -11,10 +11,11 @@ import json
 import sys
 from pathlib import Path
 
-from gateway.audit.store import AuditStore, AuditStoreError, audit_path, iso
+from gateway.audit.store import AuditStore, audit_path, iso
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
-from gateway.cli.state_dir import resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
+from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
 
 KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
@@ -23,19 +24,12 @@ KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "audit",
-        help="the audit trail: every write, method call and alarm acknowledge/confirm, who, what, and the result",
+        help="the audit trail: every write, method call and alarm acknowledge/confirm, "
+        "who, what, and the result",
     )
     audit = p.add_subparsers(dest="audit_command", metavar="ACTION", required=True)
     q = audit.add_parser("list", help="audit entries, newest first")
-    q.add_argument(
-        "-c",
-        "--config",
-        type=Path,
-        action="append",
-        metavar="FILE",
-        help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
-    )
-    q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+    add_state_dir_options(q)
     q.add_argument("--machine", default=None)
     q.add_argument("--user", default=None, help="entries of this user only")
     q.add_argument("--since", default=None, type=since_arg, metavar="WHEN", help=SINCE_HELP)

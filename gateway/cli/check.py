@@ -19,7 +19,7 @@ from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ConfigError
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("check", help="validate mapping/gateway files and print each machine's variable tree")
     p.add_argument("files", nargs="+", type=Path, metavar="FILE")
     p.set_defaults(handler=handle)
@@ -155,7 +155,7 @@ def _label(cond: Condition, value: Any) -> str:
 
 
 def print_copydata(mapping: MachineMapping, out: TextIO, writer: str | None = None) -> None:
-    """One line per COPYDATA target: where it sends and the variable ids it gets (the tree shows each id's variable).
+    """One line per COPYDATA target: where it sends, the variable ids it gets (the tree shows their names).
 
     `writer` is the role writes from a target act with, while access control is on.
     """

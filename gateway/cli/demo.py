@@ -19,6 +19,7 @@ import os
 import signal
 import socket
 import sys
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -205,7 +206,7 @@ def demo_jobs(mapping: MachineMapping, args: argparse.Namespace) -> MachineMappi
 
 
 def demo_inbox(mapping: MachineMapping, args: argparse.Namespace) -> InboxConfig:
-    """The FTP inbox with one account for the demo machine; its password from the environment or the default."""
+    """The FTP inbox, one account for the demo machine; its password from the environment or the default."""
     password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
     account = FtpAccount(
         user=DEMO_INBOX_USER, password_hash=hash_password(password), machines=[mapping.machine]
@@ -254,14 +255,16 @@ async def _run_demo(
     machine = gw.tree.machines[mapping.machine]
     jobs = gw.jobs
     busy = (lambda: jobs.machine_busy(machine.name)) if jobs is not None else (lambda: False)
-    tasks: list[tuple[str, object]] = [("demo:driver", lambda: keep_program_running(machine, busy))]
+    tasks: list[tuple[str, Callable[[], Coroutine[object, object, None]]]] = [
+        ("demo:driver", lambda: keep_program_running(machine, busy))
+    ]
     if switch is None:
         log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
     else:
         tasks.append(("demo:simulator", switch.run))
         _install_toggle(toggle)
     print_banner(gw, mapping, args, switch is None, broker)
-    await gw.run(*tasks)  # type: ignore[arg-type]
+    await gw.run(*tasks)
 
 
 class SimulatorSwitch:
@@ -308,7 +311,8 @@ class SimulatorSwitch:
             if self._sim is not None:
                 await self._stop()
                 log.warning(
-                    "simulator STOPPED: values go Bad within seconds. Press Enter (or kill -USR1) to start it again."
+                    "simulator STOPPED: values go Bad within seconds. "
+                    "Press Enter (or kill -USR1) to start it again."
                 )
             else:
                 await self._start()
@@ -338,8 +342,11 @@ def print_banner(
     lines = [
         "",
         "cnc-gateway demo",
-        f"  OPC UA server    {endpoint.replace('0.0.0.0', '127.0.0.1')}  (None, Basic256Sha256, Aes128/Aes256 "
-        f"endpoints; trust a client by moving its certificate from {args.state_dir}/pki/rejected/ to trusted/)",
+        (
+            f"  OPC UA server    {endpoint.replace('0.0.0.0', '127.0.0.1')}  "
+            "(None, Basic256Sha256, Aes128/Aes256 endpoints; trust a client by moving its certificate from "
+            f"{args.state_dir}/pki/rejected/ to trusted/)"
+        ),
         "  OPC UA users     viewer, operator, engineer; "
         + (
             f"password from {DEMO_PASSWORD_ENV}"
@@ -347,9 +354,15 @@ def print_banner(
             else f"password: the user name ({DEMO_PASSWORD_ENV} changes it)"
         )
         + "; anonymous clients are viewers",
-        f"  browse           Objects/Machines/{mapping.machine}/Axes/X/Position, Feed/Override (operators write), Status/...",
+        (
+            f"  browse           Objects/Machines/{mapping.machine}/Axes/X/Position, "
+            "Feed/Override (operators write), Status/..."
+        ),
         f"  node ids         ns=2;s={mapping.machine}/Axes/X/Position",
-        f"  simulator        {mapping.driver.endpoint} (OPC UA), ftp://127.0.0.1:{args.sim_ftp_port}/DATA/Programs "
+        (
+            f"  simulator        {mapping.driver.endpoint} (OPC UA), "
+            f"ftp://127.0.0.1:{args.sim_ftp_port}/DATA/Programs "
+        )
         + ("(already running)" if external else "(in-process)"),
     ]
     mqtt = config_mqtt(gw)
@@ -365,11 +378,15 @@ def print_banner(
         password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
         where = f"{DEMO_INBOX_USER}:{password}@{inbox.url.split('://', 1)[1]}{mapping.machine}/"
         lines += [
-            f"  FTP job inbox    {inbox.url}  user {DEMO_INBOX_USER}, password {password!r} "
-            f"(set {DEMO_INBOX_PASSWORD_ENV} to change it)",
+            (
+                f"  FTP job inbox    {inbox.url}  user {DEMO_INBOX_USER}, password {password!r} "
+                f"(set {DEMO_INBOX_PASSWORD_ENV} to change it)"
+            ),
             f"  send a job       curl -T part.nc ftp://{where}",
-            f"  jobs             cnc-gateway jobs list; OPC UA Objects/Machines/{mapping.machine}/Jobs; "
-            "the program starts when the machine is idle",
+            (
+                f"  jobs             cnc-gateway jobs list; OPC UA Objects/Machines/{mapping.machine}/Jobs; "
+                "the program starts when the machine is idle"
+            ),
         ]
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     lines += mtconnect_banner(gw, args, external)

@@ -30,7 +30,7 @@ from gateway.codecs.copydata import (
 from gateway.config.copydata import CopydataTarget, check_encoding
 from gateway.config.loader import load_mapping
 from gateway.config.mapping import MachineMapping
-from gateway.errors import ConfigError
+from gateway.errors import ConfigError, GatewayError
 from gateway.model.types import TypeSpec
 from gateway.sinks.copydata.feedback import plain
 
@@ -38,7 +38,7 @@ DWDATA_NAMES = {1: "one variable", 2: "several variables"}
 _HEX_JUNK = re.compile(r"0x|[\s:,\-_]", re.IGNORECASE)
 
 
-class UsageError(Exception):
+class UsageError(GatewayError):
     """Bad command-line input: printed as `error: …`, exit status 2."""
 
 
@@ -74,8 +74,13 @@ def add_layout_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--encoding", default=None, help="text encoding of String values (default utf-8)")
     p.add_argument("--max-cbdata", type=int, default=None, help="largest lpData accepted (default 1048576)")
-    p.add_argument("--types", action="append", default=[], metavar="ID=TYPE[:NAME],…",
-                   help="ids and types without a mapping, e.g. 1=Double:Axes/X/Position,5=UInt32")  # fmt: skip
+    p.add_argument(
+        "--types",
+        action="append",
+        default=[],
+        metavar="ID=TYPE[:NAME],…",
+        help="ids and types without a mapping, e.g. 1=Double:Axes/X/Position,5=UInt32",
+    )
 
 
 def settings_from(args: argparse.Namespace) -> Settings:

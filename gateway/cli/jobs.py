@@ -17,27 +17,18 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from gateway.cli.state_dir import load_config, resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, load_config, resolve_state_dir
 from gateway.errors import JobError
 from gateway.jobs.queue.store import Job, JobQueue, JobState, parse_job_id
 
 PASSWORD_ENV = "CNC_INBOX_PASSWORD"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("jobs", help="list, inspect, retry, cancel and submit jobs of the FTP job queue")
     jobs = p.add_subparsers(dest="jobs_command", metavar="ACTION", required=True)
 
-    def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument(
-            "-c",
-            "--config",
-            type=Path,
-            action="append",
-            metavar="FILE",
-            help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
-        )
-        q.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+    common = add_state_dir_options
 
     q = jobs.add_parser("list", help="recent jobs, newest first")
     common(q)
@@ -157,7 +148,7 @@ def print_table(jobs: list[Job], out: TextIO) -> None:
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
     for row in rows:
-        print("  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[-1], file=out)
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=False)) + "  " + row[-1], file=out)
 
 
 def handle_show(args: argparse.Namespace) -> int:

@@ -28,7 +28,8 @@ COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frame
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cnc-gateway",
-        description="Mirror CNC variables into OPC UA (and more), driven by one YAML mapping file per machine.",
+        description="Mirror CNC variables into OPC UA (and more), "
+        "driven by one YAML mapping file per machine.",
     )
     parser.add_argument("--version", action="version", version=f"cnc-gateway {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)

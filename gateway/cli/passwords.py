@@ -9,7 +9,7 @@ import sys
 from gateway.auth.passwords import hash_password
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "hash-password", help="print the hash of a password, for users and inbox accounts (password_hash)"
     )

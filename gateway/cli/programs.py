@@ -24,7 +24,7 @@ import os
 import sqlite3
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Coroutine, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,7 +34,7 @@ from gateway.cli.check import report_config_error
 from gateway.cli.state_dir import resolve_state_dir
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import load
-from gateway.errors import ConfigError, DeliveryError
+from gateway.errors import AuditStoreError, ConfigError, DeliveryError
 from gateway.model.audit import AuditEntry, as_text
 
 if TYPE_CHECKING:
@@ -150,7 +150,7 @@ class Audit:
         self.path = audit_path(resolve_state_dir(args, "audit", audit_path))
         try:
             self.store = AuditStore(self.path)
-        except (sqlite3.Error, OSError) as exc:
+        except (AuditStoreError, sqlite3.Error, OSError) as exc:
             print(f"error: cannot open the audit trail {self.path} ({exc}); nothing changed", file=sys.stderr)
             raise SystemExit(2) from None
         self.time = datetime.now(UTC)
@@ -173,7 +173,7 @@ class Audit:
         )
         try:
             self.store.insert([entry])
-        except (sqlite3.Error, OSError) as exc:
+        except (AuditStoreError, sqlite3.Error, OSError) as exc:
             print(f"error: {entry.describe()}; not recorded in {self.path}: {exc}", file=sys.stderr)
             raise SystemExit(1) from None
         finally:
@@ -186,9 +186,9 @@ class Audit:
         self.record(arguments, as_write_error(exc).status, exc.reason)
 
 
-def _run(coro: object) -> int:
+def _run(coro: Coroutine[Any, Any, int]) -> int:
     try:
-        return asyncio.run(coro)  # type: ignore[arg-type]
+        return asyncio.run(coro)
     except DeliveryError as exc:
         print(f"error: {exc.reason}", file=sys.stderr)
         return 1
@@ -222,7 +222,7 @@ def handle_get(args: argparse.Namespace) -> int:
             sys.stdout.flush()
         else:
             target = Path(args.output or args.name)
-            target.write_bytes(data)
+            target.write_bytes(data)  # noqa: ASYNC240 - the command's last step: nothing else runs
             print(f"wrote {target} ({len(data)} bytes)", file=sys.stderr)
         return 0
 

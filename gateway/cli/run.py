@@ -16,7 +16,7 @@ from gateway.logconfig import configure
 log = logging.getLogger("gateway")
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "run", help="run the gateway (a gateway file, or one or more mapping files with defaults)"
     )

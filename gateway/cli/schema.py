@@ -10,7 +10,7 @@ from gateway.config.gateway import GatewayConfig
 from gateway.config.mapping import MachineMapping
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("schema", help="print the JSON Schema of the mapping file format")
     p.add_argument("--gateway", action="store_true", help="the gateway file's schema instead")
     p.set_defaults(handler=handle)

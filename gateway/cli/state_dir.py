@@ -20,6 +20,19 @@ from gateway.errors import ConfigError
 DEFAULT_STATE_DIRS = (Path("state"), Path("state/demo"))
 
 
+def add_state_dir_options(parser: argparse.ArgumentParser) -> None:
+    """-c/--config and --state-dir, which `resolve_state_dir` reads."""
+    parser.add_argument(
+        "-c",
+        "--config",
+        type=Path,
+        action="append",
+        metavar="FILE",
+        help="gateway or mapping file(s) the gateway runs with (to find its state directory)",
+    )
+    parser.add_argument("--state-dir", type=Path, default=None, help="the gateway's state directory")
+
+
 def load_config(args: argparse.Namespace) -> Config | None:
     """The gateway file given with -c (None without one); exits 2 after reporting a bad one."""
     if not args.config:

@@ -14,10 +14,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from gateway.errors import GatewayError
+
 BLOCK = 64 * 1024
 
 
-class UploadFailed(Exception):
+class UploadFailed(GatewayError):
     """The upload did not reach the point where the gateway judged it (connection, login, refusal)."""
 
 

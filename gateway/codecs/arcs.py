@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from gateway.errors import CodecError
+
 TAU = 2.0 * math.pi
 #: Start and end closer than this (mm) make a full circle.
 SAME_POINT = 1e-6
@@ -38,7 +40,7 @@ def distance(du: float, dv: float) -> float:
     return math.sqrt(du * du + dv * dv)
 
 
-class ArcProblem(ValueError):
+class ArcProblem(CodecError):
     """Arc words that describe no arc; the message becomes an estimator note, or a simulator alarm."""
 
 

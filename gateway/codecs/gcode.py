@@ -204,10 +204,9 @@ def _lex_run(text: str, start: int, end: int, line: int) -> Iterator[Plain | Blo
         words: list[tuple[str, float]] = []
         comments = False
         number: int | None = None
-        for letter, digits, paren, semi, block in findall(text, start, stop):
+        for letter, found, paren, semi, block in findall(text, start, stop):
             if letter:
-                if " " in digits or "\t" in digits:
-                    digits = digits.replace(" ", "").replace("\t", "")
+                digits = found.replace(" ", "").replace("\t", "") if " " in found or "\t" in found else found
                 value = float(digits)
                 if value in _INFINITE:  # too large for a float: the exact lexer words the error
                     lines = []

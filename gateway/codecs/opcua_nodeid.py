@@ -56,7 +56,8 @@ def parse_address(text: str) -> OpcUaAddress:
     match = _ADDRESS_RE.match(text.strip()) if isinstance(text, str) else None
     if match is None:
         raise AddressError(
-            f"{text!r} is not an OPC UA node id; expected e.g. 'ns=2;s=Name', 'ns=3;i=1001' or 'nsu=urn:…;s=Name'"
+            f"{text!r} is not an OPC UA node id; "
+            "expected e.g. 'ns=2;s=Name', 'ns=3;i=1001' or 'nsu=urn:…;s=Name'"
         )
     namespace = 0
     if match["ns"] is not None:

@@ -68,7 +68,7 @@ class CommandRunner:
         """The Method handler: `args` are already counted and typed. Returns (result text, duration ms)."""
         spec = self.spec
         started = time.monotonic()
-        values = {a.name: v for a, v in zip(spec.arguments, args)}
+        values = {a.name: v for a, v in zip(spec.arguments, args, strict=True)}
         phase = "checking the guard"
         sub: Subscription[VariableNode] | None = None
         done = bind(spec.done, values) if spec.done is not None else None

@@ -107,14 +107,16 @@ class AlarmsConfig(Strict):
         default=500,
         ge=SEVERITY_MIN,
         le=SEVERITY_MAX,
-        description="Severity of classes the map does not list, and of every alarm without a severities array",
+        description="Severity of classes the map does not list, "
+        "and of every alarm without a severities array",
     )
     acknowledge_role: str = Field(
         default="operator", description="Lowest role that may acknowledge and confirm this machine's alarms"
     )
     confirm: bool = Field(
         default=False,
-        description="true: a cleared, acknowledged alarm stays listed (OPC UA Retain) until it is also confirmed",
+        description="true: a cleared, acknowledged alarm stays listed (OPC UA Retain) "
+        "until it is also confirmed",
     )
 
     @field_validator("severity")

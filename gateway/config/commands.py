@@ -138,7 +138,8 @@ class CommandSpec(Strict):
     )
     done: Condition | None = Field(
         default=None,
-        description="Completion: the command succeeds once this holds; without it, once the writes are accepted",
+        description="Completion: the command succeeds once this holds; "
+        "without it, once the writes are accepted",
     )
     timeout: float = Field(default=10.0, gt=0, le=MAX_TIMEOUT, description="Seconds for the whole command")
     role: str = Field(default="operator", description="Lowest role that may run it")
@@ -216,7 +217,7 @@ def render(value: Any, args: Mapping[str, Any]) -> Any:
     if ref is not None:
         return args[ref]
     if "{" in value or "}" in value:
-        return value.format_map({k: v for k, v in args.items()})
+        return value.format_map(dict(args))
     return value
 
 
@@ -224,7 +225,7 @@ def render(value: Any, args: Mapping[str, Any]) -> Any:
 
 
 def command_issues(commands: Mapping[str, CommandSpec], variables: Sequence[Any]) -> list[tuple[Loc, str]]:
-    """(location below `commands`, message) for every reference that does not resolve or value that does not fit."""
+    """(location below `commands`, message) for each reference that does not resolve or value that misfits."""
     by_path = {v.path: v for v in variables}
     issues: list[tuple[Loc, str]] = []
     for name, spec in commands.items():

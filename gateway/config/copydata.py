@@ -66,7 +66,7 @@ class VariableCopydata(Strict):
 
 
 def check_encoding(name: str) -> str:
-    """A text encoding Python knows, stateless and without a byte-order mark: the receiver reads N bytes of text."""
+    """A text encoding Python knows, stateless and without byte-order mark: the receiver reads N bytes."""
     try:
         codecs.lookup(name)
     except LookupError:
@@ -95,7 +95,8 @@ class CopydataTarget(Strict):
     host: str | None = Field(default=None, description="tcp-client, udp: the receiver's address")
     port: int | None = Field(
         default=None, ge=0, le=65535,
-        description=f"tcp-client, udp: the receiver's port; tcp-server: ours (default {DEFAULT_TCP_PORT}, 0: any free port)",
+        description="tcp-client, udp: the receiver's port; "
+        f"tcp-server: ours (default {DEFAULT_TCP_PORT}, 0: any free port)",
     )  # fmt: skip
     bind: str | None = Field(
         default=None, description=f"tcp-server: the address to listen on (default {DEFAULT_BIND})"
@@ -127,8 +128,8 @@ class CopydataTarget(Strict):
     )
     snapshot_interval: float | None = Field(
         default=None, gt=0,
-        description="Seconds between full snapshots (dwData=2, every variable); one is always sent on (re)connect. "
-        f"udp: default {DEFAULT_UDP_SNAPSHOT:g}",
+        description="Seconds between full snapshots (dwData=2, every variable); "
+        f"one is always sent on (re)connect. udp: default {DEFAULT_UDP_SNAPSHOT:g}",
     )  # fmt: skip
     variables: list[str] | None = Field(
         default=None,
@@ -141,7 +142,8 @@ class CopydataTarget(Strict):
     )  # fmt: skip
     accept_writes: bool = Field(
         default=False,
-        description="Treat dwData=1/2 frames from the receiver as writes to readwrite variables (checked like any write)",
+        description="Treat dwData=1/2 frames from the receiver as writes to readwrite variables "
+        "(checked like any write)",
     )
     queue_limit: int = Field(
         default=1000, ge=1, le=1_000_000,
@@ -158,7 +160,8 @@ class CopydataTarget(Strict):
     def _name(cls, name: str) -> str:
         if not _NAME.match(name):
             raise ValueError(
-                f"target name {name!r} must be 1-63 letters, digits, '_', '.' or '-', starting with a letter or digit"
+                f"target name {name!r} must be 1-63 letters, digits, '_', '.' or '-', "
+                "starting with a letter or digit"
             )
         return name
 
@@ -304,7 +307,8 @@ def copydata_issues(variables: Sequence[Any], copydata: MachineCopydata | None) 
             issues.append(
                 _issue(
                     ("variables", var.index, "copydata", "id"),
-                    f"copydata id {vid} is already used by variables[{other.index}] ({other.path}); ids are unique per machine",
+                    f"copydata id {vid} is already used by variables[{other.index}] ({other.path}); "
+                    "ids are unique per machine",
                     vid,
                 )
             )

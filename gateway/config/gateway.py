@@ -41,8 +41,8 @@ class OpcUaServerConfig(Strict):
     )
     profile: Profile | None = Field(
         default=None,
-        description="standard (default): None plus every signed and encrypted endpoint; secure: without None; "
-        "open: None only",
+        description="standard (default): None plus every signed and encrypted endpoint; "
+        "secure: without None; open: None only",
     )
 
     @field_validator("endpoint")

@@ -55,7 +55,8 @@ class ControllerFtp(Strict):
     timeout: float = Field(default=10.0, gt=0, description="Seconds per connect, command and data block")
     upload: Literal["temp-rename", "direct"] = Field(
         default="temp-rename",
-        description="temp-rename: upload under a temporary name, then rename (atomic); direct: for stores without RNFR/RNTO",
+        description="temp-rename: upload under a temporary name, then rename (atomic); "
+        "direct: for stores without RNFR/RNTO",
     )
     temp_suffix: str = Field(
         default=".tmp", min_length=1, description="Suffix of the temporary name on the controller"
@@ -110,8 +111,8 @@ class AutoStart(Strict):
     )
     select_value: Literal["name", "path", "program"] = Field(
         default="name",
-        description="What is written to select: the file name, its full path on the controller, or the program "
-        "name the validator found (O-number)",
+        description="What is written to select: the file name, its full path on the controller, "
+        "or the program name the validator found (O-number)",
     )
     start: str | None = Field(
         default=None, description="Boolean variable written true to start the selected program"
@@ -159,8 +160,8 @@ class JobsConfig(Strict):
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
     mqtt_retained_jobs: int = Field(
         default=100, ge=0, le=100_000,
-        description="Ended jobs (DELIVERED, REJECTED, FAILED, CANCELLED) whose MQTT jobs/<id> record stays retained; "
-        "older ones are cleared from the broker. 0: cleared as soon as they end",
+        description="Ended jobs (DELIVERED, REJECTED, FAILED, CANCELLED) whose MQTT jobs/<id> record "
+        "stays retained; older ones are cleared from the broker. 0: cleared as soon as they end",
     )  # fmt: skip
 
 
@@ -245,7 +246,7 @@ class PortRange(Strict):
 
 
 class InboxTls(Strict):
-    """Implicit FTPS (TLS from the first byte, usually port 990). Files are relative to the state directory."""
+    """Implicit FTPS (TLS from the first byte, usually port 990). Files are relative to the state directory."""  # noqa: E501 - it is the schema's description
 
     cert: str = Field(
         default="inbox-cert.pem", description="PEM certificate (chain), relative to the state directory"
@@ -277,12 +278,14 @@ class InboxConfig(Strict):
     transfer_timeout: float = Field(default=60.0, gt=0, description="Seconds a data transfer may stall")
     temp_suffixes: list[str] = Field(
         default_factory=lambda: [".part", ".tmp", ".filepart"],
-        description="Uploads with these suffixes (or in a machine's tmp/ folder) wait for a rename to become jobs",
+        description="Uploads with these suffixes (or in a machine's tmp/ folder) wait for a rename "
+        "to become jobs",
     )
     reply_within: float = Field(
         default=10.0,
         gt=0,
-        description="Seconds to wait for validation before the upload is answered; longer checks finish in the background",
+        description="Seconds to wait for validation before the upload is answered; "
+        "longer checks finish in the background",
     )
     tls: InboxTls | None = Field(default=None, description="Serve implicit FTPS instead of plain FTP")
 

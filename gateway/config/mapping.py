@@ -324,7 +324,8 @@ class MachineMapping(Strict):
     def _machine_name(cls, name: str) -> str:
         if not MACHINE_RE.match(name):
             raise ValueError(
-                f"machine name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', starting with a letter or digit"
+                f"machine name {name!r} must be 1-63 lower-case letters, digits, '-' or '_', "
+                "starting with a letter or digit"
             )
         return name
 
@@ -431,7 +432,10 @@ def tree_conflicts(paths: list[str]) -> list[tuple[int, str]]:
                 problems.append(
                     (
                         index,
-                        f"path {path!r} uses {folder!r} as a folder, but variables[{first[folder]}] is a variable",
+                        (
+                            f"path {path!r} uses {folder!r} as a folder, "
+                            f"but variables[{first[folder]}] is a variable"
+                        ),
                     )
                 )
     return problems

@@ -217,9 +217,7 @@ class ValidationRules(Strict):
             raise ValueError("end_codes must not be empty unless end_code is 'optional'")
         overlap = set(self.end_codes) & set(self.forbid_codes)
         if overlap and self.end_code != "optional":
-            raise ValueError(
-                f"forbid_codes forbids the end code {sorted(overlap)[0]} that end_codes requires"
-            )
+            raise ValueError(f"forbid_codes forbids the end code {min(overlap)} that end_codes requires")
         return self
 
     @property

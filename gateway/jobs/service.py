@@ -20,6 +20,7 @@ Files under the state directory:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import hashlib
 import logging
@@ -230,7 +231,7 @@ class JobService:
     async def submit_bytes(
         self, machine: str, filename: str, data: bytes, *, user: str, origin: str
     ) -> UploadReply:
-        """A program that arrives other than through the inbox (Programs.Put): the same checks, the same queue."""
+        """A program that comes other than through the inbox (Programs.Put): the same checks and queue."""
         try:
             check_file_name(filename)
         except PathRefused as exc:
@@ -281,10 +282,8 @@ class JobService:
             raise
         except Exception as exc:
             log.exception("%s: %s could not be processed", job.machine, job.id)
-            try:
+            with contextlib.suppress(JobError):
                 await self._q(self.queue.reject, job.seq, f"internal error while checking the program: {exc}")
-            except JobError:
-                pass
             return UploadReply(False, f"{job.id} could not be processed: {exc}", job.id)
 
     async def _validate_and_queue(self, job: Job, check: UploadCheck | None = None) -> UploadReply:

@@ -48,7 +48,7 @@ class Method:
         if len(args) > len(self.inputs):
             raise TooManyArguments(f"{self.name} takes {len(self.inputs)} argument(s), got {len(args)}")
         out = []
-        for arg, value in zip(self.inputs, args):
+        for arg, value in zip(self.inputs, args, strict=True):
             try:
                 out.append(coerce(arg.type, value))
             except RequestError as exc:  # TypeMismatch or OutOfRange: both a wrong argument here

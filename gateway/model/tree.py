@@ -146,7 +146,7 @@ class VariableNode:
             if not isinstance(last, list) or len(value) != len(last):
                 return True
             db = self._deadband
-            return any(abs(a - b) > db for a, b in zip(value, last))
+            return any(abs(a - b) > db for a, b in zip(value, last, strict=True))
         return bool(abs(value - last) > self._deadband)
 
     def check_range(self, value: Any) -> None:
@@ -335,7 +335,7 @@ class Machine:
         at: datetime | None = None,
         started: float | None = None,
     ) -> None:
-        """Record any action on this machine (acknowledge, confirm, …): `old`/`new` are JSON text (as_text)."""
+        """Record an action on this machine (acknowledge, confirm, …): `old`/`new` are JSON text (as_text)."""
         if not self.tree.audit_sinks:
             return
         duration = 0.0 if started is None else time.monotonic() - started

@@ -156,7 +156,7 @@ def _coerce_scalar(base: DataType, value: Any) -> Any:
             return value if value.tzinfo else value.replace(tzinfo=UTC)
         if isinstance(value, str):
             try:
-                parsed = datetime.fromisoformat(value.replace("Z", "+00:00"))
+                parsed = datetime.fromisoformat(value)
             except ValueError:
                 raise TypeMismatch(f"expected an ISO-8601 DateTime, got {value!r}") from None
             return parsed if parsed.tzinfo else parsed.replace(tzinfo=UTC)

@@ -24,6 +24,7 @@ option) and the simulator. Design choices, and why:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 from collections.abc import Callable, Coroutine, Sequence
@@ -48,6 +49,7 @@ from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 from gateway.reconnect import Backoff, OutageLog
+from gateway.shims.ua import new_node_id, new_status_error
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
 
@@ -135,26 +137,24 @@ async def close_client(client: Client, *, polite: bool) -> None:
 
 async def _teardown(client: Client, polite: bool) -> None:
     uaclient = client.uaclient
+    # Best effort throughout: a session that is going away fails in any of asyncua's ways (and a polite close
+    # that fails falls back to the abort below), so nothing here is worth raising or logging.
     if polite and uaclient.state is UaClientState.CONNECTED:
         try:
             async with asyncio.timeout(CLOSE_BUDGET):
                 await client.disconnect()
             return
-        except Exception:
+        except Exception:  # noqa: BLE001, S110 - see above
             pass
     proto = uaclient.protocol
     if proto is not None and proto.transport is not None:
         proto.transport.abort()
         await asyncio.sleep(0)  # let connection_lost run, so closing sends nothing on a dead socket
-    try:
+    with contextlib.suppress(Exception):
         async with asyncio.timeout(CLOSE_BUDGET):
             await client.close_session()
-    except Exception:
-        pass
-    try:
+    with contextlib.suppress(Exception):
         uaclient.disconnect_socket()
-    except Exception:
-        pass
 
 
 async def certificate_uri(security: str) -> str | None:
@@ -165,8 +165,8 @@ async def certificate_uri(security: str) -> str | None:
     try:
         cert = await uacrypto.load_certificate(parts[2])
         san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName)
-    except Exception:
-        return None  # set_security_string reports an unreadable certificate itself
+    except Exception:  # noqa: BLE001 - set_security_string reports an unreadable certificate itself
+        return None
     uris = san.value.get_values_for_type(x509.UniformResourceIdentifier)
     return uris[0] if uris else None
 
@@ -239,14 +239,14 @@ class OpcUaSource:
             self.machine.status.disconnected("gateway stopped")
 
     async def run(self) -> None:
-        """Connect, subscribe, reconnect with backoff, until cancelled. Never raises for controller trouble."""
+        """Connect, subscribe, reconnect with backoff until cancelled. Never raises for controller trouble."""
         backoff = Backoff.of(self.driver.reconnect)
         try:
             while True:
                 self.machine.status.connecting()
                 try:
                     loss = await self._connect()
-                except Exception as exc:
+                except Exception as exc:  # noqa: BLE001 - asyncua's failures, translated by describe_error
                     status, reason, expected = describe_error(exc)
                     await self._drop(status, reason, None if expected else exc)
                 else:
@@ -327,7 +327,7 @@ class OpcUaSource:
                 self.machine.ingest(node, None, now, "BadNodeIdUnknown", f"{node.definition.source}: {exc}")
                 problems.append(f"{node.path} (BadNodeIdUnknown)")
                 continue
-            self._node_ids[node] = ua.NodeId(address.identifier, index, _NODE_ID_TYPES[address.kind])
+            self._node_ids[node] = new_node_id(address.identifier, index, _NODE_ID_TYPES[address.kind])
         return problems
 
     def _subscription_parameters(self) -> ua.CreateSubscriptionParameters:
@@ -372,7 +372,7 @@ class OpcUaSource:
             )
             results = await session.create_monitored_items(params)
             now = utcnow()
-            for (_, node), res in zip(batch, results):
+            for (_, node), res in zip(batch, results, strict=True):
                 code = res.StatusCode.value
                 if code & 0x80000000:
                     name = status_name(code)
@@ -449,13 +449,13 @@ class OpcUaSource:
             except TimeoutError:
                 lost("BadCommunicationError", "subscription stalled (no publish response)")
                 return
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - whatever asyncua raised ends this session only
                 status, reason, _ = describe_error(exc)
                 lost(status, reason)
                 return
             header_status = response.ResponseHeader.ServiceResult.value
             if header_status & 0x80000000:
-                lost(*describe_error(UaStatusCodeError(header_status))[:2])
+                lost(*describe_error(new_status_error(header_status))[:2])
                 return
             result = response.Parameters
             message = result.NotificationMessage
@@ -501,12 +501,12 @@ class OpcUaSource:
                             ingest(node, value, ts)
                         else:
                             self._ingest_other(node, value, ts, 0 if code is None else code.value)
-                    except Exception as exc:  # one odd value must not stop the others
+                    except Exception as exc:  # noqa: BLE001 - one odd value must not stop the others
                         self._ingest_failed(node, value, exc)
             elif isinstance(notification, ua.StatusChangeNotification):
                 code = notification.Status.value
                 if code & 0x80000000:
-                    status, reason, _ = describe_error(UaStatusCodeError(code))
+                    status, reason, _ = describe_error(new_status_error(code))
                     lost(status, reason)
 
     def _ingest_failed(self, node: VariableNode, value: Any, exc: Exception) -> None:
@@ -553,7 +553,7 @@ class OpcUaSource:
                 ua.VariantType[raw_type.base.value],
                 is_array=raw_type.array,
             )
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - asyncua's encoders raise anything
             raise ControllerRefused(
                 f"cannot encode {raw!r} as {raw_type}: {exc}", status="BadTypeMismatch"
             ) from None
@@ -583,7 +583,7 @@ class OpcUaSource:
             raise ControllerUnavailable(
                 "the connection to the controller was lost during the write"
             ) from None
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - the rest of asyncua's failures
             raise ControllerUnavailable(f"write failed: {type(exc).__name__}: {exc}") from None
         code = results[0].value if results else 0x80010000
         if code & 0x80000000:
@@ -605,7 +605,7 @@ class OpcUaSource:
         try:
             async with asyncio.timeout(self.driver.timeout):
                 results = await client.uaclient.session.read(params)
-        except Exception as exc:  # TimeoutError, a refusal, a lost connection: the write stands
+        except Exception as exc:  # noqa: BLE001 - a timeout, a refusal, a lost link: the write stands
             log.debug("%s: reading %s back after the write failed: %s", self.machine.name, node.path, exc)
             return None
         if not results:

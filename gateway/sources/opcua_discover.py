@@ -24,6 +24,7 @@ from asyncua.ua.uaerrors import UaError
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.mapping import MACHINE_RE, check_endpoint
 from gateway.errors import AddressError, SourceError
+from gateway.shims.ua import new_node_id
 from gateway.sources.browse_paths import Key, assign_paths
 from gateway.sources.opcua_client import close_client, open_client
 from gateway.sources.opcua_status import describe_error
@@ -32,9 +33,9 @@ BROWSE_BATCH = 100  # nodes per Browse request
 READ_BATCH = 1000  # attributes per Read request
 MAX_SKIP_COMMENTS = 200
 
-_HIERARCHICAL = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
-_HAS_PROPERTY = ua.NodeId(ua.ObjectIds.HasProperty)
-_HAS_SUBTYPE = ua.NodeId(ua.ObjectIds.HasSubtype)
+_HIERARCHICAL = new_node_id(ua.ObjectIds.HierarchicalReferences)
+_HAS_PROPERTY = new_node_id(ua.ObjectIds.HasProperty)
+_HAS_SUBTYPE = new_node_id(ua.ObjectIds.HasSubtype)
 _BASE_TYPES = {
     1: "Boolean", 2: "SByte", 3: "Byte", 4: "Int16", 5: "UInt16", 6: "Int32", 7: "UInt32",
     8: "Int64", 9: "UInt64", 10: "Float", 11: "Double", 12: "String", 13: "DateTime",
@@ -116,7 +117,7 @@ class _Browser:
             strict = False
             objects: list[_Item] = []
             variables: list[_Item] = []
-            for item, refs in zip(frontier, results):
+            for item, refs in zip(frontier, results, strict=True):
                 for position, ref in enumerate(refs):
                     target = ref.NodeId
                     if getattr(target, "ServerIndex", 0):
@@ -150,7 +151,7 @@ class _Browser:
                         else:
                             depth_cut = True
             frontier = objects
-            for item, found in zip(variables, await self._describe(variables)):
+            for item, found in zip(variables, await self._describe(variables), strict=True):
                 if found.type is not None:
                     if emitted >= self.max_variables:
                         truncated = True
@@ -192,7 +193,7 @@ class _Browser:
                     for nid in batch
                 ],
             )
-            for nid, result in zip(batch, await self.session.browse(params)):
+            for nid, result in zip(batch, await self.session.browse(params), strict=True):
                 if result.StatusCode.is_bad():
                     if strict:
                         raise SourceError(f"cannot browse {nid.to_string()}: {result.StatusCode.name}")
@@ -261,10 +262,11 @@ class _Browser:
         if key in self._types:
             return self._types[key]
         result: tuple[str | None, str]
-        if data_type.NamespaceIndex == 0 and data_type.Identifier in _BASE_TYPES:
-            result = (_BASE_TYPES[data_type.Identifier], _BASE_TYPES[data_type.Identifier])
-        elif data_type.NamespaceIndex == 0 and data_type.Identifier in _UNSUPPORTED_TYPES:
-            result = (None, _UNSUPPORTED_TYPES[data_type.Identifier])
+        ident = data_type.Identifier if data_type.NamespaceIndex == 0 else None  # built-in types: numeric ids
+        if isinstance(ident, int) and ident in _BASE_TYPES:
+            result = (_BASE_TYPES[ident], _BASE_TYPES[ident])
+        elif isinstance(ident, int) and ident in _UNSUPPORTED_TYPES:
+            result = (None, _UNSUPPORTED_TYPES[ident])
         else:
             self._types[key] = (None, key)  # guards against cycles while we look upwards
             params = ua.BrowseParameters(
@@ -279,7 +281,7 @@ class _Browser:
                 ]
             )
             (browsed,) = await self.session.browse(params)
-            parents = [r for r in browsed.References or []] if browsed.StatusCode.is_good() else []
+            parents = list(browsed.References or []) if browsed.StatusCode.is_good() else []
             if parents:
                 base, label = await self._type_name(_plain(parents[0].NodeId))
                 result = (base, label if base is not None else f"{key} (a {label})")
@@ -292,7 +294,7 @@ class _Browser:
         if not self._properties:
             return
         values = await self._read([(nid, ua.AttributeIds.Value) for _, _, nid in self._properties])
-        for (found, name, _), dv in zip(self._properties, values):
+        for (found, name, _), dv in zip(self._properties, values, strict=True):
             value = _value(dv)
             if found.type is None:
                 continue
@@ -341,18 +343,18 @@ async def discover(
         client = await open_client(
             endpoint, timeout=timeout, username=username, password=password, security=security
         )
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - asyncua's failures, translated by describe_error
         raise SourceError(f"cannot connect to {endpoint}: {describe_error(exc)[1]}") from None
     try:
         namespaces = list(await client.get_namespace_array())
         if start:
             try:
                 address = parse_address(start)
-                start_id = ua.NodeId(address.identifier, address.resolve(namespaces))
+                start_id = new_node_id(address.identifier, address.resolve(namespaces))
             except AddressError as exc:
                 raise SourceError(f"start node: {exc}") from None
         else:
-            start_id = ua.NodeId(ua.ObjectIds.ObjectsFolder)
+            start_id = new_node_id(ua.ObjectIds.ObjectsFolder)
         browser = _Browser(client, max_depth=max_depth, max_variables=max_variables)
         await browser.walk(start_id)
     except SourceError:
@@ -365,7 +367,8 @@ async def discover(
     mapped = sorted((f for f in browser.found if f.type is not None), key=lambda f: f.order)
     if not mapped:
         raise SourceError(
-            f"found no variables of a supported type under {start_label} on {endpoint}; try --start or --max-depth"
+            f"found no variables of a supported type under {start_label} on {endpoint}; "
+            "try --start or --max-depth"
         )
     emitted = {k for f in mapped for k in f.keys}
     skipped = sorted(
@@ -456,7 +459,7 @@ def render(
         "",
         "variables:",
     ]
-    for path, found in zip(paths, variables):
+    for path, found in zip(paths, variables, strict=True):
         entry: dict[str, Any] = {"path": path, "source": found.source, "type": found.type}
         if found.unit:
             entry["unit"] = found.unit

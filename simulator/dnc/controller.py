@@ -51,6 +51,7 @@ from gateway.codecs.dnc import (
 )
 from gateway.codecs.dnc.receiver import ReceiverEvent
 from gateway.codecs.dnc.sender import Junk
+from gateway.errors import InvalidArgument, InvalidState
 from simulator.alarms import (
     DNC_BUFFER_OVERFLOW,
     DNC_COMMUNICATION,
@@ -63,10 +64,9 @@ from simulator.alarms import (
     no_program_space,
 )
 from simulator.dnc.uart import Coupling
-from simulator.errors import InvalidArgument, InvalidState
+from simulator.errors import ProgramNotFound
 from simulator.interpreter import Action, ProgramEnd, StreamPlanner
 from simulator.machine import Machine, MachineState
-from simulator.store import ProgramNotFound
 
 DNC_ALARMS = frozenset({NO_PROGRAM_SPACE, DNC_COMMUNICATION, DNC_LINE_DROPPED, DNC_BUFFER_OVERFLOW})
 #: Per-episode counts of characters after DC3 kept for statistics (p99 and the like).

@@ -44,7 +44,8 @@ def add_dnc_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("serial DNC (RS-232 through a device server)")
     group.add_argument(
         "--dnc-port", type=_port_or_off, default=_default(ENV_TCP, DEFAULT_TCP_PORT), metavar="PORT",
-        help=f"raw TCP device-server port, socket://HOST:PORT (default ${ENV_TCP} or {DEFAULT_TCP_PORT}; 'off')",
+        help="raw TCP device-server port, socket://HOST:PORT "
+        f"(default ${ENV_TCP} or {DEFAULT_TCP_PORT}; 'off')",
     )  # fmt: skip
     group.add_argument(
         "--dnc-rfc2217-port", type=_port_or_off, default=_default(ENV_RFC2217, DEFAULT_RFC2217_PORT),
@@ -66,7 +67,7 @@ def add_dnc_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def dnc_options(args: argparse.Namespace) -> DncOptions | None:
-    """The DNC face the arguments ask for, None when every face is off. Raises ValueError, worded for users."""
+    """The DNC face the arguments ask for, None if every face is off. Raises ValueError, worded for users."""
     if args.dnc_port is None and args.dnc_rfc2217_port is None and not args.dnc_pty:
         return None
     try:

@@ -1,4 +1,4 @@
-"""The shipped laser-sim mapping, run by a real Gateway against a real simulator, for the alarm and command tests.
+"""The shipped laser-sim mapping run by a real Gateway against a real simulator, for alarm and command tests.
 
 Everything on free loopback ports: the simulator (OPC UA and FTP, `speed` times
 real time), the gateway's OPC UA server, and optionally a Mosquitto broker that
@@ -9,6 +9,7 @@ these tests do not need them, and they would only slow the start.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
@@ -65,7 +66,8 @@ def laser_config(
             "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"},
             "state_dir": str(state_dir),
             "inbox": {"enabled": False},
-            # These tests command the machine as anonymous OPC UA clients: the gateway file opens that explicitly.
+            # These tests command the machine as anonymous OPC UA clients: the gateway file opens that
+            # explicitly.
             "access": {"anonymous": "operator"},
         }
     ).model_copy(update={"mqtt": mqtt})
@@ -117,10 +119,9 @@ class LaserRig:
 
     async def stop_gateway(self) -> None:
         for client in self.clients:
-            try:
+            # Already gone with the server, in whichever way asyncua says so.
+            with contextlib.suppress(Exception):
                 await client.disconnect()
-            except Exception:  # already gone with the server
-                pass
         self.clients.clear()
         if self._run is not None:
             self._run.cancel()

@@ -1,4 +1,4 @@
-"""README's alarm walkthrough, run as written against `cnc-gateway demo`, with its driver keeping demo.nc going.
+"""README's alarm walkthrough, run as written against `cnc-gateway demo`, its driver keeping demo.nc going.
 
 The shell block is read from README.md and its `mosquitto_sub`/`mosquitto_pub` lines are run as they are
 (with the test broker's port added), each command once the one before it has answered, as the README
@@ -204,7 +204,7 @@ def _connects(client: Client) -> Any:
 async def follow(
     steps: list[str], watch: Watch, client: Client, alarms: Alarms, port: int, round_: int
 ) -> None:
-    """One pass through the README's block: every command answered ok, the alarm raised, acknowledged, cleared."""
+    """One pass through the README's block: each command answered ok; the alarm raised, acked, cleared."""
     occurrence: int | None = None
     comment: list[str] = []
     for line in steps:
@@ -229,7 +229,7 @@ async def follow(
         )
         assert done.returncode == 0, done.stderr
         result = await wait_until(
-            lambda: watch.on(f"{topic}/result")[answered:],
+            lambda topic=topic, answered=answered: watch.on(f"{topic}/result")[answered:],
             timeout=15,
             message=f"round {round_}: the answer to {command}",
         )
@@ -239,7 +239,9 @@ async def follow(
         elif command == "reset":
             assert occurrence is not None
             cleared = await wait_until(
-                lambda: [e for e in watch.events(occurrence) if e["event"] == "cleared"],
+                lambda occurrence=occurrence: [
+                    e for e in watch.events(occurrence) if e["event"] == "cleared"
+                ],
                 timeout=10,
                 message=f"round {round_}: the alarm cleared by the reset",
             )

@@ -4,26 +4,16 @@ from __future__ import annotations
 
 import gc
 import weakref
-from collections.abc import Iterator
 
 import pytest
 
 from gateway.app import YOUNG_THRESHOLD, settled_heap
+from tests.gc_state import gc_state_kept
 
 
 class Node:
     def __init__(self) -> None:
         self.me = self  # a reference cycle: only the cyclic collector frees it
-
-
-@pytest.fixture(autouse=True)
-def restore_gc() -> Iterator[None]:
-    enabled, threshold = gc.isenabled(), gc.get_threshold()
-    yield
-    gc.unfreeze()
-    gc.set_threshold(*threshold)
-    if enabled:
-        gc.enable()
 
 
 def test_start_up_objects_are_frozen_and_the_collector_is_on_again() -> None:
@@ -62,3 +52,18 @@ def test_a_disabled_collector_stays_disabled() -> None:
     with settled_heap():
         pass
     assert not gc.isenabled()
+
+
+def test_what_settled_heap_leaves_is_undone_after_the_test() -> None:
+    """tests/conftest.py wraps each test in gc_state_kept: the raised threshold and the frozen heap go."""
+    gc.enable()
+    gc.unfreeze()
+    gc.set_threshold(700, 10, 10)
+    with gc_state_kept():
+        with settled_heap():
+            kept = [Node() for _ in range(10)]
+        assert gc.get_threshold()[0] == YOUNG_THRESHOLD
+        assert gc.get_freeze_count() >= len(kept)
+    assert gc.get_threshold() == (700, 10, 10)
+    assert gc.get_freeze_count() == 0
+    assert gc.isenabled()

@@ -28,10 +28,11 @@ BuildBackendWarning: Editable installation.
   !!
     with strategy, WheelFile(wheel_path, "w") as wheel_obj:
 """
-MACHINE_PIP_CONFIG = """\
-WARNING: Location 'file:///opt/pypi-more/simple/annotated-types/' is ignored: it is neither a file nor a directory.
-WARNING: Location 'file:///opt/pypi/simple/asyncua/' is ignored: it is neither a file nor a directory.
-"""
+MACHINE_PIP_CONFIG = (
+    "WARNING: Location 'file:///opt/pypi-more/simple/annotated-types/' is ignored: "
+    "it is neither a file nor a directory.\n"
+    "WARNING: Location 'file:///opt/pypi/simple/asyncua/' is ignored: it is neither a file nor a directory.\n"
+)
 CLEAN = """\
 python3 -m venv .venv
 .venv/bin/pip install --quiet --upgrade pip
@@ -82,7 +83,7 @@ def test_a_warning_fails_the_check_and_is_shown(tmp_path: Path) -> None:
 
 
 def test_the_editable_install_puts_the_project_root_on_the_path() -> None:
-    """The layout decision that keeps setuptools quiet: a plain .pth with the project root (not its finder)."""
+    """The layout that keeps setuptools quiet: a plain .pth with the project root (not its import finder)."""
     import gateway
 
     assert Path(gateway.__file__).resolve().parent == ROOT / "gateway"

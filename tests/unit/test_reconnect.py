@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from itertools import islice
+from itertools import islice, pairwise
 
 import pytest
 from hypothesis import given
@@ -30,7 +30,7 @@ def test_initial_above_maximum_is_capped() -> None:
 def test_jitter_only_shortens_and_by_at_most_its_share() -> None:
     delays = list(islice(backoff_delays(1.0, 2.0, 4.0, jitter=0.1, rand=lambda: 1.0), 4))
     assert delays == [0.9, 1.8, 3.6, 3.6]
-    for delay, base in zip(islice(backoff_delays(1.0, 2.0, 4.0), 50), [1.0, 2.0] + [4.0] * 48):
+    for delay, base in zip(islice(backoff_delays(1.0, 2.0, 4.0), 50), [1.0, 2.0] + [4.0] * 48, strict=True):
         assert 0.9 * base <= delay <= base
 
 
@@ -51,7 +51,7 @@ def test_every_delay_lies_under_its_unjittered_base_which_never_shrinks_nor_pass
     stream = backoff_delays(initial, factor, maximum, jitter=jitter, rand=lambda: next(draws))
     delays = list(islice(stream, len(rands)))
     base = min(initial, maximum)
-    for delay, r in zip(delays, rands):
+    for delay, r in zip(delays, rands, strict=True):
         assert delay == pytest.approx(base * (1.0 - jitter * r))
         assert base * (1.0 - jitter) - 1e-9 <= delay <= base <= maximum
         base = min(base * factor, maximum)
@@ -62,7 +62,7 @@ def test_without_jitter_the_delays_never_shrink_and_reach_the_maximum(
     initial: float, factor: float, maximum: float
 ) -> None:
     delays = list(islice(backoff_delays(initial, factor, maximum, rand=lambda: 0.0), 200))
-    assert all(a <= b for a, b in zip(delays, delays[1:]))
+    assert all(a <= b for a, b in pairwise(delays))
     assert max(delays) <= maximum
     if factor >= 1.1:
         assert delays[-1] == maximum

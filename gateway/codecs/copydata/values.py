@@ -32,9 +32,7 @@ from gateway.codecs.copydata.layout import Layout
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 
 FILETIME_EPOCH = datetime(1601, 1, 1, tzinfo=UTC)
-_MAX_TICKS = (
-    (datetime.max.replace(tzinfo=UTC) - FILETIME_EPOCH) // timedelta(microseconds=1)
-) * 10 + 9
+_MAX_TICKS = ((datetime.max.replace(tzinfo=UTC) - FILETIME_EPOCH) // timedelta(microseconds=1)) * 10 + 9
 
 # struct format letter of every fixed-width type; DateTime is its FILETIME.
 _FORMATS: dict[DataType, str] = {

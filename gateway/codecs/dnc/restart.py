@@ -101,7 +101,7 @@ def _modal_block(before: list[Block | None], line: int) -> bytes:
                 offset = value
             elif value in (0.0, 1.0, 2.0, 3.0):
                 motion = value
-            elif value in (80.0,):
+            elif value == 80.0:
                 motion = None
         f = block.get("F")
         if f is not None:

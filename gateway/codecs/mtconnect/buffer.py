@@ -383,7 +383,7 @@ class ObservationBuffer:
         return self._append(entry, dedupe)
 
     def add_unavailable(self, item_ids: Iterable[str], timestamp: datetime | str) -> list[Entry]:
-        """Mark data items UNAVAILABLE (a controller went away); returns the entries that changed something."""
+        """Mark data items UNAVAILABLE (a controller went away); the entries that changed something."""
         stamp = _stamp(timestamp)
         added: list[Entry] = []
         for item_id in item_ids:

@@ -65,7 +65,7 @@ class Description:
 
 @dataclass(frozen=True, slots=True)
 class Component:
-    """A component; `type` is its element name in the 2.4 schema: Axes, Linear, Controller, Path, Systems..."""
+    """A component; `type` is its element name in the 2.4 schema: Axes, Linear, Controller, Path, ..."""
 
     type: str
     id: str

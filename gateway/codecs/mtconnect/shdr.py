@@ -2,17 +2,19 @@
 
 SHDR is pipe-delimited text, one line per LF (CR-LF accepted):
 
-    2024-05-01T12:00:00.123456Z|Xact|12.5|execution|ACTIVE       observations, several per line
-    |Xact|12.6                                                   no timestamp: the receive time
-    2024-...Z@100.0|pcount|3                                     with a duration (seconds)
-    2024-...Z|system|FAULT|E42:c1|2|HIGH|Laser overheated          condition: level|code[:id]|severity|qualifier|text
-    2024-...Z|message|CHG_INSRT|Change inserts                   message: native code|text
-    2024-...Z|current|10|100|1 2 3 4 5 6 7 8 9 10                time series: count|rate|values
-    2024-...Z|description|"text with \\| a pipe"                   a quoted field; \\ escapes | " and \\ inside
-    2024-...Z|@ASSET@|T1.1|CuttingTool|<CuttingTool>...         assets (also --multiline--TAG bodies),
-    2024-...Z|@REMOVE_ASSET@|T1.1                                @REMOVE_ALL_ASSETS@|type, @UPDATE_ASSET@|id|k|v...
-    * shdrVersion: 2                                             protocol commands
-    * PING / * PONG 10000                                        heartbeats (the adapter states its period in ms)
+    2024-05-01T12:00:00.123456Z|Xact|12.5|execution|ACTIVE   observations, several per line
+    |Xact|12.6                                               no timestamp: the receive time
+    2024-...Z@100.0|pcount|3                                 with a duration (seconds)
+    2024-...Z|system|FAULT|E42:c1|2|HIGH|Laser overheated    condition: level|code[:id]|severity|qualifier|
+                                                             text
+    2024-...Z|message|CHG_INSRT|Change inserts               message: native code|text
+    2024-...Z|current|10|100|1 2 3 4 5 6 7 8 9 10            time series: count|rate|values
+    2024-...Z|description|"text with \\| a pipe"             a quoted field; \\ escapes | " and \\ inside
+    2024-...Z|@ASSET@|T1.1|CuttingTool|<CuttingTool>...      assets (also --multiline--TAG bodies),
+    2024-...Z|@REMOVE_ASSET@|T1.1                            also @REMOVE_ALL_ASSETS@|type,
+                                                             @UPDATE_ASSET@|id|k|v...
+    * shdrVersion: 2                                         protocol commands
+    * PING / * PONG 10000                                    heartbeats (the adapter states its period in ms)
 
 The number of fields after a key depends on the data item (a condition takes five), so
 the reader asks `kind_of(key)`; by default every key is a plain value. Keys may carry

@@ -12,18 +12,19 @@ from __future__ import annotations
 import asyncio
 import functools
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import aioftp
-from aioftp.server import Connection, ConnectionConditions
+from aioftp.common import Connection
 
 from gateway.errors import PathRefused
 from gateway.jobs.inbox.accounts import Account
 from gateway.jobs.inbox.listing import FEATURES, Entry, list_line, mdtm, mlsx_facts, split_list_argument
 from gateway.jobs.inbox.paths import TMP, InboxPath
+from gateway.shims.aioftp_server import LOGIN_REQUIRED, PASSIVE_SERVER_STARTED, Handler, connection_conditions
 
 if TYPE_CHECKING:
     from gateway.config.jobs import InboxConfig
@@ -46,7 +47,7 @@ def session_of(connection: Connection) -> Session | None:
     return future.result() if future is not None and future.done() else None
 
 
-def refusals(handler: Callable[..., Awaitable[bool]]) -> Callable[..., Awaitable[bool]]:
+def refusals(handler: Handler) -> Handler:
     """Answer a PathRefused raised by a command handler with its FTP code and reason."""
 
     @functools.wraps(handler)
@@ -57,10 +58,10 @@ def refusals(handler: Callable[..., Awaitable[bool]]) -> Callable[..., Awaitable
             connection.response(exc.code, exc.reason)
             return True
 
-    return wrapper
+    return cast(Handler, wrapper)
 
 
-login_required = ConnectionConditions(ConnectionConditions.login_required)
+login_required = connection_conditions(LOGIN_REQUIRED)
 
 
 class BrowseCommands:
@@ -73,11 +74,13 @@ class BrowseCommands:
 
     if TYPE_CHECKING:
 
-        def _where(self, connection: Connection, rest: str) -> InboxPath: ...
+        def _where(self, connection: Connection, rest: str | PurePosixPath) -> InboxPath: ...
 
         def _real(self, place: InboxPath) -> Path: ...
 
-        def _existing_file(self, connection: Connection, rest: str) -> tuple[InboxPath, Path, Any]: ...
+        def _existing_file(
+            self, connection: Connection, rest: str | PurePosixPath
+        ) -> tuple[InboxPath, Path, Any]: ...
 
     def _entries(self, place: InboxPath, session: Session) -> list[Entry]:
         assert session.account is not None
@@ -106,14 +109,14 @@ class BrowseCommands:
                 out.append(Entry(child.name, False, st.st_size, st.st_mtime))
         return out
 
-    async def _data_connection(self, connection: Connection) -> aioftp.StreamIO | None:
+    async def _data_connection(self, connection: Connection) -> aioftp.ThrottleStreamIO | None:
         try:
             async with asyncio.timeout(self.wait_future_timeout):
                 await asyncio.shield(connection.future.data_connection)
         except TimeoutError:
             connection.response("425", "can't open data connection")
             return None
-        stream = connection.data_connection
+        stream: aioftp.ThrottleStreamIO = connection.data_connection  # what aioftp's PASV made
         del connection.data_connection
         return stream
 
@@ -121,7 +124,7 @@ class BrowseCommands:
 
     @login_required
     @refusals
-    async def cwd(self, connection: Connection, rest: str) -> bool:
+    async def cwd(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         place = self._where(connection, rest or "/")
         if place.kind == "file":
             raise PathRefused(f"{place.virtual}: no such folder")
@@ -130,12 +133,12 @@ class BrowseCommands:
         return True
 
     @login_required
-    async def cdup(self, connection: Connection, rest: str) -> bool:
+    async def cdup(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         return await self.cwd(connection, str(PurePosixPath(str(connection.current_directory)).parent))
 
     @login_required
     @refusals
-    async def mkd(self, connection: Connection, rest: str) -> bool:
+    async def mkd(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         place = self._where(connection, rest)
         if place.kind != "tmp":
             raise PathRefused("only a machine's tmp/ folder exists here; it cannot be created elsewhere")
@@ -144,38 +147,40 @@ class BrowseCommands:
         return True
 
     @login_required
-    async def rmd(self, connection: Connection, rest: str) -> bool:
+    async def rmd(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         connection.response("550", "folders cannot be removed")
         return True
 
     # --- listings --------------------------------------------------------------------------------
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.passive_server_started)
+    @connection_conditions(LOGIN_REQUIRED, PASSIVE_SERVER_STARTED)
     @refusals
-    async def list(self, connection: Connection, rest: str) -> bool:
+    async def list(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         return self._listing(connection, rest, list_line)
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.passive_server_started)
+    @connection_conditions(LOGIN_REQUIRED, PASSIVE_SERVER_STARTED)
     @refusals
-    async def mlsd(self, connection: Connection, rest: str) -> bool:
+    async def mlsd(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         return self._listing(connection, rest, mlsx_facts)
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.passive_server_started)
+    @connection_conditions(LOGIN_REQUIRED, PASSIVE_SERVER_STARTED)
     @refusals
     async def nlst(self, connection: Connection, rest: str) -> bool:
         return self._listing(connection, rest, lambda e: e.name)
 
-    def _listing(self, connection: Connection, rest: str, fmt: Callable[[Entry], str]) -> bool:
+    def _listing(
+        self, connection: Connection, rest: str | PurePosixPath, fmt: Callable[[Entry], str]
+    ) -> bool:
         session = session_of(connection)
         assert session is not None
-        place = self._where(connection, split_list_argument(rest))
+        place = self._where(connection, split_list_argument(str(rest)))
         lines = [fmt(e) for e in self._entries(place, session)]
         task = asyncio.create_task(self._send_lines(connection, lines), name="inbox:listing")
         connection.extra_workers.add(task)
         connection.response("150", "listing follows")
         return True
 
-    async def _send_lines(self, connection: Connection, lines: list[str]) -> bool:
+    async def _send_lines(self, connection: Connection, lines: Sequence[str]) -> bool:
         try:
             stream = await self._data_connection(connection)
             if stream is None:
@@ -193,7 +198,7 @@ class BrowseCommands:
 
     @login_required
     @refusals
-    async def mlst(self, connection: Connection, rest: str) -> bool:
+    async def mlst(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         session = session_of(connection)
         assert session is not None
         place = self._where(connection, rest)

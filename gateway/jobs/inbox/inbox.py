@@ -41,8 +41,8 @@ from gateway.jobs.inbox.server import (
     Submit,
     Upload,
     UploadReply,
-    close_server,
 )
+from gateway.shims.aioftp_server import close_server
 
 __all__ = ["STAGING", "Inbox", "Submit", "Upload", "UploadReply", "tls_context"]
 
@@ -55,7 +55,8 @@ def tls_context(state_dir: Path, cert: str, key: str) -> ssl.SSLContext:
     for path in (cert_path, key_path):
         if not path.is_file():
             raise SinkError(
-                f"FTP inbox TLS: {path} does not exist; create it, e.g. `openssl req -x509 -newkey rsa:2048 -nodes "
+                f"FTP inbox TLS: {path} does not exist; create it, e.g. "
+                "`openssl req -x509 -newkey rsa:2048 -nodes "
                 f"-days 3650 -subj /CN=cnc-gateway -keyout {key_path} -out {cert_path}`"
             )
     context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
@@ -95,7 +96,7 @@ class Inbox:
         return f"{scheme}://{host}:{self.port}/"
 
     def prepare(self) -> list[str]:
-        """Create the folders; discard uploads that a previous run left unfinished. Returns what was discarded."""
+        """Create the folders; discard uploads that a previous run left unfinished; what was discarded."""
         discarded = []
         staging = self.root / STAGING
         staging.mkdir(parents=True, exist_ok=True)

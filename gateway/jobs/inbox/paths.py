@@ -113,7 +113,7 @@ def resolve(cwd: str, argument: str, machines: Collection[str]) -> InboxPath:
     if len(argument) >= 2 and argument[1] == ":" and argument[0].isalpha():
         raise PathRefused("drive letters are not paths here", "553")
     base = PurePosixPath("/") if argument.startswith("/") else PurePosixPath(cwd)
-    parts = [p for p in base.parts[1:]] + [p for p in argument.split("/") if p not in ("", ".")]
+    parts = list(base.parts[1:]) + [p for p in argument.split("/") if p not in ("", ".")]
     if ".." in parts:
         raise PathRefused("'..' is not allowed in paths", "553")
     if not parts:

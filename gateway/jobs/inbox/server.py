@@ -6,8 +6,8 @@ mixin, so that gateway.jobs.inbox.paths decides what a client may see and write 
 nothing is resolved by aioftp's own path logic. See gateway/jobs/inbox/inbox.py for
 how an upload is judged complete.
 
-`close_server` is how any aioftp server here stops (the simulator's program store
-uses it too): the one place that reaches into aioftp's private state.
+aioftp's handler decorators and its graceful stop come from gateway/shims/aioftp_server.py
+(the simulator's program store uses them too).
 """
 
 from __future__ import annotations
@@ -26,17 +26,24 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
 import aioftp
-from aioftp.server import AbstractUserManager, Connection, ConnectionConditions
+from aioftp.common import Connection
+from aioftp.server import AbstractUserManager
 
 from gateway.config.jobs import InboxConfig
 from gateway.errors import PathRefused
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.browse import BrowseCommands, Session, login_required, refusals, session_of
 from gateway.jobs.inbox.paths import InboxPath, resolve
+from gateway.shims.aioftp_server import (
+    LOGIN_REQUIRED,
+    PASSIVE_SERVER_STARTED,
+    RENAME_FROM_REQUIRED,
+    USER_REQUIRED,
+    connection_conditions,
+)
 
-if (
-    TYPE_CHECKING
-):  # only named here; the job service makes them (and the simulator need not import validation)
+# Only named here; the job service makes them.
+if TYPE_CHECKING:
     from gateway.jobs.validation.upload_check import UploadCheck
 
 log = logging.getLogger("gateway.jobs.inbox")
@@ -46,7 +53,6 @@ COMMIT_GRACE = 0.25  # s the control connection must outlive the data connection
 LOGIN_FAILURE_DELAY = 0.5  # s before a wrong password is answered
 MAX_LOGIN_FAILURES = 3  # then the session is closed
 STAGING = ".staging"  # under the inbox root: plain STORs in progress; not visible to clients
-CLOSE_GRACE = 0.5  # s for sessions to end before the server is closed
 IDLE, GONE = "\x00idle", "\x00gone"  # pseudo-commands from parse_command
 
 
@@ -226,7 +232,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
             session.account = None
         return await super().user(connection, rest)
 
-    @ConnectionConditions(ConnectionConditions.user_required)
+    @connection_conditions(USER_REQUIRED)
     async def pass_(self, connection: Connection, rest: str) -> bool:
         session = session_of(connection)
         assert session is not None
@@ -253,10 +259,10 @@ class InboxServer(BrowseCommands, aioftp.Server):
 
     # --- paths -----------------------------------------------------------------------------------
 
-    def _where(self, connection: Connection, rest: str) -> InboxPath:
+    def _where(self, connection: Connection, rest: str | PurePosixPath) -> InboxPath:
         session = session_of(connection)
         assert session is not None and session.account is not None
-        place = resolve(str(connection.current_directory), rest, session.account.machines)
+        place = resolve(str(connection.current_directory), str(rest), session.account.machines)
         real = self.root
         for part in place.parts:
             real = real / part
@@ -267,13 +273,15 @@ class InboxServer(BrowseCommands, aioftp.Server):
     def _real(self, place: InboxPath) -> Path:
         return self.root.joinpath(*place.parts)
 
-    def _file(self, connection: Connection, rest: str) -> tuple[InboxPath, Path]:
+    def _file(self, connection: Connection, rest: str | PurePosixPath) -> tuple[InboxPath, Path]:
         place = self._where(connection, rest)
         if place.kind != "file":
             raise PathRefused(f"{place.virtual} is a folder")
         return place, self._real(place)
 
-    def _existing_file(self, connection: Connection, rest: str) -> tuple[InboxPath, Path, os.stat_result]:
+    def _existing_file(
+        self, connection: Connection, rest: str | PurePosixPath
+    ) -> tuple[InboxPath, Path, os.stat_result]:
         place, real = self._file(connection, rest)
         try:
             st = real.stat()
@@ -287,13 +295,13 @@ class InboxServer(BrowseCommands, aioftp.Server):
     # --- files ---------------------------------------------------------------------------------------
 
     @login_required
-    async def retr(self, connection: Connection, rest: str) -> bool:
+    async def retr(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         connection.response("550", "the inbox is write-only: programs leave it when they are queued")
         return True
 
     @login_required
     @refusals
-    async def dele(self, connection: Connection, rest: str) -> bool:
+    async def dele(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         place, real, _ = self._existing_file(connection, rest)
         real.unlink()
         self._waiting.pop(real, None)
@@ -302,15 +310,15 @@ class InboxServer(BrowseCommands, aioftp.Server):
 
     @login_required
     @refusals
-    async def rnfr(self, connection: Connection, rest: str) -> bool:
+    async def rnfr(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         place, _, _ = self._existing_file(connection, rest)
         connection.rename_from = place
         connection.response("350", "ready for RNTO")
         return True
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.rename_from_required)
+    @connection_conditions(LOGIN_REQUIRED, RENAME_FROM_REQUIRED)
     @refusals
-    async def rnto(self, connection: Connection, rest: str) -> bool:
+    async def rnto(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         source: InboxPath = connection.rename_from
         del connection.rename_from
         target, target_real = self._file(connection, rest)
@@ -342,9 +350,9 @@ class InboxServer(BrowseCommands, aioftp.Server):
         connection.response("250" if reply.ok else "550", reply.message)
         return True
 
-    @ConnectionConditions(ConnectionConditions.login_required, ConnectionConditions.passive_server_started)
+    @connection_conditions(LOGIN_REQUIRED, PASSIVE_SERVER_STARTED)
     @refusals
-    async def stor(self, connection: Connection, rest: str, mode: str = "wb") -> bool:
+    async def stor(self, connection: Connection, rest: str | PurePosixPath, mode: str = "wb") -> bool:
         session = session_of(connection)
         assert session is not None
         place, real = self._file(connection, rest)
@@ -368,7 +376,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
         connection.response("150", "ready to receive")
         return True
 
-    async def appe(self, connection: Connection, rest: str) -> bool:
+    async def appe(self, connection: Connection, rest: str | PurePosixPath) -> bool:
         return await self.stor(connection, rest, "ab")
 
     async def _receive(
@@ -382,6 +390,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
         offset: int,
     ) -> bool:
         """The data side of STOR/APPE; answers the client itself and never raises."""
+        assert place.machine is not None  # a file's place (`_file`) names its machine
         handed_over = False
         session.busy += 1
         try:
@@ -436,7 +445,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
             session.busy -= 1
             session.last_activity = time.monotonic()
             if not handed_over and not temporary:
-                target.unlink(missing_ok=True)
+                target.unlink(missing_ok=True)  # noqa: ASYNC240 - one unlink of a failed upload's file
 
     def _wait(self, path: Path, checked: _Checked) -> None:
         """Keep the check of an upload to a temporary name for its rename (the oldest go beyond a few)."""
@@ -446,18 +455,20 @@ class InboxServer(BrowseCommands, aioftp.Server):
 
     async def _copy(
         self,
-        stream: aioftp.StreamIO,
+        stream: aioftp.ThrottleStreamIO,
         place: InboxPath,
         target: Path,
         mode: str,
         offset: int,
         check: UploadCheck | None = None,
     ) -> tuple[int, str]:
-        """Data connection to file, within the size limit, fed to `check` too; (size, SHA-256) of what arrived."""
+        """Data connection to file, within the size limit, fed to `check` too; (size, SHA-256) of it."""
         digest = hashlib.sha256()
         limit = int(self.config.max_file_size)
         size = offset
-        with open(target, "r+b" if offset else mode) as out:
+        # The blocks go to the page cache as they arrive, in the loop (a thread hop per block costs more than
+        # the write); the one fsync at the end blocks the loop for as long as the disk takes.
+        with open(target, "r+b" if offset else mode) as out:  # noqa: ASYNC230 - see above
             if offset:
                 out.seek(offset)
                 out.truncate()
@@ -503,7 +514,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
             raise
         except Exception:
             log.exception("inbox: the job service failed on %s", place.virtual)
-            staged.unlink(missing_ok=True)
+            staged.unlink(missing_ok=True)  # noqa: ASYNC240 - one unlink, on a failure that is logged
             return UploadReply(False, "internal error: the upload was not kept")
 
 
@@ -519,22 +530,3 @@ def _digest(path: Path) -> tuple[int, str]:
             size += len(block)
             h.update(block)
     return size, h.hexdigest()
-
-
-async def close_server(server: aioftp.Server, grace: float = CLOSE_GRACE) -> None:
-    """Stop an aioftp server that has started, with no traceback in the log.
-
-    aioftp's `Server.close()` cancels every session's task, and Python 3.11's asyncio
-    reports each as an "exception in callback". So: stop listening, close every
-    client's stream (the client sees its connection end, and its session task
-    finishes on its own), give them `grace` seconds, then close. aioftp keeps a
-    session's task only in a private attribute (`Connection._dispatcher`); this is
-    the one place that reads it.
-    """
-    server.server.close()  # no new connections
-    dispatchers = [c._dispatcher for c in server.connections.values()]
-    for stream in list(server.connections):
-        stream.close()
-    if dispatchers:
-        await asyncio.wait(dispatchers, timeout=grace)
-    await server.close()

@@ -81,7 +81,8 @@ class JobPublisher:
         self.tree = tree
         self.vars = {name: JobVariables(tree.machines[name]) for name in machines}
         self._progress_at: dict[int, float] = {}
-        # Per machine: how many ended jobs keep a retained record, and those that do (seq -> id), oldest first.
+        # Per machine: how many ended jobs keep a retained record, and those that do (seq -> id),
+        # oldest first.
         self.keep = {name: jobs.mqtt_retained_jobs for name, jobs in machines.items()}
         self._ended: dict[str, OrderedDict[int, str]] = {name: OrderedDict() for name in self.vars}
 

@@ -190,7 +190,8 @@ class JobQueue(SqliteFile):
             )
             seq = int(cur.lastrowid or 0)
             db.execute(
-                "INSERT INTO transitions (seq, state, previous, reason, ts) VALUES (?, 'RECEIVED', NULL, ?, ?)",
+                "INSERT INTO transitions (seq, state, previous, reason, ts)"
+                " VALUES (?, 'RECEIVED', NULL, ?, ?)",
                 (seq, f"from {user or 'unknown'} via {origin or 'unknown'}", now),
             )
             return self._get(db, seq)
@@ -232,8 +233,8 @@ class JobQueue(SqliteFile):
             earlier = [
                 _job(row)
                 for row in db.execute(
-                    "SELECT * FROM jobs WHERE machine = ? AND sha256 = ? AND seq != ? AND state IN ('QUEUED', 'SENDING')"
-                    " ORDER BY seq",
+                    "SELECT * FROM jobs WHERE machine = ? AND sha256 = ? AND seq != ?"
+                    " AND state IN ('QUEUED', 'SENDING') ORDER BY seq",
                     (job.machine, job.sha256, seq),
                 )
             ]
@@ -356,7 +357,8 @@ class JobQueue(SqliteFile):
     def latest(self, machine: str, state: JobState) -> Job | None:
         with self._lock:
             row = self.db.execute(
-                "SELECT * FROM jobs WHERE machine = ? AND state = ? ORDER BY updated_at DESC, seq DESC LIMIT 1",
+                "SELECT * FROM jobs WHERE machine = ? AND state = ?"
+                " ORDER BY updated_at DESC, seq DESC LIMIT 1",
                 (machine, state.value),
             ).fetchone()
             return _job(row) if row else None
@@ -364,7 +366,8 @@ class JobQueue(SqliteFile):
     def history(self, seq: int) -> builtins.list[Transition]:
         with self._lock:
             rows = self.db.execute(
-                "SELECT t.*, j.machine FROM transitions t JOIN jobs j ON j.seq = t.seq WHERE t.seq = ? ORDER BY t.id",
+                "SELECT t.*, j.machine FROM transitions t JOIN jobs j ON j.seq = t.seq"
+                " WHERE t.seq = ? ORDER BY t.id",
                 (seq,),
             )
             return [_transition(r) for r in rows]
@@ -378,7 +381,8 @@ class JobQueue(SqliteFile):
     def transitions_since(self, last_id: int) -> builtins.list[Transition]:
         with self._lock:
             rows = self.db.execute(
-                "SELECT t.*, j.machine FROM transitions t JOIN jobs j ON j.seq = t.seq WHERE t.id > ? ORDER BY t.id",
+                "SELECT t.*, j.machine FROM transitions t JOIN jobs j ON j.seq = t.seq"
+                " WHERE t.id > ? ORDER BY t.id",
                 (last_id,),
             )
             return [_transition(r) for r in rows]

@@ -1,1 +1,1 @@
-"""Validation of a program before it is queued: the pure pipeline, its compiled reader, the run-time estimate."""
+"""A program's validation before it is queued: the pure pipeline, its compiled reader, its run time."""

@@ -140,7 +140,7 @@ class _FastReader:
         if self.m_table is None:
             self.m_table = bytes(self.m_allowed(str(m)) for m in range(100))
         est = self.est
-        ox, oy, oz = est.offset
+        ox, oy, oz = _known(est.offset)
         return (self.g_table, self.m_table, est.unit, ox, oy, oz, est.rapid, "clamp" in est.once)
 
     def m_allowed(self, m: str) -> bool:
@@ -180,8 +180,9 @@ class _FastReader:
         n = first = last = 0  # fast blocks since the last store, and their first and last lines
         moved = False
         simple = self.simple()
-        unit, (ox, oy, oz) = est.unit, est.offset  # known (not None) whenever `simple`
-        px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed = self.load()  # fmt: skip
+        unit, (ox, oy, oz) = est.unit, _known(est.offset)  # known (not None) whenever `simple`
+        (px, py, pz, lox, loy, loz, hix, hiy, hiz,
+         motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed) = self.load()  # fmt: skip
         for row in rows:
             g, x, y, z, i, j, rr, f, m, _s, other = row
             plain = not other and row != _BLANK
@@ -206,7 +207,7 @@ class _FastReader:
                             done = False  # the general path notes what it assumes
                         elif fe > rapid:
                             fe = rapid
-                if done and mo < 2.0:  # type: ignore[operator]
+                if done and mo < 2.0:
                     square = 0.0
                     if x:
                         d = tx - px
@@ -223,10 +224,10 @@ class _FastReader:
                         rapid_s += length / rapid * 60.0
                     else:
                         cut_mm += length
-                        cut_s += length / fe * 60.0  # type: ignore[operator]
+                        cut_s += length / fe * 60.0
                 elif done:
                     try:
-                        arc = _arc(mo, (px, py, pz), (tx, ty, tz), bool(z), i, j, rr, unit)  # type: ignore[arg-type]
+                        arc = _arc(mo, (px, py, pz), (tx, ty, tz), bool(z), i, j, rr, unit)
                         extremes, length = (arc.extremes(), arc.length) if arc is not None else ((), 0.0)
                     except (ArcProblem, OverflowError, ValueError):
                         arc = None
@@ -241,7 +242,7 @@ class _FastReader:
                             loz = pz if pz < loz else loz
                             hiz = pz if pz > hiz else hiz
                         cut_mm += length
-                        cut_s += length / fe * 60.0  # type: ignore[operator]
+                        cut_s += length / fe * 60.0
                 if done:
                     lox = tx if tx < lox else lox
                     hix = tx if tx > hix else hix
@@ -260,7 +261,8 @@ class _FastReader:
                     continue
             # The general path, with the state as it was before this row.
             if n:
-                self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
+                self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz,
+                           motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
                 n, moved = 0, False
             if not plain:
                 if not pending:
@@ -275,10 +277,12 @@ class _FastReader:
             line += 1
             simple = self.simple()
             if simple:
-                unit, (ox, oy, oz) = est.unit, est.offset
-                px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed = self.load()  # fmt: skip
+                unit, (ox, oy, oz) = est.unit, _known(est.offset)
+                (px, py, pz, lox, loy, loz, hix, hiy, hiz,
+                 motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed) = self.load()  # fmt: skip
         if n:
-            self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz, motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
+            self.store(n, first, last, moved, px, py, pz, lox, loy, loz, hix, hiy, hiz,
+                       motion, feed, cut_mm, rapid_mm, cut_s, rapid_s, timed)  # fmt: skip
         if pending:
             self.general(pending, pending_line)
 
@@ -293,7 +297,9 @@ class _FastReader:
     def store(self, n: int, first: int, last: int, moved: bool, *state: Any) -> None:
         """Write the locals of `rows` back: n fast blocks read, lines first to last."""
         est, asm, reading = self.est, self.reading.assembler, self.reading
-        px, py, pz, lox, loy, loz, hix, hiy, hiz, est.motion, est.feed, est.cut_mm, est.rapid_mm, est.cut_s, est.rapid_s, est.timed = state  # fmt: skip
+        (px, py, pz, lox, loy, loz, hix, hiy, hiz,
+         est.motion, est.feed, est.cut_mm, est.rapid_mm,
+         est.cut_s, est.rapid_s, est.timed) = state  # fmt: skip
         est.pos = [px, py, pz]
         est.lo = [lox, loy, loz]
         est.hi = [hix, hiy, hiz]
@@ -308,6 +314,13 @@ class _FastReader:
 
 
 Point3 = tuple[float, float, float]
+
+
+def _known(offset: list[float | None]) -> tuple[float, float, float]:
+    """The G92 offsets while `simple()` holds, which it does only when none is unknown."""
+    ox, oy, oz = offset
+    assert ox is not None and oy is not None and oz is not None
+    return ox, oy, oz
 
 
 def _arc(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import cast
 
 from gateway.codecs.gcode import Block, GcodeError, Plain, Program, format_number, parse_program
 from gateway.config.validation import ValidationRules
@@ -153,8 +154,9 @@ class Reading:
                 block_delete = False
                 block = None
             else:
-                line, block_delete, block = item.line, item.block_delete, item  # type: ignore[union-attr]
-                pairs = [(w.letter, w.value) for w in item.words]  # type: ignore[union-attr]
+                block = cast(Block, item)  # take() turned errors away; a Plain is a tuple
+                line, block_delete = block.line, block.block_delete
+                pairs = [(w.letter, w.value) for w in block.words]
             estimate(line, pairs, block_delete)
             if not pairs:
                 continue

@@ -42,7 +42,7 @@ class UploadCheck:
 
     @property
     def changed(self) -> bool:
-        """Whether the program to deliver differs from the upload (XON/XOFF bytes stripped); after `verdict`."""
+        """Whether the program to deliver differs from the upload (XON/XOFF stripped); after `verdict`."""
         return self._check.changed
 
     async def feed(self, block: bytes) -> None:
@@ -59,7 +59,7 @@ class UploadCheck:
                 self._batch, self._running = [], deque()
 
     async def verdict(self, filename: str) -> Verdict:
-        """The verdict for everything fed, as `filename` (its `program` is empty). Raises what the check raised."""
+        """The verdict for all that was fed, as `filename` (`program` empty). Raises what the check raised."""
         if self._failed is not None:
             raise self._failed
         await self._hand_over()

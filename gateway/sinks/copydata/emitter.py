@@ -214,7 +214,7 @@ class Emitter:
                     pending.pop(node, None)
 
     async def emit(self, sub: Subscription[VariableNode]) -> None:
-        """The emit loop: changes to frames to channels, until cancelled (run() runs it beside the transport)."""
+        """The emit loop: changes to frames to channels until cancelled; run() runs it by the transport."""
         pending = self._pending
         limiter = self.limiter
         single = self.target.mode == "single"

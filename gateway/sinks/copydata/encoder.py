@@ -83,7 +83,8 @@ class TargetEncoder:
         except struct.error:
             self._failed(
                 node,
-                f"{len(data)} bytes do not fit a {layout.len_width}-byte length field (max {layout.max_length})",
+                f"{len(data)} bytes do not fit a {layout.len_width}-byte length field "
+                f"(max {layout.max_length})",
             )
             return None
         if len(header) + len(data) > layout.max_cbdata:

@@ -79,7 +79,7 @@ class Feedback:
         self.refused = 0
 
     def report_writers(self) -> None:
-        """Say at start-up what replies may write, with which role; or that they are refused for want of one."""
+        """Say at start-up what replies may write, with which role, or that they are refused (no role)."""
         if not self.accept_writes:
             return
         access = self.machine.tree.access
@@ -160,8 +160,8 @@ class Feedback:
 
     def _log_refusal(self, peer: str, what: str, reason: str, status: str) -> None:
         self.throttle.log(
-            f"copydata {self.name} refusals", logging.WARNING, "copydata %s: write of %s from %s refused: %s (%s)",
-            self.name, what, peer, reason, status,
+            f"copydata {self.name} refusals", logging.WARNING,
+            "copydata %s: write of %s from %s refused: %s (%s)", self.name, what, peer, reason, status,
         )  # fmt: skip
 
 

@@ -262,7 +262,8 @@ class TcpServerTransport:
             self.refused += 1
             emitter.throttle.log(
                 f"copydata {emitter.name} refused", logging.WARNING,
-                "copydata %s: refusing %s: already serving max_clients=%d", emitter.name, peer, self.target.max_clients,
+                "copydata %s: refusing %s: already serving max_clients=%d",
+                emitter.name, peer, self.target.max_clients,
             )  # fmt: skip
             writer.transport.abort()
             return

@@ -107,7 +107,8 @@ class UdpTransport:
             self.bad_replies += 1
             emitter.throttle.log(
                 f"copydata {emitter.name} malformed", logging.WARNING,
-                "copydata %s: dropping a datagram from %s: malformed frame (%s): %s", emitter.name, peer, exc.kind, exc,
+                "copydata %s: dropping a datagram from %s: malformed frame (%s): %s",
+                emitter.name, peer, exc.kind, exc,
             )  # fmt: skip
             return
         try:

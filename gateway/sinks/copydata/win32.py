@@ -168,7 +168,7 @@ class CopydataSender:
             self.timeout_ms,
             ctypes.pointer(result),
         )
-        # `buffer` and `cds` are still referenced here, so they stayed alive (and in place) for the whole call.
+        # `buffer` and `cds` are still referenced here: they stayed alive (and in place) for the whole call.
         del buffer, cds
         if ok:
             return int(result.value)
@@ -477,7 +477,8 @@ class Win32Transport:
                     delay = backoff.next()
                     emitter.throttle.log(
                         f"copydata {emitter.name} timeouts", logging.WARNING,
-                        "copydata %s: %s; trying again in %.1f s, starting from a snapshot", emitter.name, failure, delay,
+                        "copydata %s: %s; trying again in %.1f s, starting from a snapshot",
+                        emitter.name, failure, delay,
                     )  # fmt: skip
                     channel.request_snapshot()
                     await asyncio.sleep(delay)
@@ -501,7 +502,8 @@ class Win32Transport:
             except CopydataError as exc:
                 emitter.throttle.log(
                     f"copydata {emitter.name} malformed", logging.WARNING,
-                    "copydata %s: WM_COPYDATA from %s ignored: malformed frame (%s): %s", emitter.name, peer, exc.kind, exc,
+                    "copydata %s: WM_COPYDATA from %s ignored: malformed frame (%s): %s",
+                    emitter.name, peer, exc.kind, exc,
                 )  # fmt: skip
                 continue
             await emitter.on_frame(frame, peer)

@@ -18,6 +18,7 @@ gateway.sqlite_file) so that a restart does not lose it.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sqlite3
 from collections import deque
@@ -274,10 +275,8 @@ class Journal:
     def _close_file(self) -> None:
         file, self._file, self._db = self._file, None, None
         if file is not None:
-            try:
+            with contextlib.suppress(sqlite3.Error):
                 file.close()
-            except sqlite3.Error:
-                pass
 
     def load(self) -> list[Message]:
         if self._db is None:

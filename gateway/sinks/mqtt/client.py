@@ -32,7 +32,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode, MQTTProtocolVersion
@@ -41,6 +41,9 @@ from paho.mqtt.properties import Properties
 
 from gateway.config.mqtt import MqttTls
 from gateway.errors import BrokerError, BrokerRefused, SinkError
+
+# paho's Properties() has no annotations, which mypy --strict will not call; this is its signature.
+_properties = cast(Callable[[int], Properties], Properties)
 
 log = logging.getLogger(__name__)
 
@@ -411,7 +414,7 @@ class MqttClient:
         """Queue one message on the socket; returns its message id (for `on_published`)."""
         props = None
         if correlation_data is not None and self.v5:
-            props = Properties(PacketTypes.PUBLISH)
+            props = _properties(PacketTypes.PUBLISH)
             props.CorrelationData = correlation_data
         try:
             info = self._client.publish(topic, payload, qos, retain, props)
@@ -429,7 +432,7 @@ class MqttClient:
         if not filters:
             return
         rc, mid = self._client.subscribe([(f, qos) for f in filters])
-        if rc != MQTTErrorCode.MQTT_ERR_SUCCESS:
+        if rc != MQTTErrorCode.MQTT_ERR_SUCCESS or mid is None:
             raise BrokerError(f"cannot subscribe: {paho.error_string(rc)}")
         self._pending_subs[mid] = filters
 
@@ -459,7 +462,7 @@ class MqttClient:
         client.disconnect()
         deadline = loop.time() + timeout
         # paho closes the socket once DISCONNECT is written; give the writer a few turns.
-        while self._sock is not None and loop.time() < deadline:
+        while self._sock is not None and loop.time() < deadline:  # noqa: ASYNC110 - paho's socket has no event
             await asyncio.sleep(0.01)
         self._drop_socket()
 
@@ -480,10 +483,8 @@ def _resolve(fut: asyncio.Future[BaseException | None], error: BaseException | N
 
 def _close_quietly(sock: Any) -> None:
     if sock is not None:
-        try:
+        with contextlib.suppress(OSError):
             sock.close()
-        except OSError:
-            pass
 
 
 def _reason_text(reason: Any) -> str:

@@ -1,4 +1,4 @@
-"""Command requests: `<prefix>/<machine>/commands/<name>` runs a mapped command, the answer goes to `…/result`.
+"""Command requests: `<prefix>/<machine>/commands/<name>` runs a mapped command, answered on `…/result`.
 
 The body is a JSON object with the command's arguments by name and an optional
 `correlation_id`, which the answer repeats: `{"name": "part.nc",
@@ -6,8 +6,10 @@ The body is a JSON object with the command's arguments by name and an optional
 response topic and correlation data are used, as for writes. Every request gets
 exactly one answer:
 
-    {"ok": true,  "status": "Good", "reason": "Machine/State is 1 (Running)", "result": …, "duration_ms": 312.5, …}
-    {"ok": false, "status": "BadTimeout", "error": "start: no completion within 5 s …", "reason": …, "duration_ms": …}
+    {"ok": true,  "status": "Good", "reason": "Machine/State is 1 (Running)", "result": …,
+     "duration_ms": 312.5, …}
+    {"ok": false, "status": "BadTimeout", "error": "start: no completion within 5 s …", "reason": …,
+     "duration_ms": …}
 
 What can be refused without the controller (unknown machine or command, commands
 not enabled for the machine, a retained request, an oversized or malformed body,
@@ -95,9 +97,10 @@ def read_body(payload: bytes) -> dict[str, Any]:
         body = json.loads(text)
     except RecursionError:
         raise MalformedRequest("malformed JSON: nested too deeply") from None
-    except ValueError as exc:
-        where = f" at character {exc.pos}" if isinstance(getattr(exc, "pos", None), int) else ""
-        raise MalformedRequest(f"malformed JSON: {getattr(exc, 'msg', exc)}{where}") from None
+    except json.JSONDecodeError as exc:
+        raise MalformedRequest(f"malformed JSON: {exc.msg} at character {exc.pos}") from None
+    except ValueError as exc:  # json's other refusals (an integer too long to convert, say)
+        raise MalformedRequest(f"malformed JSON: {exc}") from None
     if not isinstance(body, dict):
         raise MalformedRequest('expected a JSON object with the arguments by name, e.g. {"name": "part.nc"}')
     return body
@@ -223,7 +226,8 @@ class CommandRequests:
                 raise UnknownCommand(f"{machine.name} has no command {name!r} (it has {known})")
             if len(msg.payload) > self.cfg.max_set_payload:
                 raise MalformedRequest(
-                    f"the body has {len(msg.payload)} bytes, more than the {self.cfg.max_set_payload} allowed",
+                    f"the body has {len(msg.payload)} bytes, "
+                    f"more than the {self.cfg.max_set_payload} allowed",
                     status="BadRequestTooLarge",
                 )
             body = read_body(msg.payload)
@@ -232,7 +236,8 @@ class CommandRequests:
             mqtt = mapping.mqtt if mapping is not None else None
             if mqtt is None or not mqtt.commands:
                 raise AccessDenied(
-                    f"commands over MQTT are not enabled for {machine.name} (mapping: mqtt: {{commands: true}})"
+                    f"commands over MQTT are not enabled for {machine.name} "
+                    "(mapping: mqtt: {commands: true})"
                 )
             args = arguments(method, body)
             try:
@@ -241,7 +246,8 @@ class CommandRequests:
                 )
             except asyncio.QueueFull:
                 raise TooManyWrites(
-                    f"{self.cfg.max_pending_writes} commands for {machine.name} are already waiting; try again"
+                    f"{self.cfg.max_pending_writes} commands for {machine.name} are already waiting; "
+                    "try again"
                 ) from None
         except RequestError as exc:
             if machine is not None and method is not None:  # known commands only: junk is not worth an entry
@@ -253,10 +259,13 @@ class CommandRequests:
         return WriteContext("mqtt", user=None, role=self.tree.access.mqtt_role(machine.name))
 
     def _reply_topic(self, topic: str, requested: str | None) -> str:
-        """The v5 response topic when usable (under our prefix only a …/result topic), else `<topic>/result`."""
-        if requested and valid_publish_topic(requested):
-            if not requested.startswith(self.prefix + "/") or requested.endswith(f"/{RESULT}"):
-                return requested
+        """The v5 response topic if usable (under our prefix only a …/result topic), else `<topic>/result`."""
+        if (
+            requested
+            and valid_publish_topic(requested)
+            and (not requested.startswith(self.prefix + "/") or requested.endswith(f"/{RESULT}"))
+        ):
+            return requested
         return f"{topic}/{RESULT}"
 
     def _refuse(

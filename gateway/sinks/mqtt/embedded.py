@@ -48,7 +48,7 @@ class EmbeddedBroker:
         broker = Broker(config)
         try:
             await broker.start()
-        except Exception as exc:  # amqtt wraps socket errors in its own BrokerError
+        except Exception as exc:  # noqa: BLE001 - amqtt raises its own BrokerError and others, untyped
             raise SinkError(
                 f"cannot start the embedded MQTT broker on {self.host}:{self.port}: {exc}"
             ) from None

@@ -99,7 +99,8 @@ def encode_raw(value: Any) -> bytes:
     """The value alone as text: `12.5`, `true`, `part.nc`, `[1,2]`, an ISO time."""
     t = type(value)
     if t is str:
-        return value.encode()
+        text: str = value
+        return text.encode()
     if isinstance(value, datetime):
         return iso(value).encode()
     return json_text(value).encode()

@@ -216,12 +216,14 @@ class MqttSink:
         """Deliver what is waiting (briefly), then say offline, then disconnect cleanly."""
         loop = asyncio.get_running_loop()
         deadline = loop.time() + SHUTDOWN_FLUSH
-        while (self._inflight or self.backlog) and self._online and loop.time() < deadline:
+        # Polls for at most SHUTDOWN_FLUSH while stopping: paho's acknowledgements come by callback, with no
+        # event to wait for.
+        while (self._inflight or self.backlog) and self._online and loop.time() < deadline:  # noqa: ASYNC110
             await asyncio.sleep(0.02)
         payload = gateway_offline(__version__, "gateway stopped", utcnow())
         self._publish_now(self.routes.status_topic, payload, 1, True, None, True)
         deadline = loop.time() + SHUTDOWN_FLUSH / 2
-        while self._inflight and self._online and loop.time() < deadline:
+        while self._inflight and self._online and loop.time() < deadline:  # noqa: ASYNC110 - as above
             await asyncio.sleep(0.01)
         await client.disconnect()
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
+from gateway.errors import SinkError
+
 _UNSAFE = re.compile(r"[+#/\x00\s]")
 MAX_TOPIC_BYTES = 65535
 
@@ -20,7 +22,7 @@ RESULT = "result"
 STATUS = "status"
 
 
-class TopicClash(ValueError):
+class TopicClash(SinkError):
     """Two variables (or a variable and a gateway topic) would publish to the same topic."""
 
 

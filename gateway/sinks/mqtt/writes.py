@@ -196,9 +196,12 @@ class WriteBack:
         A response topic under our own prefix must be a result topic: a client may
         not make the gateway publish onto its own value or status topics.
         """
-        if requested and valid_publish_topic(requested):
-            if not requested.startswith(self._own_prefix) or requested.endswith("/set/result"):
-                return requested
+        if (
+            requested
+            and valid_publish_topic(requested)
+            and (not requested.startswith(self._own_prefix) or requested.endswith("/set/result"))
+        ):
+            return requested
         return result_topic(target)
 
     def _refuse(self, target: str, reply: str, corr: bytes | None, exc: RequestError) -> None:

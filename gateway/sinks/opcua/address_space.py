@@ -20,6 +20,7 @@ from asyncua import ua
 
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import TypeSpec
+from gateway.shims.ua import NULL_ARRAY, new_node_id
 from gateway.sinks.opcua.values import (
     SCALAR,
     array_dimensions,
@@ -40,17 +41,17 @@ INTERNAL_OBJECTS: dict[str, str] = {
     "Commands": "Commands to the machine",
 }
 
-OBJECTS_FOLDER = ua.NodeId(ua.ObjectIds.ObjectsFolder, 0)
-FOLDER_TYPE = ua.NodeId(ua.ObjectIds.FolderType, 0)
-BASE_OBJECT_TYPE = ua.NodeId(ua.ObjectIds.BaseObjectType, 0)
-BASE_DATA_VARIABLE_TYPE = ua.NodeId(ua.ObjectIds.BaseDataVariableType, 0)
-ANALOG_ITEM_TYPE = ua.NodeId(ua.ObjectIds.AnalogItemType, 0)
-PROPERTY_TYPE = ua.NodeId(ua.ObjectIds.PropertyType, 0)
-ORGANIZES = ua.NodeId(ua.ObjectIds.Organizes, 0)
-HAS_COMPONENT = ua.NodeId(ua.ObjectIds.HasComponent, 0)
-HAS_PROPERTY = ua.NodeId(ua.ObjectIds.HasProperty, 0)
-EU_INFORMATION_TYPE = ua.NodeId(ua.ObjectIds.EUInformation, 0)
-RANGE_TYPE = ua.NodeId(ua.ObjectIds.Range, 0)
+OBJECTS_FOLDER = new_node_id(ua.ObjectIds.ObjectsFolder, 0)
+FOLDER_TYPE = new_node_id(ua.ObjectIds.FolderType, 0)
+BASE_OBJECT_TYPE = new_node_id(ua.ObjectIds.BaseObjectType, 0)
+BASE_DATA_VARIABLE_TYPE = new_node_id(ua.ObjectIds.BaseDataVariableType, 0)
+ANALOG_ITEM_TYPE = new_node_id(ua.ObjectIds.AnalogItemType, 0)
+PROPERTY_TYPE = new_node_id(ua.ObjectIds.PropertyType, 0)
+ORGANIZES = new_node_id(ua.ObjectIds.Organizes, 0)
+HAS_COMPONENT = new_node_id(ua.ObjectIds.HasComponent, 0)
+HAS_PROPERTY = new_node_id(ua.ObjectIds.HasProperty, 0)
+EU_INFORMATION_TYPE = new_node_id(ua.ObjectIds.EUInformation, 0)
+RANGE_TYPE = new_node_id(ua.ObjectIds.Range, 0)
 
 READ = ua.AccessLevel.CurrentRead.mask
 READ_WRITE = ua.AccessLevel.CurrentRead.mask | ua.AccessLevel.CurrentWrite.mask
@@ -83,7 +84,7 @@ class AddressSpacePlan:
     # --- ids -------------------------------------------------------------------------------------
 
     def id(self, text: str) -> ua.NodeId:
-        return ua.NodeId(text, self.ns)
+        return new_node_id(text, self.ns)
 
     def machine_id(self, machine: str) -> ua.NodeId:
         return self.id(machine)
@@ -203,7 +204,7 @@ class AddressSpacePlan:
         self.owned.add(nodeid)
 
     def _property(self, parent: ua.NodeId, name: str, value: object, data_type: ua.NodeId) -> None:
-        nodeid = ua.NodeId(f"{parent.Identifier}/{name}", self.ns)
+        nodeid = new_node_id(f"{parent.Identifier!s}/{name}", self.ns)
         attrs = ua.VariableAttributes(
             DisplayName=ua.LocalizedText(name),
             Description=_NO_TEXT,
@@ -212,7 +213,7 @@ class AddressSpacePlan:
             Value=ua.Variant(value, ua.VariantType.ExtensionObject),
             DataType=data_type,
             ValueRank=SCALAR,
-            ArrayDimensions=None,
+            ArrayDimensions=NULL_ARRAY,
             AccessLevel=READ,
             UserAccessLevel=READ,
             MinimumSamplingInterval=0,

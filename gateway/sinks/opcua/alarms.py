@@ -41,6 +41,7 @@ from gateway.alarms.service import AlarmService
 from gateway.errors import CallError, RequestError
 from gateway.model.context import WriteContext
 from gateway.model.sample import utcnow
+from gateway.shims.ua import new_node_id
 from gateway.sinks.opcua.address_space import HAS_COMPONENT
 from gateway.sinks.opcua.conditions import (
     ACKNOWLEDGE,
@@ -61,7 +62,7 @@ from gateway.sinks.opcua.values import status_code
 log = logging.getLogger(__name__)
 
 OBJECT = "Alarms"
-BASE_OBJECT_TYPE = ua.NodeId(ua.ObjectIds.BaseObjectType)
+BASE_OBJECT_TYPE = new_node_id(ua.ObjectIds.BaseObjectType)
 EVENT_IDS_KEPT = 32  # recent EventIds per condition that Acknowledge/Confirm accept
 
 
@@ -110,7 +111,9 @@ class OpcUaAlarms:
             machine_id = server.machine_node_id(name)
             self._notifiers[name] = machine_id
             await server.add_event_notifier(machine_id)
-            await server.add_nodes([_object_item(ua.NodeId(f"{name}/{OBJECT}", ns), machine_id, OBJECT, ns)])
+            await server.add_nodes(
+                [_object_item(new_node_id(f"{name}/{OBJECT}", ns), machine_id, OBJECT, ns)]
+            )
             for record in manager.retained():
                 condition = await self._condition(manager, record)
                 condition.last = self._event(condition, record, record.raised_at, True)
@@ -127,8 +130,8 @@ class OpcUaAlarms:
             return self._conditions[nodeid]
         ns = self.server.namespace_index
         name = manager.name
-        nodeid = ua.NodeId(f"{name}/{OBJECT}/{record.occurrence}", ns)
-        parent = ua.NodeId(f"{name}/{OBJECT}", ns)
+        nodeid = new_node_id(f"{name}/{OBJECT}/{record.occurrence}", ns)
+        parent = new_node_id(f"{name}/{OBJECT}", ns)
         await self.server.add_nodes([_condition_item(nodeid, parent, record, ns)])
         ids = ConditionIds(nodeid, self._notifiers[name], name)
         condition = _Condition(manager, record.occurrence, ids, record.severity)
@@ -188,7 +191,7 @@ class OpcUaAlarms:
         self._by_occurrence.pop(condition.occurrence, None)
         try:
             await self.server.delete_nodes([nodeid])
-        except Exception as exc:  # a node left behind is untidy, not harmful
+        except Exception as exc:  # noqa: BLE001 - asyncua raises anything; a node left behind is only untidy
             log.warning("cannot remove the ended alarm condition %s: %s", nodeid.to_string(), exc)
 
     # --- Acknowledge and Confirm -------------------------------------------------------------

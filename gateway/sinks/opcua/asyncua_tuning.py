@@ -1,18 +1,7 @@
-"""One asyncua habit the gateway cannot afford: a deep copy of every value, per subscribed item, per change.
+"""asyncua's server made lighter on memory: nodes whose constant attributes are equal share them.
 
-For every value written to a node that a client monitors, asyncua's server calls
-`MonitoredItemValues.set_current_datavalue`, which keeps a `copy.deepcopy` of the
-DataValue, so that a caller who mutates a value after writing it cannot change
-what the next change is compared against. Profiles of the mirror benchmark
-(bench/README.md) put that copy at about half of the gateway's CPU time per
-change when one client subscribes, more than everything else the gateway does
-for the change together.
-
-Nobody here mutates a written DataValue: the OPC UA sink builds a fresh one for
-every write (gateway/sinks/opcua/values.py), and so do asyncua's own writes and
-the simulator. `keep_written_values()` makes asyncua keep a reference instead of
-a copy. It is process-wide (asyncua has no per-server hook), idempotent, and
-leaves the comparison itself (value, status, timestamps) exactly as it was.
+(Its other costly habit, a deep copy of every value per subscribed item, is dropped by
+gateway/shims/asyncua_server.py's `keep_written_values`, which the simulator uses too.)
 """
 
 from __future__ import annotations
@@ -20,24 +9,6 @@ from __future__ import annotations
 from typing import Any
 
 from asyncua import ua
-
-_MARK = "_cnc_gateway_keeps_reference"
-
-
-def keep_written_values() -> None:
-    """Replace asyncua's deep copy of each monitored value by a reference (once per process)."""
-    from asyncua.server.monitored_item_service import MonitoredItemValues
-
-    if getattr(MonitoredItemValues, _MARK, False):
-        return
-
-    def set_current_datavalue(self: Any, cur_val: Any) -> None:
-        self.old_dvalue = self.current_dvalue
-        self.current_dvalue = cur_val
-
-    MonitoredItemValues.set_current_datavalue = set_current_datavalue  # type: ignore[method-assign]
-    setattr(MonitoredItemValues, _MARK, True)
-
 
 #: Attributes whose values are the same on thousands of nodes and are replaced, never changed in place,
 #: when anything sets them (AddressSpace.set_attribute_value assigns a new DataValue).
@@ -82,7 +53,7 @@ class SharedAttributes:
         self._canonical: dict[tuple[Any, ...], Any] = {}
 
     def share(self, nodeids: Any = None) -> int:
-        """Share the constant attributes of these nodes (all nodes if None); how many DataValues were dropped."""
+        """Share the constant attributes of these nodes (all if None); how many DataValues were dropped."""
         nodes = self._nodes
         targets = list(nodes.values()) if nodeids is None else [nodes[n] for n in nodeids if n in nodes]
         canonical, dropped = self._canonical, 0

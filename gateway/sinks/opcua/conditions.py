@@ -24,15 +24,16 @@ from asyncua.common.events import Event
 
 from gateway.alarms.records import AlarmRecord, Quality
 from gateway.model.sample import utcnow
+from gateway.shims.ua import new_node_id, new_status_code
 
-SERVER = ua.NodeId(ua.ObjectIds.Server)
-ALARM_CONDITION_TYPE = ua.NodeId(ua.ObjectIds.AlarmConditionType)
-PROCESS_CLASS = ua.NodeId(ua.ObjectIds.ProcessConditionClassType)
-ACKNOWLEDGE = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
-CONFIRM = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Confirm)
-CONDITION_REFRESH = ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh)
-CONDITION_REFRESH2 = ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh2)
-HAS_NOTIFIER = ua.NodeId(ua.ObjectIds.HasNotifier)
+SERVER = new_node_id(ua.ObjectIds.Server)
+ALARM_CONDITION_TYPE = new_node_id(ua.ObjectIds.AlarmConditionType)
+PROCESS_CLASS = new_node_id(ua.ObjectIds.ProcessConditionClassType)
+ACKNOWLEDGE = new_node_id(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
+CONFIRM = new_node_id(ua.ObjectIds.AcknowledgeableConditionType_Confirm)
+CONDITION_REFRESH = new_node_id(ua.ObjectIds.ConditionType_ConditionRefresh)
+CONDITION_REFRESH2 = new_node_id(ua.ObjectIds.ConditionType_ConditionRefresh2)
+HAS_NOTIFIER = new_node_id(ua.ObjectIds.HasNotifier)
 
 QUALITY_CODES: dict[Quality, int] = {
     Quality.GOOD: ua.StatusCodes.Good,
@@ -110,7 +111,7 @@ def condition_event(
     e.Retain = retained
     e.SupportsFilteredRetain = False
     _two_state(event, "EnabledState", True, "Enabled", "Disabled", None)
-    e.Quality = ua.StatusCode(QUALITY_CODES[record.quality])
+    e.Quality = new_status_code(QUALITY_CODES[record.quality])
     setattr(e, "Quality/SourceTimestamp", time)
     e.LastSeverity = record.severity if last_severity is None else last_severity
     e.Comment = ua.LocalizedText(comment or record.confirm_comment or record.ack_comment)

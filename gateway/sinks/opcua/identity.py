@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.user_managers import UserManager
 
 from gateway.auth.users import UserDirectory
 from gateway.model.access import AccessPolicy
@@ -44,7 +45,7 @@ class SessionUser(User):
     role_name: str | None = None
 
 
-class GatewayUserManager:
+class GatewayUserManager(UserManager):
     """asyncua user manager (`get_user` is called synchronously from ActivateSession)."""
 
     def __init__(self, directory: UserDirectory) -> None:

@@ -29,6 +29,7 @@ from gateway.errors import CallError, RequestError
 from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
 from gateway.model.tree import Machine
+from gateway.shims.ua import new_node_id
 from gateway.sinks.opcua.address_space import HAS_COMPONENT, HAS_PROPERTY, PROPERTY_TYPE, AddressSpacePlan
 from gateway.sinks.opcua.values import (
     ValueMismatch,
@@ -41,7 +42,7 @@ from gateway.sinks.opcua.values import (
 
 log = logging.getLogger(__name__)
 
-ARGUMENT_TYPE = ua.NodeId(ua.ObjectIds.Argument, 0)
+ARGUMENT_TYPE = new_node_id(ua.ObjectIds.Argument, 0)
 ORIGIN = "opcua"
 
 
@@ -51,7 +52,7 @@ def plan_methods(plan: AddressSpacePlan, machines: Iterable[Machine]) -> list[tu
     for machine in machines:
         for method in machine.methods.values():
             parent = plan.add_object(machine, method.object)
-            nodeid = plan.id(f"{parent.Identifier}/{method.name}")
+            nodeid = plan.id(f"{parent.Identifier!s}/{method.name}")
             plan.add_item(method_item(nodeid, parent, method, plan.ns))
             if method.inputs:
                 plan.add_item(arguments_item(nodeid, "InputArguments", method.inputs, plan.ns))
@@ -109,7 +110,7 @@ def arguments_item(method_id: ua.NodeId, name: str, args: Sequence[Argument], ns
     return ua.AddNodesItem(
         ParentNodeId=method_id,
         ReferenceTypeId=HAS_PROPERTY,
-        RequestedNewNodeId=ua.NodeId(f"{method_id.Identifier}/{name}", ns),
+        RequestedNewNodeId=new_node_id(f"{method_id.Identifier!s}/{name}", ns),
         BrowseName=ua.QualifiedName(name, 0),
         NodeClass=ua.NodeClass.Variable,
         NodeAttributes=attrs,
@@ -132,7 +133,7 @@ def check_inputs(
         return None, ua.CallMethodResult(StatusCode=_status("BadTooManyArguments"))
     results: list[ua.StatusCode] = []
     values: list[Any] = []
-    for arg, variant in zip(expected, inputs):
+    for arg, variant in zip(expected, inputs, strict=True):
         kind = value_kind(arg.type)
         is_array = bool(getattr(variant, "is_array", False)) or isinstance(variant.Value, (list, tuple))
         if (
@@ -157,7 +158,7 @@ def encode_outputs(method: Method, outputs: Sequence[Any]) -> list[ua.Variant]:
         raise ValueMismatch(
             f"{method.object}.{method.name} returned {len(outputs)} outputs, declares {len(method.outputs)}"
         )
-    return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs)]
+    return [value_kind(arg.type).variant(value) for arg, value in zip(method.outputs, outputs, strict=True)]
 
 
 class ArgumentsRefused(CallError):

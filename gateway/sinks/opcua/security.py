@@ -44,6 +44,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from gateway.config.security import is_secure
 from gateway.errors import SinkError
+from gateway.shims.ua import new_status_code
 
 log = logging.getLogger(__name__)
 
@@ -201,7 +202,7 @@ class ClientCertificates:
             if not self._trusted(cert):
                 raise ServiceError(ua.StatusCodes.BadCertificateUntrusted)
         except ServiceError as exc:
-            await asyncio.to_thread(self._reject, cert, app, ua.StatusCode(exc.code).name)
+            await asyncio.to_thread(self._reject, cert, app, new_status_code(exc.code).name)
             raise
 
     def _trusted(self, cert: x509.Certificate) -> bool:

@@ -46,8 +46,10 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.shims.asyncua_server import keep_written_values
+from gateway.shims.ua import new_node_id, new_status_code
 from gateway.sinks.opcua.address_space import AddressSpacePlan
-from gateway.sinks.opcua.asyncua_tuning import SharedAttributes, keep_written_values
+from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -65,14 +67,17 @@ from gateway.sinks.opcua.writes import write_node
 
 log = logging.getLogger(__name__)
 
+# The caller AttributeService.write assumes when it is given none (asyncua's own default: every right).
+_ADMIN = User(role=UserRole.Admin)
+
 ADD_BATCH = 2000  # AddNodesItems per call; the loop gets a turn between batches
 YIELD_EVERY = 1000  # value writes between turns for the rest of the loop
 # Notifications kept per monitored item for a client that does not collect them; a client's "0: as many as
 # you allow" is revised to this. asyncua's own cap, 10,000, lets one stalled client (no Publish requests)
 # hold about 270 bytes x 10,000 x every variable it watches (tests/integration/drills/test_slow_consumers.py).
 MAX_QUEUE_PER_ITEM = 100
-SERVER_OBJECT = ua.NodeId(ua.ObjectIds.Server)
-HAS_NOTIFIER = ua.NodeId(ua.ObjectIds.HasNotifier)
+SERVER_OBJECT = new_node_id(ua.ObjectIds.Server)
+HAS_NOTIFIER = new_node_id(ua.ObjectIds.HasNotifier)
 
 # The session user of the Call request being served: asyncua does not pass it to method callbacks.
 _CALLER: ContextVar[Any] = ContextVar("opcua_caller", default=None)
@@ -233,9 +238,7 @@ class _GatewayAttributeService(AttributeService):
                     results[index] = answer
         return results
 
-    async def write(
-        self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)
-    ) -> list[ua.StatusCode]:
+    async def write(self, params: ua.WriteParameters, user: User = _ADMIN) -> list[ua.StatusCode]:
         owned = self._sink._owned
         items = params.NodesToWrite
         if user is self._internal_user or not any(wv.NodeId in owned for wv in items):
@@ -245,11 +248,11 @@ class _GatewayAttributeService(AttributeService):
         others = [(i, wv) for i, wv in enumerate(items) if wv.NodeId not in owned]
         if others:
             theirs = await super().write(ua.WriteParameters(NodesToWrite=[wv for _, wv in others]), user)
-            for (i, _), status in zip(others, theirs):
+            for (i, _), status in zip(others, theirs, strict=True):
                 results[i] = status
         name, role = self._sink.user_name(user), self._sink.user_role(user)
         statuses = await asyncio.gather(*(self._sink._client_write(wv, name, role) for _, wv in ours))
-        for (i, _), status in zip(ours, statuses):
+        for (i, _), status in zip(ours, statuses, strict=True):
             results[i] = status
         return results
 
@@ -319,10 +322,11 @@ class OpcUaSink:
         for start in range(0, len(items), ADD_BATCH):
             chunk = list(items[start : start + ADD_BATCH])
             results = await isession.add_nodes(chunk)
-            for item, result in zip(chunk, results):
+            for item, result in zip(chunk, results, strict=True):
                 if not result.StatusCode.is_good():
                     raise SinkError(
-                        f"OPC UA server refused node {item.RequestedNewNodeId.to_string()}: {result.StatusCode.name}"
+                        f"OPC UA server refused node {item.RequestedNewNodeId.to_string()}: "
+                        f"{result.StatusCode.name}"
                     )
                 added.append(result.AddedNodeId)
             if self._shared is not None:
@@ -415,14 +419,15 @@ class OpcUaSink:
     async def _start(self) -> None:
         self._vars, self._by_id, self._owned = {}, {}, set()
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
-        keep_written_values()  # no deep copy of every value per subscribed item (asyncua_tuning.py)
+        keep_written_values()  # no deep copy of every value per subscribed item (shims/asyncua_server.py)
         server = Server()
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
         server.manufacturer_name = "cnc-gateway"
         await server.init()
         self._shared = SharedAttributes(server)
-        self._shared.share()  # the standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py)
+        # The standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py).
+        self._shared.share()
         await server.set_application_uri(self.application_uri)
         await server.set_build_info(
             server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()
@@ -546,7 +551,7 @@ class OpcUaSink:
         try:
             plan.add_variable(node)
             await self.add_nodes(plan.take())
-        except Exception as exc:  # a refused node must not stop the value loop
+        except Exception as exc:  # noqa: BLE001 - a refused node, whatever asyncua raised, must not stop the loop
             self._unplaceable.add(node)
             log.error("cannot add %s to the OPC UA address space: %s", node.full_path, exc)
             return None
@@ -624,7 +629,7 @@ class OpcUaSink:
     async def _client_write(self, wv: ua.WriteValue, user: str | None, role: str | None) -> ua.StatusCode:
         var = self._by_id.get(wv.NodeId)
         if var is None:  # one of our folders, objects or properties
-            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+            return new_status_code(ua.StatusCodes.BadNotWritable)
         status = await write_node(var.node, var.kind, wv, user, role)
         if status.is_good():  # read-your-writes: the controller's read-back is served before the answer
             await self._push([(var.node, var.node.sample)])

@@ -14,8 +14,10 @@ from typing import Any
 
 from asyncua import ua
 
+from gateway.errors import CodecError
 from gateway.model.sample import Sample
 from gateway.model.types import FLOAT32_MAX, INT_BOUNDS, DataType, TypeSpec
+from gateway.shims.ua import NULL_ARRAY, new_data_value, new_node_id, new_status_code
 
 # --- types -------------------------------------------------------------------------------------
 
@@ -38,7 +40,7 @@ VARIANT_TYPES: dict[DataType, ua.VariantType] = {
 # The built-in DataType nodes of namespace 0 carry the same numbers as the VariantTypes
 # (Boolean = i=1 ... DateTime = i=13); spelled out by name so a reader need not know that.
 DATA_TYPE_IDS: dict[DataType, ua.NodeId] = {
-    base: ua.NodeId(getattr(ua.ObjectIds, vtype.name), 0) for base, vtype in VARIANT_TYPES.items()
+    base: new_node_id(getattr(ua.ObjectIds, vtype.name), 0) for base, vtype in VARIANT_TYPES.items()
 }
 
 SCALAR = -1  # ValueRank
@@ -58,9 +60,9 @@ def value_rank(spec: TypeSpec) -> int:
     return ONE_DIMENSION if spec.array else SCALAR
 
 
-def array_dimensions(spec: TypeSpec) -> list[int] | None:
-    """[0] = one dimension of unknown length; None for scalars."""
-    return [0] if spec.array else None
+def array_dimensions(spec: TypeSpec) -> list[int]:
+    """[0] = one dimension of unknown length; a null array (None) for scalars."""
+    return [0] if spec.array else NULL_ARRAY
 
 
 # --- status codes --------------------------------------------------------------------------------
@@ -79,12 +81,12 @@ def status_code(name: str) -> ua.StatusCode:
         value = getattr(ua.StatusCodes, name, None) if name and not name.startswith("_") else None
         if not isinstance(value, int) or isinstance(value, bool):
             return _INTERNAL_ERROR
-        code = ua.StatusCode(value)
+        code = new_status_code(value)
         _STATUS_CACHE[name] = code
     return code
 
 
-_INTERNAL_ERROR = ua.StatusCode(ua.StatusCodes.BadInternalError)
+_INTERNAL_ERROR = new_status_code(ua.StatusCodes.BadInternalError)
 
 
 # --- engineering units (UNECE Recommendation 20 common codes, as OPC UA Part 8 prescribes) --------
@@ -172,10 +174,10 @@ def eu_information(unit: str) -> ua.EUInformation:
 
 
 _NULL = ua.Variant(None, ua.VariantType.Null)  # Variants are immutable: one null serves every DataValue
-_TYPE_MISMATCH = ua.StatusCode(ua.StatusCodes.BadTypeMismatch)
+_TYPE_MISMATCH = new_status_code(ua.StatusCodes.BadTypeMismatch)
 
 
-class ValueMismatch(ValueError):
+class ValueMismatch(CodecError):
     """A value that cannot be carried by its variable's VariantType."""
 
 
@@ -209,10 +211,10 @@ def _double(value: Any) -> float:
 
 
 def _float(value: Any) -> float:
-    value = _double(value)
-    if math.isfinite(value) and abs(value) > FLOAT32_MAX:
-        raise ValueMismatch(f"{value!r} does not fit a 32-bit Float")
-    return value
+    number = _double(value)
+    if math.isfinite(number) and abs(number) > FLOAT32_MAX:
+        raise ValueMismatch(f"{number!r} does not fit a 32-bit Float")
+    return number
 
 
 def _string(value: Any) -> str:
@@ -269,15 +271,12 @@ class ValueKind:
     def datavalue(self, sample: Sample, server_ts: datetime) -> ua.DataValue:
         """The DataValue for a Sample. Bad samples carry no value, as OPC UA requires."""
         status = status_code(sample.status)
-        if status.is_bad():
-            variant = _NULL
-        else:
-            variant = self.variant(sample.value)
-        return ua.DataValue(variant, status, SourceTimestamp=sample.source_ts, ServerTimestamp=server_ts)
+        variant = _NULL if status.is_bad() else self.variant(sample.value)
+        return new_data_value(variant, status, SourceTimestamp=sample.source_ts, ServerTimestamp=server_ts)
 
     def mismatch(self, sample: Sample, server_ts: datetime) -> ua.DataValue:
         """What clients see when the tree holds a value the type cannot carry."""
-        return ua.DataValue(
+        return new_data_value(
             _NULL,
             _TYPE_MISMATCH,
             SourceTimestamp=sample.source_ts,

@@ -20,6 +20,7 @@ from asyncua import ua
 from gateway.errors import RequestError, WriteError
 from gateway.model.context import WriteContext
 from gateway.model.tree import VariableNode
+from gateway.shims.ua import new_status_code
 from gateway.sinks.opcua.address_space import access_level
 from gateway.sinks.opcua.values import ValueKind, status_code
 
@@ -89,4 +90,4 @@ async def write_node(
     except Exception:
         log.exception("OPC UA write to %s failed unexpectedly", node.full_path)
         return _bad("BadInternalError")
-    return ua.StatusCode(ua.StatusCodes.Good)
+    return new_status_code(ua.StatusCodes.Good)

@@ -69,7 +69,7 @@ async def test_soft_limit_alarm_through_opcua_and_mqtt_acknowledged_refreshed_an
         _, seen = await rig.subscribe_alarms(client)
         await raise_soft_limit(rig, client)
 
-        await wait_until(lambda: seen.alarms(), timeout=10, message="the alarm event")
+        await wait_until(seen.alarms, timeout=10, message="the alarm event")
         raised = seen.alarms()[0]
         assert raised.Message.Text == SOFT_LIMIT and raised.Severity == 700  # class 3 (error) mapped to 700
         assert state(raised, "ActiveState") is True and state(raised, "AckedState") is False
@@ -143,7 +143,7 @@ async def test_acknowledgement_survives_a_gateway_restart_and_confirm_ends_it(tm
         client = await rig.client()
         _, seen = await rig.subscribe_alarms(client)
         await raise_soft_limit(rig, client)
-        await wait_until(lambda: seen.alarms(), message="the alarm event")
+        await wait_until(seen.alarms, message="the alarm event")
         first = seen.alarms()[0]
         await acknowledge(client, first, "seen before the restart")
         await wait_until(lambda: len(seen.alarms()) >= 2, message="the acknowledge event")
@@ -185,7 +185,7 @@ async def test_a_controller_outage_keeps_the_alarm_uncertain_and_reconnecting_re
         client = await rig.client()
         _, seen = await rig.subscribe_alarms(client)
         await raise_soft_limit(rig, client)
-        await wait_until(lambda: seen.alarms(), message="the alarm event")
+        await wait_until(seen.alarms, message="the alarm event")
         ports = (rig.sim.opcua_port, rig.sim.ftp_port)
         await rig.sim.__aexit__(None, None, None)
 

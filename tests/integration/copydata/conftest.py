@@ -28,7 +28,7 @@ from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.sink import CopydataSink
 from gateway.sinks.copydata.tcp import TcpServerTransport
 from simulator.runner import Simulator
-from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber  # noqa: F401
+from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber  # noqa: F401 - for this folder's tests, which import them from here
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]

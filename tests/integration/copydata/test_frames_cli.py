@@ -28,7 +28,8 @@ async def test_frames_listen_prints_the_head_moving_and_stops_cleanly_on_sigint(
     port = await rig.server_port()
     proc = await asyncio.create_subprocess_exec(
         CLI, "frames", "listen", "--tcp", f"127.0.0.1:{port}", "--mapping", MAPPING,
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )  # fmt: skip
     lines: list[str] = []
     try:
@@ -40,8 +41,12 @@ async def test_frames_listen_prints_the_head_moving_and_stops_cleanly_on_sigint(
                 lines.append(line.decode())
 
         reader = asyncio.create_task(read_lines())
-        await wait_until(lambda: len({l.split("Axes/X/Position=")[1].split()[0] for l in lines if "Axes/X/Position=" in l}) > 5,
-                         timeout=20, message="several X positions printed")  # fmt: skip
+        marker = "Axes/X/Position="
+        await wait_until(
+            lambda: len({text.split(marker)[1].split()[0] for text in lines if marker in text}) > 5,
+            timeout=20,
+            message="several X positions printed",
+        )
         assert "dwData=2" in lines[0] and "Program/Name=" in lines[0]  # the snapshot names every variable
         proc.send_signal(signal.SIGINT)
         async with asyncio.timeout(15):

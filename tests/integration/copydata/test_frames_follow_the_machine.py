@@ -47,7 +47,7 @@ async def test_positions_and_blocks_follow_the_running_program(make_rig: RigFact
         await wait_until(lambda: all(receiver.got.latest().get(p) == rig.value(p) for p in paths),
                          message="the receiver's last values to match the machine")  # fmt: skip
         for axis, path in zip(
-            rig.sim.machine.axes, ("Axes/X/Position", "Axes/Y/Position", "Axes/Z/Position")
+            rig.sim.machine.axes, ("Axes/X/Position", "Axes/Y/Position", "Axes/Z/Position"), strict=True
         ):
             assert abs(receiver.got.latest()[path] - axis.actual) < 0.01, path
     finally:

@@ -1,4 +1,4 @@
-"""A receiver that stops reading costs the gateway a bounded queue, and nothing else: OPC UA and MQTT flow on."""
+"""A receiver that stops reading costs the gateway a bounded queue and nothing else: OPC UA, MQTT flow on."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""tcp-server lifecycle: a port that is taken does not stop the gateway, and shutdown with clients is quiet."""
+"""tcp-server lifecycle: a port that is taken does not stop the gateway; shutdown with clients is quiet."""
 
 from __future__ import annotations
 

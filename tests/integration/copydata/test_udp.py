@@ -29,8 +29,8 @@ async def test_udp_frames_snapshots_and_replies(make_rig: RigFactory) -> None:
     transport, receiver = await loop.create_datagram_endpoint(Datagrams, local_addr=("127.0.0.1", port))
     try:
         rig = await make_rig(targets({
-            "name": "nesting", "transport": "udp", "host": "127.0.0.1", "port": port, "snapshot_interval": 0.2,
-            "max_rate": None,
+            "name": "nesting", "transport": "udp", "host": "127.0.0.1", "port": port,
+            "snapshot_interval": 0.2, "max_rate": None,
         }), loop_program="demo.nc")  # fmt: skip
         emitter = rig.emitter()
         await rig.connected()
@@ -53,8 +53,8 @@ async def test_udp_frames_snapshots_and_replies(make_rig: RigFactory) -> None:
         full = {v.name for v in emitter.encoder.table}
         await wait_until(lambda: sum(1 for dw, v in decoded() if dw == 2 and set(v) == full) >= 2,
                          message="periodic full snapshots")  # fmt: skip
-        await wait_until(lambda: len({v["Axes/X/Position"] for _, v in decoded() if "Axes/X/Position" in v}) > 5,
-                         message="positions moving")  # fmt: skip
+        x = "Axes/X/Position"
+        await wait_until(lambda: len({v[x] for _, v in decoded() if x in v}) > 5, message="positions moving")
 
         # A reply from the receiver's address comes back as feedback.
         events = rig.machine.tree.events.subscribe("test")

@@ -111,7 +111,8 @@ class StalledOpcUa:
         session.ensure_publish_loop = _no_publish_loop  # type: ignore[method-assign]
         params = ua.CreateSubscriptionParameters(
             RequestedPublishingInterval=publishing_interval, RequestedLifetimeCount=10_000,
-            RequestedMaxKeepAliveCount=3_000, MaxNotificationsPerPublish=0, PublishingEnabled=True, Priority=0,
+            RequestedMaxKeepAliveCount=3_000, MaxNotificationsPerPublish=0, PublishingEnabled=True,
+            Priority=0,
         )  # fmt: skip
         result = await session.create_subscription(params, callback=lambda *_: None)
         requests = [
@@ -184,7 +185,7 @@ class OpcUaCounter:
 
 
 class SequenceSubscriber:
-    """A normal MQTT subscriber (QoS 1, its own network thread) that keeps the noise sequence numbers it got."""
+    """A normal MQTT subscriber (QoS 1, its own network thread) keeping the noise sequence numbers it got."""
 
     def __init__(self, port: int, topic: str) -> None:
         self.port = port

@@ -24,7 +24,6 @@ import yaml
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.mqtt import MachineMqtt
 from gateway.config.sparkplug import SparkplugConfig
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.tcp import TcpServerTransport
@@ -35,7 +34,6 @@ from tests.integration.mqtt.conftest import mqtt_config
 from tests.waiting import free_port
 
 MACHINE = "laser-sim"
-COMMANDS = "commands" in MachineMqtt.model_fields  # MQTT command requests have landed
 
 
 def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
@@ -46,7 +44,7 @@ def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
     data["jobs"]["retry"] = {"initial": 0.05, "max": 0.5, "factor": 2}
     target = data["copydata"]["targets"][0]
     target.update(bind="127.0.0.1", port=0)
-    data["mqtt"] = {"writable": True, **({"commands": True} if COMMANDS else {})}
+    data["mqtt"] = {"writable": True, "commands": True}
     for variable in data["variables"]:
         if variable["path"] == "Machine/Mode":
             variable["mqtt"] = {"writable": False}
@@ -74,7 +72,9 @@ def rules_machine(name: str, sim_port: int, ftp_port: int, rules: dict[str, Any]
     return {
         "machine": name,
         "driver": {"endpoint": f"opc.tcp://127.0.0.1:{sim_port}"},
-        "variables": [{"path": "Machine/State", "source": "ns=2;s=::AsGlobalPV:gMachine.State", "type": "Int16"}],
+        "variables": [
+            {"path": "Machine/State", "source": "ns=2;s=::AsGlobalPV:gMachine.State", "type": "Int16"}
+        ],
         "jobs": {
             "controller": {"host": "127.0.0.1", "port": ftp_port, "user": "cnc", "password": "simulator",
                            "folder": f"/DATA/{name}", "timeout": 5},
@@ -137,7 +137,8 @@ async def corpus_rig(
     gateway = GatewayConfig.model_validate({
         "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway", "security": ["None"]},
         "state_dir": str(tmp_path / "state"),
-        "inbox": {"host": "127.0.0.1", "port": 0, "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
+        "inbox": {"host": "127.0.0.1", "port": 0,
+                  "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
     }).model_copy(update={"mqtt": mqtt_config(mqtt_port), "sparkplug": SparkplugConfig()})  # fmt: skip
     async with Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=store) as sim:
         for name in machines.values():

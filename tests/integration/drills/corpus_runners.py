@@ -298,8 +298,8 @@ async def run_ftp(
     stray = [str(p) for p in base.rglob("*escape*") if not any(p.is_relative_to(d) for d in inside)]
     delivered = [j.filename for j in rig.queue.list(limit=10_000)
                  if "escape" in j.filename and j.state is not JobState.REJECTED]  # fmt: skip
-    out.append(Outcome("ftp", "nothing escaped", not stray and not delivered and outside.read_bytes() == program,
-                       f"stray files {stray}, jobs {delivered}"))  # fmt: skip
+    kept_out = not stray and not delivered and outside.read_bytes() == program
+    out.append(Outcome("ftp", "nothing escaped", kept_out, f"stray files {stray}, jobs {delivered}"))
     return out
 
 
@@ -342,7 +342,7 @@ async def copydata_case(port: int, data: bytes, expect: dict[str, Any], feedback
             item.get("write", {}).get("ok") is False
             and item["write"].get("status") == want["status"]
             and want["error"] in item["write"].get("error", "")
-            for item, want in zip(items, wanted_items)
+            for item, want in zip(items, wanted_items, strict=True)
         )
         return ok, json.dumps(items)[:300]
     except (AssertionError, TimeoutError) as exc:

@@ -141,8 +141,15 @@ def write_yaml(path: Path, data: Any) -> Path:
     return path
 
 
-def gateway_file(directory: Path, mappings: list[str], *, opcua_port: int, inbox_port: int,
-                 mqtt: dict[str, Any] | None = None, inbox: dict[str, Any] | None = None) -> Path:  # fmt: skip
+def gateway_file(
+    directory: Path,
+    mappings: list[str],
+    *,
+    opcua_port: int,
+    inbox_port: int,
+    mqtt: dict[str, Any] | None = None,
+    inbox: dict[str, Any] | None = None,
+) -> Path:
     data: dict[str, Any] = {
         "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway", "security": ["None"]},
         "state_dir": "state",

@@ -25,7 +25,7 @@ from asyncua import Client
 from gateway.jobs.queue.store import JobState
 from tests.integration.drills import corpus_runners as runners
 from tests.integration.drills.conftest import Report
-from tests.integration.drills.corpus_rig import COMMANDS, MACHINE, CorpusRig, corpus_rig
+from tests.integration.drills.corpus_rig import MACHINE, CorpusRig, corpus_rig
 from tests.integration.jobs.conftest import GOOD, in_thread
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
 from tests.waiting import wait_until
@@ -70,7 +70,8 @@ async def test_every_bad_input_gets_its_clear_error_and_the_gateway_serves_on(
     secret.parent.mkdir()
     secret.write_bytes(GOOD)
     set_cases = runners.load("mqtt/set.yaml")
-    commands = runners.load("mqtt/commands.yaml") if COMMANDS else []
+    commands = runners.load("mqtt/commands.yaml")
+    assert commands, "tests/corpus/mqtt/commands.yaml has no cases"
     await runners.publish_retained(mqtt, set_cases + commands)
     async with corpus_rig(tmp_path / "rig", mosquitto.port, rule_sets) as rig:
         await wait_until(lambda: rig.gateway.tree.machines[MACHINE].status.is_connected, timeout=20,
@@ -95,19 +96,16 @@ async def test_every_bad_input_gets_its_clear_error_and_the_gateway_serves_on(
     drill_report(
         "bad-input corpus", inputs=sum(kinds.values()) - controls,
         **{kind.replace("-", "_"): n for kind, n in kinds.items()},
-        valid_controls=controls, commands="run" if COMMANDS else "skipped (not landed)", failed=len(failed),
+        valid_controls=controls, failed=len(failed),
         error_log_lines=len(errors), survived=", ".join(survived),
     )  # fmt: skip
     assert not failed, "inputs without their clear error:\n" + "\n".join(map(str, failed))
     assert not errors, "errors in the log:\n" + "\n".join(f"{r.name}: {r.getMessage()}" for r in errors[:20])
     assert sum(kinds.values()) - controls >= 60
-    if not COMMANDS:
-        pytest.skip("MQTT command requests have not landed (no mqtt.commands in the mapping model): "
-                    "the cases in tests/corpus/mqtt/commands.yaml were not run")  # fmt: skip
 
 
 async def still_serving(rig: CorpusRig, mqtt: Recorder) -> list[str]:
-    """After the corpus: OPC UA Good, an MQTT write, a valid job, a valid COPYDATA frame. Returns what passed."""
+    """After the corpus: OPC UA Good, an MQTT write, a valid job, a valid COPYDATA frame; what passed."""
     machine = rig.gateway.tree.machines[MACHINE]
     passed = []
     client = Client(f"opc.tcp://127.0.0.1:{rig.opcua_port}/cnc-gateway", timeout=5)

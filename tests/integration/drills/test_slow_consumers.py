@@ -60,7 +60,7 @@ MAX_QUEUE_PER_ITEM = 1000
 
 
 def noise_machine(sim_port: int, copydata_port: int) -> dict[str, object]:
-    """The simulator's own noise mapping, plus a COPYDATA id per variable and a target sending every change."""
+    """The simulator's noise mapping, plus a COPYDATA id per variable and a target sending every change."""
     spec = noise.NoiseSpec(NOISE_VARIABLES, RATE)
     data = yaml.safe_load(noise.noise_mapping(spec, f"opc.tcp://127.0.0.1:{sim_port}", machine="noise"))
     for index, variable in enumerate(data["variables"], start=1):
@@ -82,8 +82,10 @@ async def test_stalled_consumers_cost_bounded_memory_and_nobody_else_slows(
     mqtt = {"port": mosquitto.port, "client_id": f"drill-{uuid.uuid4().hex[:8]}"}
     gw_file = processes.gateway_file(tmp_path, ["laser-sim.yaml", "noise.yaml"], opcua_port=gw_port,
                                      inbox_port=free_port(), mqtt=mqtt)  # fmt: skip
-    sim = processes.simulator(tmp_path, sim_port, free_port(), "--loop", "demo.nc", "--speed", "20",
-                              "--noise-variables", str(NOISE_VARIABLES), "--noise-rate", str(RATE))  # fmt: skip
+    sim = processes.simulator(
+        tmp_path, sim_port, free_port(), "--loop", "demo.nc", "--speed", "20",
+        "--noise-variables", str(NOISE_VARIABLES), "--noise-rate", str(RATE),
+    )  # fmt: skip
     gateway = processes.gateway(tmp_path, gw_file)
     endpoint = f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway"
     mqtt_sub = SequenceSubscriber(mosquitto.port, "cnc/noise/#")

@@ -107,6 +107,28 @@ async def test_programs_put_and_delete_are_audited(store: Store, tmp_path: Path)
     assert "part.nc is not in" in entries[3]["reason"]
 
 
+async def test_programs_change_nothing_when_the_audit_trail_refuses_them(
+    store: Store, tmp_path: Path
+) -> None:
+    """An audit file the trail will not open (written by a newer cnc-gateway): a message, no change."""
+    import sqlite3
+
+    mapping = tmp_path / "laser.yaml"
+    mapping.write_text(mapping_text("laser", store.port))
+    state = tmp_path / "state"
+    state.mkdir()
+    with sqlite3.connect(state / "audit.sqlite3") as db:
+        db.execute("PRAGMA user_version=99")
+    target = store.folder() / "keep.nc"
+    target.write_bytes(GOOD)
+    code, _, err = await cli(
+        "programs", "delete", "laser", "keep.nc", "-c", str(mapping), "--state-dir", str(state)
+    )
+    assert code == 2 and "cannot open the audit trail" in err and "newer cnc-gateway" in err, err
+    assert "Traceback" not in err
+    assert target.read_bytes() == GOOD
+
+
 async def test_programs_against_a_controller_that_is_down(tmp_path: Path) -> None:
     mapping = tmp_path / "laser.yaml"
     mapping.write_text(mapping_text("laser", free_port()))

@@ -43,7 +43,7 @@ async def run_corpus(
     machines = [f"c{i}" for i in range(len(rule_sets))]
     for machine in machines:
         (store.root / "DATA" / machine).mkdir()
-    mappings = [machine_text(m, store.port, json.loads(k)) for m, k in zip(machines, rule_sets)]
+    mappings = [machine_text(m, store.port, json.loads(k)) for m, k in zip(machines, rule_sets, strict=True)]
     async with harness(mappings) as h:
         expected = []
         for data, name, rules, rejections in files:

@@ -1,4 +1,4 @@
-"""Delivery to a real FTP program store: retries, dead letters, duplicates, order, and recovery after a crash."""
+"""Delivery to a real FTP program store: retries, dead letters, duplicates, order, recovery after a crash."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Uploads into the gateway's inbox with real clients, through validation and the queue, to a real FTP store."""
+"""Uploads to the gateway's inbox with real clients, through validation and the queue, to a real FTP store."""
 
 from __future__ import annotations
 
@@ -146,10 +146,12 @@ async def test_a_20_mb_program(store: Store, harness) -> None:
         i += 1
     data = ("\n".join([*lines, "M30", "%"]) + "\n").encode()
     async with harness([mapping_text("laser", store.port)], reply_within=60) as h:
-        async with aioftp.Client.context("127.0.0.1", h.port, USER, PASSWORD) as client:
-            async with client.upload_stream("/laser/big.nc") as stream:
-                for start in range(0, len(data), 1024 * 1024):
-                    await stream.write(data[start : start + 1024 * 1024])
+        async with (
+            aioftp.Client.context("127.0.0.1", h.port, USER, PASSWORD) as client,
+            client.upload_stream("/laser/big.nc") as stream,
+        ):
+            for start in range(0, len(data), 1024 * 1024):
+                await stream.write(data[start : start + 1024 * 1024])
         job = await h.wait_state(1, S.DELIVERED, timeout=90)
         assert job.size == len(data) > 20 * 1024 * 1024
         delivered = store.folder() / "big.nc"

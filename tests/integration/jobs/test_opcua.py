@@ -92,7 +92,7 @@ async def test_put_goes_through_validation_and_the_queue(env: Env) -> None:
     assert env.store.files()["opc.nc"] == GOOD
     assert queue.get(1).origin == "opcua"
     last = env.client.get_node("ns=2;s=laser/Jobs/LastDelivered")
-    await wait_until(lambda: last.read_value(), message="Jobs/LastDelivered over OPC UA")
+    await wait_until(last.read_value, message="Jobs/LastDelivered over OPC UA")
     assert await last.read_value() == "J000001 opc.nc"
     job_id, message = await env.call("Put", "bad.nc", "G1 X1 F100\n")
     assert job_id == "J000002" and "rejected" in message and "end code" in message

@@ -192,7 +192,7 @@ async def test_every_refused_write_gets_its_reason_and_nothing_is_written(
     )
     async with running(tree, mqtt_config(mosquitto.port), tmp_path) as sink:
         await wait_until(lambda: sink.online)
-        await wait_until(lambda: rec.subscribed.is_set())
+        await wait_until(rec.subscribed.is_set)
         await asyncio.sleep(0)  # the gateway's SUBACK: a first probe below is repeated until answered
         result = topic + "/result"
 

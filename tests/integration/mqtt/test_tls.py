@@ -121,5 +121,5 @@ def test_missing_tls_files_stop_the_start_with_a_clear_error(tmp_path: Path) -> 
     from gateway.sinks.mqtt.sink import MqttSink
 
     tree = MappedTree([MachineMapping.model_validate(MAPPING)])
-    with pytest.raises(SinkError, match="mqtt.tls: cannot load .*nope.pem"):
+    with pytest.raises(SinkError, match=r"mqtt\.tls: cannot load .*nope\.pem"):
         MqttSink(tree, mqtt_config(1, tls={"ca": "nope.pem"}), tmp_path, tree.mappings)

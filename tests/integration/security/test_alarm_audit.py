@@ -53,7 +53,7 @@ async def test_acknowledge_and_confirm_over_opcua_are_audited_whether_allowed_or
             await commands.call_method("2:select-program", ua.Variant("soft-limit.nc", ua.VariantType.String))
             await commands.call_method("2:start")
             await wait_until(lambda: rig.sim.machine.state is MachineState.ALARM, timeout=15, message="Alarm")
-            await wait_until(lambda: seen.alarms(), timeout=10, message="the alarm event")
+            await wait_until(seen.alarms, timeout=10, message="the alarm event")
             raised = seen.alarms()[0]
 
             assert await call(vera, ACK, raised, "viewer tries") == "BadUserAccessDenied"

@@ -48,7 +48,7 @@ def environ(sim_port: int) -> dict[str, str]:
 
 
 def from_mapping_alone(tmp_path: Path, sim_port: int, gw_port: int) -> Config:
-    """`cnc-gateway run mappings/laser-sim.yaml`: every default, with free ports instead of the default ones."""
+    """`cnc-gateway run mappings/laser-sim.yaml`: every default, free ports instead of the default ones."""
     config = load([ROOT / "mappings" / "laser-sim.yaml"], environ=environ(sim_port))
     gw = config.gateway
     assert gw.users == [] and gw.access == AccessConfig()  # what a new user gets

@@ -39,7 +39,7 @@ async def test_bad_logins_are_refused(
     store: tuple[FtpStore, DirectoryStore], user: str, password: str
 ) -> None:
     ftp, _ = store
-    with pytest.raises(ftplib.error_perm, match="^530"):
+    with pytest.raises(ftplib.error_perm, match=r"^530"):
         await asyncio.to_thread(connect, ftp.port, user, password)
 
 
@@ -62,7 +62,7 @@ async def test_upload_to_temp_name_then_rename_size_list_and_delete(
             c.rename("demo.nc.tmp", "demo.nc")  # replaces the existing program
             demo_size = c.size("/DATA/Programs/demo.nc")
             c.delete("soft-limit.nc")
-            with pytest.raises(ftplib.error_perm, match="^550"):
+            with pytest.raises(ftplib.error_perm, match=r"^550"):
                 c.size("soft-limit.nc")
             return size, names, lines, demo_size, c.nlst()
 

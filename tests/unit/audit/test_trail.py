@@ -43,7 +43,7 @@ async def test_a_burst_is_stored_in_few_transactions_and_logged_one_line_each(
     release = stall_the_disk(monkeypatch)
     async with AuditTrail(tmp_path / "audit.sqlite3") as trail:
         trail.record(entry(0))
-        await wait_until(lambda: trail._queue.empty(), message="the writer to take the first entry")
+        await wait_until(trail._queue.empty, message="the writer to take the first entry")
         for i in range(1, 2000):  # a burst while the writer is busy
             trail.record(entry(i))
         release.set()
@@ -75,7 +75,7 @@ async def test_entries_beyond_the_backlog_are_counted_not_blocking(
     trail = AuditTrail(tmp_path / "audit.sqlite3", max_pending=10)
     async with trail:
         trail.record(entry(0))
-        await wait_until(lambda: trail._queue.empty(), message="the writer to take the first entry")
+        await wait_until(trail._queue.empty, message="the writer to take the first entry")
         for i in range(1, 100):
             trail.record(entry(i))  # returns at once, on the event loop
         assert (trail._queue.qsize(), trail.dropped) == (10, 89)

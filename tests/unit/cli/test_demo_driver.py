@@ -72,7 +72,9 @@ class Controller:
             if self.state != IDLE:
                 raise InvalidState("a program is already running")
             self.show(RUNNING)
-        elif (node.path == "Control/Stop" and self.state in (RUNNING, PAUSED)) or node.path == "Control/Reset":
+        elif (
+            node.path == "Control/Stop" and self.state in (RUNNING, PAUSED)
+        ) or node.path == "Control/Reset":
             self.show(IDLE)
         elif node.path == "Control/SelectProgram":
             self.select(raw)
@@ -134,7 +136,7 @@ async def driver_ran_demo(controller: Controller, trail: Trail, starts: int = 1)
 
 
 async def settled(driver: DemoDriver) -> None:
-    """Twenty more looks at the machine (several settle periods), in which it would have acted if it were going to."""
+    """Twenty more looks at the machine (several settle periods), in which it would have acted, were it to."""
     seen = driver.cycles
     await wait_until(lambda: driver.cycles >= seen + 20, timeout=5, message="the driver's next looks")
 

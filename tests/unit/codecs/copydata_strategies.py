@@ -59,7 +59,7 @@ def layouts() -> st.SearchStrategy[Layout]:
 def same(a: Any, b: Any) -> bool:
     """Equality that treats NaN as equal to NaN and tells -0.0 from 0.0."""
     if isinstance(a, list) and isinstance(b, list):
-        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
     if isinstance(a, float) and isinstance(b, float):
         if math.isnan(a) or math.isnan(b):
             return math.isnan(a) and math.isnan(b)

@@ -143,8 +143,10 @@ def test_multi_frames_round_trip_for_every_width(id_width: int, len_width: int, 
     layout = Layout(id_width=id_width, len_width=len_width, encoding=data.draw(st.sampled_from(ENCODINGS)))
     ids = data.draw(st.lists(st.integers(0, layout.max_id), min_size=1, max_size=6, unique=True), label="ids")
     specs = [data.draw(st.sampled_from(ALL_SPECS)) for _ in ids]
-    table = VariableTable(Variable(i, f"V{i}", s) for i, s in zip(ids, specs))
-    pairs: list[tuple[int, Any]] = [(i, data.draw(values(s, layout.encoding))) for i, s in zip(ids, specs)]
+    table = VariableTable(Variable(i, f"V{i}", s) for i, s in zip(ids, specs, strict=True))
+    pairs: list[tuple[int, Any]] = [
+        (i, data.draw(values(s, layout.encoding))) for i, s in zip(ids, specs, strict=True)
+    ]
     if len_width == 1:  # keep every item under 256 bytes
         pairs = [(i, v) for i, v in pairs if len(table[i].encode(v, layout).data) <= 255] or [(ids[0], None)]
         if pairs[0][1] is None:
@@ -157,7 +159,7 @@ def test_multi_frames_round_trip_for_every_width(id_width: int, len_width: int, 
     assert decoded == frame
     got = [(r.variable.id, r.value) for r in table.decode(decoded, layout)]
     assert [i for i, _ in got] == [i for i, _ in pairs]
-    assert all(same(a, b) for (_, a), (_, b) in zip(got, pairs))
+    assert all(same(a, b) for (_, a), (_, b) in zip(got, pairs, strict=True))
 
 
 def test_dwdata_2_with_one_item_is_valid() -> None:

@@ -210,7 +210,7 @@ def fleets(draw: st.DrawFn, *, sufficient: bool) -> tuple[list[DripLine], dict[s
     rates = [draw(st.sampled_from([480.0, 960.0, 3_840.0, 11_520.0])) for _ in range(k)]
     lines = []
     share = 4 * k if sufficient else 1
-    slowest = min(min(rates), capacity)
+    slowest = min(*rates, capacity)
     worst_block = 0.0
     worst_demand = 0.0
     programs = []

@@ -242,7 +242,7 @@ def test_compact_lexing_reads_like_lex_lines(text: str) -> None:
 
     compact, exact = list(lex_compact(text)), list(lex_lines(text))
     assert len(compact) == len(exact)
-    for c, e in zip(compact, exact):
+    for c, e in zip(compact, exact, strict=True):
         _same_reading(c, e)
 
 
@@ -259,7 +259,7 @@ def test_compact_lexing_of_a_large_program_across_chunks() -> None:
         assert len(compact) == len(exact) > 12000 - 1
         # the fast path took nearly all of it (a number too large for a float sends its chunk to lex_line)
         assert sum(isinstance(c, tuple) for c in compact) >= 10000
-        for c, e in zip(compact, exact):
+        for c, e in zip(compact, exact, strict=True):
             _same_reading(c, e)
 
 

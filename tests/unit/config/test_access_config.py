@@ -1,4 +1,4 @@
-"""Users, roles, access and OPC UA security in the gateway file, and the mappings' roles checked against them."""
+"""Users, roles, access and OPC UA security in the gateway file; the mappings' roles checked against them."""
 
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ def test_opcua_security_names_and_profiles() -> None:
     assert explicit.endpoints == ("Basic256Sha256_SignAndEncrypt",)
     with pytest.raises(ValidationError, match="Basic256Sha256_SignAndEncrypt"):
         OpcUaServerConfig(security=["Basic256Sha256"])  # the mode is part of the name
-    with pytest.raises(ValidationError, match="either opcua.profile or opcua.security"):
+    with pytest.raises(ValidationError, match=r"either opcua\.profile or opcua\.security"):
         OpcUaServerConfig(security=["None"], profile="secure")
     with pytest.raises(ValidationError, match="listed twice"):
         OpcUaServerConfig(security=["None", "None"])

@@ -57,6 +57,7 @@ def test_check_command_exits_nonzero_and_prints_every_error() -> None:
         capture_output=True,
         text=True,
         timeout=60,
+        check=False,
     )
     assert proc.returncode == 2
     for line, key, _ in expectations(path):

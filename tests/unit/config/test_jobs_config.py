@@ -49,7 +49,7 @@ def test_duplicate_accounts_and_bad_ranges_are_refused() -> None:
         InboxConfig.model_validate({"accounts": [{"user": "a", "password_hash": HASH}] * 2})
     with pytest.raises(ValidationError, match="max must not be below min"):
         InboxConfig.model_validate({"passive_ports": {"min": 30010, "max": 30000}})
-    with pytest.raises(ValidationError, match="look like .part"):
+    with pytest.raises(ValidationError, match=r"look like \.part"):
         InboxConfig.model_validate({"temp_suffixes": ["part"]})
 
 

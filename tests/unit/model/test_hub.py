@@ -40,7 +40,7 @@ async def test_every_change_mode_keeps_order_then_collapses_beyond_the_limit() -
     # 16 changes > limit 10: the backlog collapsed to the latest per variable, and never grew past the limit
     assert sub.backlog <= 10
     batch = sub.take()
-    assert dict((n, s.value) for n, s in batch)[a] == 7
+    assert {n: s.value for n, s in batch}[a] == 7
     assert sub.coalesced > 0
 
 

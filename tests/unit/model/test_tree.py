@@ -24,7 +24,8 @@ machine: m1
 driver: {endpoint: "opc.tcp://127.0.0.1:4841"}
 variables:
   - {path: Axes/X/Position, source: "ns=2;s=x", type: Double, unit: mm, deadband: 0.5}
-  - {path: Axes/X/Counts, source: "ns=2;s=c", type: Double, source_type: Int32, scale: {gain: 0.001, offset: 10}, access: readwrite, range: {min: 0, max: 100}}
+  - {path: Axes/X/Counts, source: "ns=2;s=c", type: Double, source_type: Int32,
+     scale: {gain: 0.001, offset: 10}, access: readwrite, range: {min: 0, max: 100}}
   - {path: Feed/Override, source: "ns=2;s=o", type: UInt16, access: readwrite, range: {min: 0, max: 150}}
   - {path: Laser/Power, source: "ns=2;s=p", type: Double, range: {min: 0, max: 6000}, deadband: "1%"}
   - {path: Table, source: "ns=2;s=t", type: "Double[]", deadband: 0.1}

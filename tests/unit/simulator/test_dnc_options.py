@@ -31,8 +31,8 @@ def test_the_test_suite_turns_them_off_and_off_means_no_face() -> None:
 
 def test_explicit_settings(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(dnc_options.ENV_TCP, "5001")
-    options = parse("--dnc-rfc2217-port", "0", "--dnc-baud", "4800", "--dnc-format", "7N1", "--dnc-mode", "drip",
-                    "--dnc-buffer", "512", "--dnc-handshake", "none")  # fmt: skip
+    options = parse("--dnc-rfc2217-port", "0", "--dnc-baud", "4800", "--dnc-format", "7N1",
+                    "--dnc-mode", "drip", "--dnc-buffer", "512", "--dnc-handshake", "none")  # fmt: skip
     assert options is not None
     assert (options.tcp_port, options.rfc2217_port) == (5001, 0)  # type: ignore[attr-defined]
     spec = options.spec  # type: ignore[attr-defined]

@@ -4,9 +4,8 @@ import math
 
 import pytest
 
-from gateway.errors import OutOfRange
+from gateway.errors import InvalidArgument, InvalidState, OutOfRange
 from simulator.alarms import PROGRAM_ERROR, PROGRAM_NOT_FOUND, SOFT_LIMIT
-from simulator.errors import InvalidArgument, InvalidState
 from simulator.machine import AMBIENT, GAS_ON, Machine, MachineState, Mode
 from simulator.store import MemoryStore
 
@@ -156,7 +155,7 @@ def test_override_zero_holds_the_path_while_running() -> None:
 
 def test_override_range_and_mode() -> None:
     m = Machine(MemoryStore())
-    with pytest.raises(OutOfRange, match="outside 0..200"):
+    with pytest.raises(OutOfRange, match=r"outside 0\.\.200"):
         m.set_override(201)
     m.set_override(200)
     assert m.override == 200

@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 
 from simulator.alarms import SOFT_LIMIT
+from simulator.errors import ProgramNotFound
 from simulator.machine import Machine, MachineState
-from simulator.store import DirectoryStore, ProgramNotFound
+from simulator.store import DirectoryStore
 
 
 @pytest.fixture

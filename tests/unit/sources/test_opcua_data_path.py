@@ -112,7 +112,7 @@ def test_unknown_handles_are_ignored() -> None:
 
 
 def test_an_unparseable_address_gets_no_handle() -> None:
-    source, machine = make_source()
+    source, _machine = make_source()
     assert all(node.path != "Broken" for node, _ in source._handles.values())
     assert "Broken" in {n.path for n in source._address_errors}
 

@@ -57,6 +57,6 @@ def test_errors_become_a_status_and_a_short_reason(exc: BaseException, status: s
 
 
 def test_a_bug_is_reported_as_unexpected() -> None:
-    status, reason, expected = describe_error(KeyError("x"))
+    _status, reason, expected = describe_error(KeyError("x"))
     assert not expected
     assert reason.startswith("unexpected error: KeyError")

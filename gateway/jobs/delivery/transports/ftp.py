@@ -149,7 +149,7 @@ class FtpProgramStore:
         return await self._call(f"listing {self.config.folder}", collect())
 
     async def size(self, name: str) -> int | None:
-        """The size of a program, or None if there is none of that name. SIZE first, a listing if unsupported."""
+        """The size of a program, None if there is none of that name. SIZE first, a listing if unsupported."""
         path = self.path(name)
         try:
             _, info = await self.client.command(f"SIZE {path}", "213")

@@ -102,7 +102,8 @@ def test_none_is_a_null_without_a_value() -> None:
         ("Int16[]", [-30000, 30000], "d0 8a 30 75"),
         ("Int32[]", [-1, 315338746], "ff ff ff ff fa af cb 12"),
         ("Int32[]", [123456789, 987654321], "15 cd 5b 07 b1 68 de 3a"),
-        ("Int64[]", [-4270929666821191986, -3601064768563266876], "ce 06 72 ac 18 9c ba c4 c4 ba 9c 18 ac 72 06 ce"),
+        ("Int64[]", [-4270929666821191986, -3601064768563266876],
+         "ce 06 72 ac 18 9c ba c4 c4 ba 9c 18 ac 72 06 ce"),
         ("Byte[]", [23, 250], "17 fa"),
         ("UInt16[]", [30, 52360], "1e 00 88 cc"),
         ("UInt32[]", [52, 3293969225], "34 00 00 00 49 fb 55 c4"),
@@ -188,7 +189,8 @@ def test_uint32_is_also_read_from_long_value_where_java_hosts_put_it() -> None:
 @pytest.mark.parametrize(
     ("spec", "metric", "error", "fragment"),
     [
-        ("Int32", Payload.Metric(long_value=5), WrongDatatype, "an Int32 travels in int_value, got long_value"),
+        ("Int32", Payload.Metric(long_value=5), WrongDatatype,
+         "an Int32 travels in int_value, got long_value"),
         ("Double", Payload.Metric(float_value=1.5), WrongDatatype, "got float_value"),
         ("Boolean", Payload.Metric(int_value=1), WrongDatatype, "got int_value"),
         ("String", Payload.Metric(bytes_value=b"x"), WrongDatatype, "got bytes_value"),

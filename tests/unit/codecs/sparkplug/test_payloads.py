@@ -156,9 +156,13 @@ def test_quality_goes_out_as_the_specifications_int32_property() -> None:
                  properties=metric_properties(quality=quality_of_status("BadNotConnected")))  # fmt: skip
     seen = host.read(encode_ddata([bad], seq=Seq(), timestamp=NOW), TYPES)
     assert seen.metrics[0].properties == {"Quality": (3, 0)}  # type 3 (Int32), value 0 (BAD)
-    assert [quality_of_status(s) for s in ("Good", "GoodClamped", "UncertainLastUsableValue", "BadTimeout")] == [
-        Quality.GOOD, Quality.GOOD, Quality.STALE, Quality.BAD
-    ]  # fmt: skip
+    statuses = ("Good", "GoodClamped", "UncertainLastUsableValue", "BadTimeout")
+    assert [quality_of_status(s) for s in statuses] == [
+        Quality.GOOD,
+        Quality.GOOD,
+        Quality.STALE,
+        Quality.BAD,
+    ]
     assert [int(q) for q in (Quality.BAD, Quality.GOOD, Quality.STALE)] == [0, 192, 500]
 
 
@@ -295,16 +299,19 @@ def test_nbirth_writes_its_own_reserved_metrics(name: str) -> None:
     [
         (lambda: encode_ddata([], seq=Seq(), timestamp=NOW), "at least one metric"),
         (lambda: encode_ddeath(seq=Seq(), timestamp=-1), "uint64, got -1"),
-        (lambda: encode_ddata([Metric("A", T("Int16"), 1, 2**64, alias=1)], seq=Seq(), timestamp=NOW), "uint64"),
+        (lambda: encode_ddata([Metric("A", T("Int16"), 1, 2**64, alias=1)], seq=Seq(), timestamp=NOW),
+         "uint64"),
         (lambda: encode_ddata([Metric("A", T("Int16"), 1, NOW, alias=-1)], seq=Seq(), timestamp=NOW),
          "alias -1 is not a uint64"),
         (lambda: encode_ddata([Metric("Feed", T("Int16"), "5", NOW, alias=1)], seq=Seq(), timestamp=NOW),
          "Feed: an Int16 needs an integer"),
-        (lambda: encode_dbirth([Metric("A", T("Int16"), 1, NOW, properties={"k": Property(SparkplugType.Int8, 300)})],
+        (lambda: encode_dbirth([Metric("A", T("Int16"), 1, NOW,
+                                       properties={"k": Property(SparkplugType.Int8, 300)})],
                                seq=Seq(), timestamp=NOW), "property 'k': 300 does not fit an Int8"),
         (lambda: encode_dbirth([Metric("A\ud800", T("Int16"), 1, NOW)], seq=Seq(), timestamp=NOW),
          "a metric name with a lone surrogate at 1"),
-        (lambda: encode_dbirth([Metric("A", T("Int16"), 1, NOW, properties={"\udc00": Property(SparkplugType.Int8, 1)})],
+        (lambda: encode_dbirth([Metric("A", T("Int16"), 1, NOW,
+                                       properties={"\udc00": Property(SparkplugType.Int8, 1)})],
                                seq=Seq(), timestamp=NOW), "a property key with a lone surrogate"),
         (lambda: encode_ndeath(bdseq=256), "bdSeq is 0..255"),
         (lambda: encode_nbirth([], bdseq=-1, seq=Seq(), timestamp=NOW), "bdSeq is 0..255"),

@@ -1,4 +1,4 @@
-"""Auto-start after delivery: wait for the machine to be ready, select, start, confirm; through the tree's writes."""
+"""Auto-start after delivery: wait for the machine to be ready, select, start, confirm (the tree's writes)."""
 
 from __future__ import annotations
 

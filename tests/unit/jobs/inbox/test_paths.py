@@ -100,7 +100,7 @@ def test_temporary_names_by_suffix_or_folder() -> None:
 @given(
     cwd=st.sampled_from(["/", "/laser", "/laser/tmp", "/plasma"]),
     arg=st.lists(
-        st.sampled_from(list("./\\ab:\x00-_ ~") + ["..", "laser", "plasma", "tmp", "etc"]), max_size=12
+        st.sampled_from([*list("./\\ab:\x00-_ ~"), "..", "laser", "plasma", "tmp", "etc"]), max_size=12
     ).map("".join),
 )
 def test_whatever_a_client_sends_stays_inside_the_inbox(cwd: str, arg: str) -> None:

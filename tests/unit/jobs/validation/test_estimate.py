@@ -286,10 +286,7 @@ def test_arc_takes_r_theta_over_feed(
     sx, sy = cx + r * math.cos(a0), cy + r * math.sin(a0)
     ex, ey = cx + r * math.cos(a1), cy + r * math.sin(a1)
     assume(math.hypot(ex - sx, ey - sy) > 1e-3)
-    if by_radius:
-        centre = f"R{n(r if theta <= math.pi else -r)}"
-    else:
-        centre = f"I{n(cx - sx)} J{n(cy - sy)}"
+    centre = f"R{n(r if theta <= math.pi else -r)}" if by_radius else f"I{n(cx - sx)} J{n(cy - sy)}"
     g = "G2" if clockwise else "G3"
     text = f"G92 X{n(sx)} Y{n(sy)}\n{g} X{n(ex)} Y{n(ey)} {centre} F{n(f)}\n"
     e = est(text, rapid=FAST)

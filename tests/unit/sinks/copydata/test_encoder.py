@@ -1,4 +1,4 @@
-"""Samples to frames: every type decodes back with the codec, frames split at max_cbdata, bad values stay out."""
+"""Samples to frames: each type decodes back by the codec, frames split at max_cbdata, bad values stay out."""
 
 from __future__ import annotations
 
@@ -80,9 +80,7 @@ def test_bad_values_are_not_in_snapshots() -> None:
 def test_a_batch_over_max_cbdata_is_split_into_several_frames() -> None:
     m, enc = encoder_for(max_cbdata=40)
     changes = []
-    for i, path in enumerate(
-        ["Axes/X/Position", "Axes/Y/Position", "Program/Block", "Laser/On", "Feed/Override"]
-    ):
+    for path in ["Axes/X/Position", "Axes/Y/Position", "Program/Block", "Laser/On", "Feed/Override"]:
         node = ingest(m, path, VALUES[path])
         changes.append((node, node.sample))
     frames = enc.batch(changes)

@@ -36,7 +36,8 @@ async def test_a_reply_is_published_as_an_event_and_in_status() -> None:
     assert (event.machine, event.channel) == ("m1", "copydata/feedback")
     assert event.payload == {
         "target": "nest", "peer": "127.0.0.1:4000", "dwdata": 2,
-        "items": [{"id": 5, "path": "Program/Block", "value": 42}, {"id": 9, "path": "Program/Name", "value": "ok"}],
+        "items": [{"id": 5, "path": "Program/Block", "value": 42},
+                  {"id": 9, "path": "Program/Name", "value": "ok"}],
     }  # fmt: skip
     status = machine.nodes["Status/CopydataFeedback"].sample.value
     assert json.loads(status) == event.payload

@@ -68,7 +68,8 @@ def test_decode_without_types_still_takes_the_frame_apart(capsys: pytest.Capture
 
 def test_encode_builds_the_docs_example_and_decode_reads_it_back(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run(capsys, "encode", "--mapping", MAPPING,
-                         "Axes/X/Position=1234.5", "5=42", "Laser/On=true", "Program/Name=Teil-Ø3.nc")  # fmt: skip
+                         "Axes/X/Position=1234.5", "5=42", "Laser/On=true",
+                         "Program/Name=Teil-Ø3.nc")  # fmt: skip
     assert code == 0, err
     assert out.strip() == WORKED_HEX
     code, out, _ = run(capsys, "decode", out.strip(), "--mapping", MAPPING)
@@ -88,8 +89,9 @@ def test_encode_with_other_widths_and_inline_types(
 
 
 def test_encode_arrays_strings_and_datetimes_round_trip(capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, err = run(capsys, "encode", "11:String[]=[\"Gas low\",\"Düse\"]", "12:DateTime=2024-01-01T00:00:00Z",
-                         "13:Double[]=[0.5,100]", "--encoding", "utf-16-le")  # fmt: skip
+    code, out, err = run(capsys, "encode", "11:String[]=[\"Gas low\",\"Düse\"]",
+                         "12:DateTime=2024-01-01T00:00:00Z", "13:Double[]=[0.5,100]",
+                         "--encoding", "utf-16-le")  # fmt: skip
     assert code == 0, err
     code, out, _ = run(capsys, "decode", out, "--encoding", "utf-16-le",
                        "--types", "11=String[],12=DateTime,13=Double[]")  # fmt: skip

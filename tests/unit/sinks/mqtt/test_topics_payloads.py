@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from datetime import UTC, datetime, timedelta, timezone
 
@@ -218,7 +219,5 @@ def test_arbitrary_bytes_never_raise_anything_but_a_write_error(payload: bytes, 
     st.sampled_from(SPECS),
 )
 def test_arbitrary_json_never_raises_anything_but_a_write_error(doc: object, spec: TypeSpec) -> None:
-    try:
+    with contextlib.suppress(RequestError):
         decode_set(json.dumps(doc).encode(), spec)
-    except RequestError:
-        pass

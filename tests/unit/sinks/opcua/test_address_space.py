@@ -25,7 +25,8 @@ machine: m1
 description: Test machine
 driver: {endpoint: "opc.tcp://127.0.0.1:4841"}
 variables:
-  - {path: Axes/X/Position, source: "ns=2;s=x", type: Double, unit: mm, range: {min: 0, max: 3000}, description: Actual X}
+  - {path: Axes/X/Position, source: "ns=2;s=x", type: Double, unit: mm, range: {min: 0, max: 3000},
+     description: Actual X}
   - {path: Axes/X/Target, source: "ns=2;s=t", type: Double, unit: mm, access: readwrite}
   - {path: Axes/Y/Position, source: "ns=2;s=y", type: Double, range: {min: 0, max: 1500}}
   - {path: Feed/Override, source: "ns=2;s=o", type: UInt16, access: readwrite}

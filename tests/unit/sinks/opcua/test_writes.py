@@ -17,7 +17,8 @@ MAPPING = """
 machine: m1
 driver: {endpoint: "opc.tcp://127.0.0.1:4841"}
 variables:
-  - {path: Target, source: "ns=2;s=t", type: Double, source_type: Int32, scale: {gain: 0.01}, access: readwrite, range: {min: 0, max: 100}}
+  - {path: Target, source: "ns=2;s=t", type: Double, source_type: Int32, scale: {gain: 0.01},
+     access: readwrite, range: {min: 0, max: 100}}
   - {path: Position, source: "ns=2;s=p", type: Double}
   - {path: Table, source: "ns=2;s=tb", type: "Int32[]", access: readwrite}
 """

@@ -1,6 +1,6 @@
 """The test controller in a process of its own, so a test can freeze it (SIGSTOP) like a hung PLC.
 
-Run as `python -m tests.integration.sources.controller_process PORT`; prints `ready NS` once listening.
+Run as `python -m tests.integration.opcua.controller_process PORT`; prints `ready NS` once listening.
 """
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import sys
 
-from tests.integration.sources.conftest import Controller
+from tests.integration.opcua.conftest import Controller
 
 
 async def main(port: int) -> None:

@@ -17,7 +17,7 @@ from gateway.errors import ControllerRefused, ControllerUnavailable
 from gateway.model.context import WriteContext
 from gateway.model.tree import Machine
 from gateway.sources.opcua_client import OpcUaSource
-from tests.integration.sources.conftest import NS_URI, SOURCE_TS, Controller, make_machine, source_for
+from tests.integration.opcua.conftest import NS_URI, SOURCE_TS, Controller, make_machine, source_for
 from tests.waiting import free_port, wait_until
 
 CTX = WriteContext("test")
@@ -236,7 +236,7 @@ async def test_exit_closes_the_session_and_unsets_the_writer(controller: Control
 async def test_a_controller_that_stops_answering_is_caught_by_the_watchdog(root: Path) -> None:
     port = free_port()
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "tests.integration.sources.controller_process", str(port),
+        sys.executable, "-m", "tests.integration.opcua.controller_process", str(port),
         cwd=root, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL,
     )  # fmt: skip
     try:

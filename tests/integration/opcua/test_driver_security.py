@@ -10,7 +10,7 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from gateway.sources.opcua_client import certificate_uri
-from tests.integration.sources.conftest import make_machine, source_for
+from tests.integration.opcua.conftest import make_machine, source_for
 from tests.waiting import free_port, wait_until
 
 

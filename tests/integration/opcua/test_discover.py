@@ -13,7 +13,7 @@ from gateway.config.loader import load_mapping
 from gateway.config.mapping import MachineMapping
 from gateway.errors import SourceError
 from gateway.sources.opcua_discover import discover
-from tests.integration.sources.conftest import NS_URI, Controller
+from tests.integration.opcua.conftest import NS_URI, Controller
 from tests.waiting import free_port
 
 # discover only reads, so one controller serves every test in this module

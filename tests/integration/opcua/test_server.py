@@ -36,10 +36,14 @@ machine: laser
 description: Test laser cutter
 driver: {endpoint: "opc.tcp://127.0.0.1:4841"}
 variables:
-  - {path: Axes/X/Position, source: "ns=2;s=x", type: Double, unit: mm, range: {min: 0, max: 3000}, description: Actual X position}
-  - {path: Axes/X/Target, source: "ns=2;s=xt", type: Double, source_type: Int32, scale: {gain: 0.001, offset: 5}, unit: mm, access: readwrite, range: {min: 0, max: 3000}, description: Commanded X}
+  - {path: Axes/X/Position, source: "ns=2;s=x", type: Double, unit: mm, range: {min: 0, max: 3000},
+     description: Actual X position}
+  - {path: Axes/X/Target, source: "ns=2;s=xt", type: Double, source_type: Int32,
+     scale: {gain: 0.001, offset: 5}, unit: mm, access: readwrite, range: {min: 0, max: 3000},
+     description: Commanded X}
   - {path: Axes/Y/Position, source: "ns=2;s=y", type: Double, unit: furlong}
-  - {path: Feed/Override, source: "ns=2;s=o", type: UInt16, unit: "%", access: readwrite, range: {min: 0, max: 150}}
+  - {path: Feed/Override, source: "ns=2;s=o", type: UInt16, unit: "%", access: readwrite,
+     range: {min: 0, max: 150}}
   - {path: Laser/On, source: "ns=2;s=on", type: Boolean}
   - {path: Laser/PowerTable, source: "ns=2;s=pt", type: "Double[]", unit: "%"}
   - {path: Program/Name, source: "ns=2;s=pn", type: String, access: readwrite}
