@@ -128,7 +128,8 @@ async def throughput(ctx: Context, face: str, n: int) -> tuple[list[Step], dict[
                 steps.append(step)
                 p99 = f"{_ms(step.latency.get('p99'))} ({_ms(step.p99_median)})"
                 ctx.log(
-                    f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s  delivered {step.delivered:8,.0f}/s"
+                    f"  {rate_label(rate):>9}: offered {step.offered:8,.0f}/s"
+                    f"  delivered {step.delivered:8,.0f}/s"
                     f"  in {step.messages:7,.0f} msgs/s  p99 {p99}  cpu {step.cpu:3.0f}%"
                 )
                 await drain(gw, sub)

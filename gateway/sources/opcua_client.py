@@ -43,7 +43,7 @@ from asyncua.ua.uaerrors import (
 from cryptography import x509
 
 from gateway.codecs.opcua_nodeid import OpcUaAddress, parse_address
-from gateway.config.mapping import MachineMapping
+from gateway.config.mapping import MachineMapping, OpcUaDriver
 from gateway.errors import AddressError, ControllerRefused, ControllerUnavailable
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
@@ -184,7 +184,9 @@ class OpcUaSource:
     def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
         self.machine = machine
         self.mapping = mapping
-        self.driver = mapping.driver
+        if not isinstance(mapping.driver, OpcUaDriver):  # create_source picks this class by the driver's type
+            raise TypeError(f"{machine.name}: not an OPC UA driver: {mapping.driver.type}")
+        self.driver: OpcUaDriver = mapping.driver
         self._client: Client | None = None
         self._connected = False
         self._publish_task: asyncio.Task[None] | None = None

@@ -126,7 +126,9 @@ def test_quality_goes_with_a_change_only_when_it_changes() -> None:
 def test_times_and_values() -> None:
     assert millis(datetime(1970, 1, 1, 0, 0, 1, 999, tzinfo=UTC)) == 1000
     assert millis(datetime(1970, 1, 1, 0, 0, 1)) == 1000  # naive: UTC
-    assert millis(datetime(1969, 12, 31, 23, 59, 59, 500000, tzinfo=UTC)) == 0  # no Sparkplug time before 1970
+    assert (
+        millis(datetime(1969, 12, 31, 23, 59, 59, 500000, tzinfo=UTC)) == 0
+    )  # no Sparkplug time before 1970
     assert value_of(Sample(0.0, datetime.now(UTC) - timedelta(1), "BadWaitingForInitialData")) is None
     assert value_of(Sample(3.5, datetime.now(UTC), "BadNotConnected")) == 3.5
 
