@@ -317,9 +317,9 @@ Point3 = tuple[float, float, float]
 
 
 def _known(offset: list[float | None]) -> tuple[float, float, float]:
-    """The G92 offsets while `simple()` holds, which it does only when none is unknown."""
-    ox, oy, oz = offset
-    assert ox is not None and oy is not None and oz is not None
+    """The G92 offsets for the inline reader. They are all known whenever `simple()` holds, the only
+    state in which the reader uses them; an unknown one (after G28, say) reads as NaN, never used."""
+    ox, oy, oz = (math.nan if v is None else v for v in offset)
     return ox, oy, oz
 
 
