@@ -7,9 +7,9 @@ import sys
 from collections.abc import Sequence
 
 from gateway import __version__
-from gateway.cli import alarms, audit, check, demo, discover, frames, jobs, passwords, programs, run, schema
+from gateway.cli import alarms, audit, check, demo, discover, frames, jobs, passwords, programs, run, schema, tokens
 
-COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms)
+COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms, tokens)
 
 
 def build_parser() -> argparse.ArgumentParser:
