@@ -71,7 +71,9 @@ class JobsPort(Protocol):
         """Validate and queue the program at `path` (the service takes the file over)."""
         ...
 
-    async def list_jobs(self, *, machine: str | None, states: Sequence[str], limit: int) -> Sequence[Record]: ...
+    async def list_jobs(
+        self, *, machine: str | None, states: Sequence[str], limit: int
+    ) -> Sequence[Record]: ...
 
     async def show_job(self, job_id: str) -> Record:
         """The job's record with `history` (its transitions); NotFound if there is none."""

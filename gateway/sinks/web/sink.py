@@ -84,6 +84,7 @@ class WebSink:
         r.add("GET", "/metrics", self._metrics, public=True)
         r.add("GET", "/api/openapi.json", self._openapi, public=True)
         r.add("GET", "/static/{name}", self._static, public=True)
+        r.add("GET", "/favicon.ico", self._no_icon, public=True)
         r.add("GET", "/login", self._login_page, public=True)
         r.add("POST", "/login", self._login, public=True)
         r.add("POST", "/logout", self._logout)
@@ -104,6 +105,7 @@ class WebSink:
         self._counter: Subscription[VariableNode] | None = None
         self._events: EventSubscription | None = None
         self._static_cache: dict[str, bytes] = {}
+        self._bind_error = ""
 
     def _no_uploads(self) -> Path:
         return self.config.state_dir / "web-uploads" / f"{time.monotonic_ns()}"
@@ -125,7 +127,7 @@ class WebSink:
             self.listening = True
             self._report()
         except SinkError as exc:  # retried by run(): a taken port must not stop the other doors
-            log.error("web console %s; retrying in the background", exc)
+            self._bind_error = str(exc)
         return self
 
     def _report(self) -> None:
@@ -164,7 +166,7 @@ class WebSink:
             try:
                 await self.server.start(self.http.host, self.http.port)
             except SinkError as exc:
-                outage.failed(str(exc), "web console %s", exc)
+                outage.failed(str(exc), "web console %s; retrying in the background", exc)
                 continue
             self.listening = True
             outage.recovered("web console listening on %s:%d", self.http.host, self.http.port)
@@ -266,6 +268,9 @@ class WebSink:
                 raise NotFound(f"no file {name!r}")
             data = self._static_cache[name] = await asyncio.to_thread(path.read_bytes)
         return HttpResponse(200, data, kind, {"Cache-Control": "no-cache"})
+
+    async def _no_icon(self, req: HttpRequest) -> HttpResponse:
+        return HttpResponse(204, b"", "image/x-icon", {"Cache-Control": "max-age=86400"})
 
     async def _metrics(self, req: HttpRequest) -> HttpResponse:
         scrape = Scrape(
