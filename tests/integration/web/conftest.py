@@ -27,7 +27,8 @@ from tests.integration.security.conftest import laser_mapping
 from tests.waiting import free_port, wait_until
 
 MACHINE = "laser-sim"
-CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM = "/usr/bin/chromium"
+HAVE_CHROMIUM = Path(CHROMIUM).exists()
 CHROMIUM_ARGS = [
     "--headless",
     "--no-sandbox",
@@ -113,24 +114,23 @@ async def web_gateway(tmp_path: Path, *, speed: float = 20.0, **gateway: Any) ->
     )
     async with Simulator(
         opcua_port=sim_port, ftp_port=ftp_port, speed=speed, store=tmp_path / "store"
-    ) as sim:
-        async with Gateway(config) as gw:
-            task = asyncio.create_task(gw.run(), name="test:gateway")
-            rig = WebRig(
-                gw, sim, f"http://127.0.0.1:{http_port}", f"opc.tcp://127.0.0.1:{port}/cnc-gateway", state
+    ) as sim, Gateway(config) as gw:
+        task = asyncio.create_task(gw.run(), name="test:gateway")
+        rig = WebRig(
+            gw, sim, f"http://127.0.0.1:{http_port}", f"opc.tcp://127.0.0.1:{port}/cnc-gateway", state
+        )
+        try:
+            await wait_until(
+                lambda: rig.machine.nodes["Machine/State"].sample.good,
+                timeout=20,
+                message="the gateway to mirror the simulator",
             )
-            try:
-                await wait_until(
-                    lambda: rig.machine.nodes["Machine/State"].sample.good,
-                    timeout=20,
-                    message="the gateway to mirror the simulator",
-                )
-                yield rig
-            finally:
-                for session in rig.sessions:
-                    await session.close()
-                task.cancel()
-                await asyncio.gather(task, return_exceptions=True)
+            yield rig
+        finally:
+            for session in rig.sessions:
+                await session.close()
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
 
 
 @pytest.fixture
@@ -142,12 +142,12 @@ async def rig(tmp_path: Path) -> AsyncIterator[WebRig]:
 @pytest.fixture
 async def browser() -> AsyncIterator[Any]:
     """Debian's Chromium, headless, through Playwright (skipped where it is not installed)."""
-    if not CHROMIUM.exists():
+    if not HAVE_CHROMIUM:
         pytest.skip("chromium is not installed (make system-deps installs it)")
     from playwright.async_api import async_playwright
 
     async with async_playwright() as pw:
-        browser = await pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        browser = await pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
             yield browser
         finally:

@@ -1,4 +1,4 @@
-"""The console in a real browser (Debian's Chromium through Playwright) against a running gateway and simulator:
+"""The console in a real browser (Debian's Chromium, through Playwright) against a gateway and simulator:
 log in, watch a position change live, write as operator and be refused as viewer, drop a job and see it
 DELIVERED, acknowledge an alarm raised through a command, trust a rejected OPC UA certificate, log out.
 
