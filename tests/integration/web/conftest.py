@@ -67,7 +67,7 @@ class WebRig:
 
     async def session(self, user: str | None = None) -> aiohttp.ClientSession:
         """An HTTP client, logged in as `user` (None: anonymous); its CSRF token in `.headers`."""
-        session = aiohttp.ClientSession(base_url=self.url)
+        session = aiohttp.ClientSession(base_url=self.url, cookie_jar=aiohttp.CookieJar(unsafe=True))
         self.sessions.append(session)
         if user is None:
             return session
@@ -112,9 +112,10 @@ async def web_gateway(tmp_path: Path, *, speed: float = 20.0, **gateway: Any) ->
     config = Config(
         GatewayConfig.model_validate(settings), (mapping.model_copy(update={"jobs": jobs}),), tmp_path
     )
-    async with Simulator(
-        opcua_port=sim_port, ftp_port=ftp_port, speed=speed, store=tmp_path / "store"
-    ) as sim, Gateway(config) as gw:
+    async with (
+        Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=speed, store=tmp_path / "store") as sim,
+        Gateway(config) as gw,
+    ):
         task = asyncio.create_task(gw.run(), name="test:gateway")
         rig = WebRig(
             gw, sim, f"http://127.0.0.1:{http_port}", f"opc.tcp://127.0.0.1:{port}/cnc-gateway", state
