@@ -28,6 +28,7 @@ from gateway.cli.check import report_config_error
 from gateway.cli.demo_driver import keep_program_running
 from gateway.config.access import AccessConfig, UserConfig
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.http import HttpConfig
 from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
@@ -40,7 +41,7 @@ log = logging.getLogger("gateway.demo")
 DEMO_INBOX_USER = "nesting"
 DEMO_INBOX_PASSWORD = "nesting"  # a demo-only default, printed in the banner
 DEMO_INBOX_PASSWORD_ENV = "CNC_DEMO_INBOX_PASSWORD"
-DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the role of its name
+DEMO_USERS = ("viewer", "operator", "engineer", "admin")  # logins (OPC UA, web console), role = name
 DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
 
 
@@ -58,6 +59,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=5020,
         help="port of the mapping's COPYDATA tcp-server target (default 5020)",
     )
+    p.add_argument(
+        "--http-port",
+        type=int,
+        default=8080,
+        help="web console, REST API and /metrics (default 8080; 0: off)",
+    )
+    p.add_argument("--http-host", default="127.0.0.1", help="web console address (default 127.0.0.1)")
     p.add_argument("--speed", type=float, default=1.0, help="simulator speed factor (default 1)")
     p.add_argument("--state-dir", type=Path, default=Path("state/demo"))
     p.add_argument("--mqtt-host", default="127.0.0.1", help="MQTT broker (default 127.0.0.1)")
@@ -110,6 +118,7 @@ def handle(args: argparse.Namespace) -> int:
         state_dir=str(args.state_dir),
         inbox=demo_inbox(mapping, args),
         mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
+        http=HttpConfig(host=args.http_host, port=args.http_port) if args.http_port else None,
         **demo_access(),
     )
     config = Config(gateway, (mapping,), Path.cwd(), base.files)
@@ -283,7 +292,7 @@ def print_banner(
         "cnc-gateway demo",
         f"  OPC UA server    {endpoint.replace('0.0.0.0', '127.0.0.1')}  (None, Basic256Sha256, Aes128/Aes256 "
         f"endpoints; trust a client by moving its certificate from {args.state_dir}/pki/rejected/ to trusted/)",
-        "  OPC UA users     viewer, operator, engineer; "
+        "  users            viewer, operator, engineer, admin (OPC UA and the web console); "
         + (
             f"password from {DEMO_PASSWORD_ENV}"
             if os.environ.get(DEMO_PASSWORD_ENV)
@@ -313,6 +322,7 @@ def print_banner(
             f"  jobs             cnc-gateway jobs list; OPC UA Objects/Machines/{mapping.machine}/Jobs; "
             "the program starts when the machine is idle",
         ]
+    lines += web_banner(gw)
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     if not external:
         lines.append(
@@ -320,6 +330,21 @@ def print_banner(
         )
     lines += ["  stop             Ctrl-C", ""]
     print("\n".join(lines), flush=True)
+
+
+def web_banner(gw: Gateway) -> list[str]:
+    """Where the web console, the REST API and /metrics are."""
+    try:
+        web = gw.sink("web")
+    except KeyError:
+        return []
+    url = str(getattr(web, "url", ""))
+    return [
+        f"  web console      {url}  (log in as a user above; anonymous visitors look as viewers)",
+        f"  REST API         {url}api/openapi.json; token: cnc-gateway tokens create --user operator "
+        f"--state-dir {gw.config.state_dir}",
+        f"  metrics          {url}metrics  (Prometheus), {url}readyz",
+    ]
 
 
 def copydata_banner(mapping: MachineMapping, mapping_file: str) -> list[str]:
