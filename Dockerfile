@@ -5,5 +5,5 @@ COPY gateway ./gateway
 COPY simulator ./simulator
 COPY mappings ./mappings
 RUN pip install --no-cache-dir .
-EXPOSE 4840 4841 2121 2122 5020
+EXPOSE 4840 4841 2121 2122 5020 8080
 CMD ["cnc-gateway", "run", "mappings/laser-sim.yaml"]
