@@ -76,6 +76,7 @@ class Results:
     targets_13: list[Target] = field(
         default_factory=list
     )  # issue 13's: against the peer (Node-RED), tighter scale
+    targets_16: list[Target] = field(default_factory=list)  # issue 16's: the web console
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -116,6 +117,7 @@ class Results:
             "figures": [f.as_dict() for f in self.figures],
             "targets": [t.as_dict() for t in self.targets],
             "targets_13": [t.as_dict() for t in self.targets_13],
+            "targets_16": [t.as_dict() for t in self.targets_16],
             "details": self.details,
             "errors": self.errors,
         }
@@ -175,6 +177,8 @@ def render(results: Results) -> str:
     out = [table, "", "Targets (issue 7)", _targets(results.targets)]
     if results.targets_13:
         out += ["", "Targets (issue 13)", _targets(results.targets_13)]
+    if results.targets_16:
+        out += ["", "Targets (issue 16)", _targets(results.targets_16)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -24,7 +24,7 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, jobs, mirror, naive, peer, scale
+from bench.scenarios import baselines, jobs, mirror, naive, peer, scale, web
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -36,6 +36,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "peer": peer.run,
     "scale": scale.run,
     "jobs": jobs.run,
+    "web": web.run,
 }
 
 

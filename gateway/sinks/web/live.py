@@ -47,7 +47,45 @@ Change = tuple[VariableNode, Sample]
 
 
 def row(node: VariableNode, sample: Sample) -> list[Any]:
-    return [node.machine.name, node.path, plain(sample.value), sample.status, plain(sample.source_ts)]
+    """One change as the page gets it: machine, path, value, status, source time (ms since the epoch)."""
+    return [node.machine.name, node.path, plain(sample.value), sample.status, _ms(sample)]
+
+
+def _ms(sample: Sample) -> int | None:
+    try:
+        return int(sample.source_ts.timestamp() * 1000)
+    except (OverflowError, OSError, ValueError):
+        return None
+
+
+_PREFIX: dict[VariableNode, str] = {}  # '["machine","path",' per node, made once
+_STATUS: dict[str, str] = {}
+
+
+def _row_text(node: VariableNode, sample: Sample) -> str:
+    """`row()` as JSON text, built by hand: the live path encodes ~10,000 of these a second per page
+    shown, and json.dumps over nested lists (with each value made plain first) was most of its cost."""
+    prefix = _PREFIX.get(node)
+    if prefix is None:
+        prefix = _PREFIX[node] = json.dumps([node.machine.name, node.path], ensure_ascii=False)[:-1] + ","
+    value = sample.value
+    kind = type(value)
+    if kind is float and value == value and value not in (_INF, -_INF):
+        text = repr(value)
+    elif kind is int:
+        text = str(value)
+    elif kind is bool:
+        text = "true" if value else "false"
+    else:
+        text = json.dumps(plain(value), ensure_ascii=False, separators=(",", ":"))
+    status = _STATUS.get(sample.status)
+    if status is None:
+        status = _STATUS[sample.status] = json.dumps(sample.status)
+    ms = _ms(sample)
+    return f"{prefix}{text},{status},{'null' if ms is None else ms}]"
+
+
+_INF = float("inf")
 
 
 class Watch:
@@ -157,7 +195,7 @@ class Client:
 
 
 def encode(changes: Iterable[Change]) -> str:
-    return json.dumps({"v": [row(n, s) for n, s in changes]}, separators=(",", ":"))
+    return '{"v":[' + ",".join([_row_text(n, s) for n, s in changes]) + "]}"
 
 
 class Live:

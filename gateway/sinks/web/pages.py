@@ -108,6 +108,9 @@ class Pages:
         self.templates = Templates()
         self.templates.env.filters["when"] = when
         self.latest_jobs = latest_jobs  # machine -> its latest job record seen on the event bus
+        self._summary_paths: dict[
+            str, tuple[str | None, str | None, str | None]
+        ] = {}  # definitions are fixed
 
     def register(self, r: Router) -> None:
         r.add("GET", "/", self.machines)
@@ -162,12 +165,19 @@ class Pages:
         rows = []
         paths: set[str] = {"Status/State", "Status/LastError", "Jobs/QueueLength", "Status/CopydataTargets"}
         for m in self.tree.machines.values():
+            found = self._summary_paths.get(m.name)
+            if found is None:
+                found = self._summary_paths[m.name] = (
+                    _find(m, STATE_NAMES),
+                    _find(m, PROGRAM_NAMES),
+                    _find(m, BLOCK_NAMES),
+                )
             row: dict[str, Any] = {
                 "name": m.name,
                 "description": m.definition.description,
-                "state_path": _find(m, STATE_NAMES),
-                "program_path": _find(m, PROGRAM_NAMES),
-                "block_path": _find(m, BLOCK_NAMES),
+                "state_path": found[0],
+                "program_path": found[1],
+                "block_path": found[2],
                 "alarms": None,
                 "jobs": "Jobs/QueueLength" in m.nodes,
                 "copydata": "Status/CopydataTargets" in m.nodes,

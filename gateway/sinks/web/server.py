@@ -231,7 +231,8 @@ class HttpServer:
             remote=request.remote or "",
             secure=request.secure,
         )
-        ws = web.WebSocketResponse(heartbeat=30.0, max_msg_size=MAX_MESSAGE)
+        # No permessage-deflate: compressing every batch for every page cost the mirror more than a LAN saves.
+        ws = web.WebSocketResponse(heartbeat=30.0, max_msg_size=MAX_MESSAGE, compress=False)
         if not ws.can_prepare(request).ok:
             return _wire(refusal("BadDecodingError", "this address takes WebSocket connections only"))
         await ws.prepare(request)

@@ -94,7 +94,7 @@ function update(row) {
     const q = el.querySelector(".q");
     if (q) q.textContent = status;
     const t = el.querySelector(".t");
-    if (t && ts) t.textContent = ts.replace("T", " ").slice(0, 23);
+    if (t && ts !== null) t.textContent = new Date(ts).toISOString().replace("T", " ").slice(0, 23);
   }
 }
 
