@@ -103,7 +103,8 @@ async def run(ctx: Context) -> None:
             details["machines_page_ms"] = page
             r.add(
                 "web.machines_page", SECTION, f"machines page server time, {MACHINES} × {PER} (p50)",
-                page["p50"], "ms", baseline=statistics.median(floor), baseline_label="one pass over every sample",
+                page["p50"], "ms", baseline=statistics.median(floor),
+                baseline_label="one pass over every sample",
                 note=f"p95 {page['p95']:.1f} ms, {size:,} bytes",
             )  # fmt: skip
             ctx.log(f"machines page: p50 {page['p50']:.1f} ms, p95 {page['p95']:.1f} ms ({size:,} bytes)")
@@ -136,10 +137,12 @@ async def run(ctx: Context) -> None:
             )
             ratio, wall_ratio = shown / alone, wall_shown / wall_alone
             details["mirror"] = {
-                "none": none, "clients": watched, "received": received, "ratio": ratio, "wall_ratio": wall_ratio,
+                "none": none, "clients": watched, "received": received,
+                "ratio": ratio, "wall_ratio": wall_ratio,
             }  # fmt: skip
             r.add(
-                "web.mirror_ratio", SECTION, f"mirror changes per CPU-s with {CLIENTS} machine pages open / none",
+                "web.mirror_ratio", SECTION,
+                f"mirror changes per CPU-s with {CLIENTS} machine pages open / none",
                 ratio, "×", note=f"{shown:,.0f} vs {alone:,.0f} per CPU-s; wall clock {wall_shown:,.0f}/s vs "
                 f"{wall_alone:,.0f}/s = {wall_ratio:.2f} (flat out, one machine's {PER} variables, "
                 f"{CLIENTS} socket clients in another process)",
@@ -154,7 +157,8 @@ async def run(ctx: Context) -> None:
             details["browser"] = latency
             if latency:
                 r.add(
-                    "web.browser_p99", SECTION, f"source → DOM in Chromium at {LATENCY_RATE:,.0f} changes/s (p99)",
+                    "web.browser_p99", SECTION,
+                    f"source → DOM in Chromium at {LATENCY_RATE:,.0f} changes/s (p99)",
                     latency["p99"], "ms", note=f"p50 {latency['p50']:.0f} ms, {latency['n']} samples, "
                     f"{latency['per_second']:.1f} updates/s of the sampled variable",
                 )  # fmt: skip
@@ -178,7 +182,7 @@ def _pct(values: list[float], p: float) -> float:
 
 async def _flat_out(machine: Any, seconds: float) -> tuple[float, float]:
     """Changes the tree takes in, ingesting as fast as the loop lets us (yielding every 100): per second
-    of wall time, and per second of this process's CPU time (what the gateway could do on cores of its own)."""
+    of wall time, and per second of this process's CPU time (what the gateway does on cores of its own)."""
     nodes = list(machine.mapped)
     count, value = len(nodes), 0.0
     done = 0
@@ -196,7 +200,7 @@ async def _flat_out(machine: Any, seconds: float) -> tuple[float, float]:
 
 
 async def _browser_latency(url: str, machine: Any, seconds: float) -> dict[str, Any] | None:
-    if not Path(CHROMIUM).exists():
+    if not await asyncio.to_thread(Path(CHROMIUM).exists):
         return None
     from playwright.async_api import async_playwright
 
