@@ -52,7 +52,7 @@ def _digest(secret: str) -> str:
 
 
 class TokenStore:
-    """The token file: `create`, `revoke`, `entries`, and `verify` (which re-reads the file when it changed)."""
+    """The token file: `create`, `revoke`, `entries`, `verify` (which re-reads the file when it changed)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path

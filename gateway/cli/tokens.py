@@ -65,7 +65,8 @@ def handle_create(args: argparse.Namespace) -> int:
         return 1
     print(token)
     print(
-        f"(a token for {args.user}, stored hashed in {store.path}; send it as `Authorization: Bearer <token>`;"
+        f"(a token for {args.user}, stored hashed in {store.path}; "
+        "send it as `Authorization: Bearer <token>`;"
         " it is not shown again)",
         file=sys.stderr,
     )

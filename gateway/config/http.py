@@ -34,7 +34,9 @@ from gateway.config.base import Strict
 class HttpTls(Strict):
     """HTTPS instead of HTTP. Files are relative to the state directory, as for the FTP inbox's TLS."""
 
-    cert: str = Field(default="http-cert.pem", description="PEM certificate (chain), relative to the state dir")
+    cert: str = Field(
+        default="http-cert.pem", description="PEM certificate (chain), relative to the state directory"
+    )
     key: str = Field(default="http-key.pem", description="PEM private key, relative to the state directory")
 
 
@@ -43,8 +45,8 @@ class HttpConfig(Strict):
 
     host: str = Field(
         default="0.0.0.0",
-        description="Address to listen on; 0.0.0.0 (every interface) so that the shop floor and monitoring reach "
-        "it; anonymous visitors only get access.anonymous's role",
+        description="Address to listen on; 0.0.0.0 (every interface) so that the shop floor and monitoring "
+        "reach it; anonymous visitors only get access.anonymous's role",
     )
     port: Annotated[int, Field(ge=0, le=65535)] = 8080
     tls: HttpTls | None = Field(default=None, description="Serve HTTPS; session cookies are then Secure")
@@ -78,7 +80,7 @@ MASK = "********"
 
 
 def masked(model: BaseModel) -> dict[str, Any]:
-    """A configuration as plain JSON data with every secret replaced by a mask (for the console's Gateway page)."""
+    """A configuration as plain JSON data, every secret masked (for the console's Gateway page)."""
     return _mask(model.model_dump(mode="json"))  # type: ignore[no-any-return]
 
 
