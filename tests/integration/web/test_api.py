@@ -322,3 +322,130 @@ async def test_a_taken_port_leaves_the_gateway_running_without_its_console(tmp_p
 async def test_http_null_turns_the_console_off(tmp_path: Path) -> None:
     async with web_gateway(tmp_path, http=None) as rig:
         assert "web" not in [s.name for s in rig.gateway.sinks]
+
+
+def _self_signed(folder: Path) -> None:
+    """http-cert.pem and http-key.pem in `folder` (the state directory), as `openssl req -x509` makes them."""
+    import datetime as dt
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "cnc-gateway")])
+    now = dt.datetime.now(dt.UTC)
+    cert = (
+        x509.CertificateBuilder()
+        .subject_name(name)
+        .issuer_name(name)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - dt.timedelta(minutes=1))
+        .not_valid_after(now + dt.timedelta(days=1))
+        .add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost")]), critical=False)
+        .sign(key, hashes.SHA256())
+    )
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "http-cert.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    (folder / "http-key.pem").write_bytes(
+        key.private_bytes(
+            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+        )
+    )
+
+
+async def test_https_with_the_state_directorys_certificate_and_secure_cookies(tmp_path: Path) -> None:
+    import ssl
+
+    _self_signed(tmp_path / "state")
+    from tests.waiting import free_port
+
+    port = free_port()
+    http = {"host": "127.0.0.1", "port": port, "tls": {}}
+    async with web_gateway(tmp_path, http=http) as rig:
+        context = ssl.create_default_context(cafile=str(tmp_path / "state" / "http-cert.pem"))
+        context.check_hostname = False
+        connector = aiohttp.TCPConnector(ssl=context)
+        async with aiohttp.ClientSession(
+            base_url=f"https://127.0.0.1:{port}",
+            connector=connector,
+            cookie_jar=aiohttp.CookieJar(unsafe=True),
+        ) as session:
+            async with session.post(
+                "/login", data={"username": "otto", "password": USERS["otto"][1]}, allow_redirects=False
+            ) as r:
+                assert r.status == 303
+                cookie = r.headers["Set-Cookie"]
+            assert "Secure" in cookie and "HttpOnly" in cookie and "SameSite=Strict" in cookie
+            async with session.get("/api/me") as r:
+                assert (await r.json())["user"] == "otto"
+        assert rig.web.url.startswith("https://")
+
+
+async def test_a_missing_certificate_stops_the_start_with_what_to_do(tmp_path: Path) -> None:
+    from gateway.errors import SinkError
+
+    with pytest.raises(SinkError, match=r"web console TLS: .*http-cert\.pem does not exist; create it"):
+        async with web_gateway(tmp_path, http={"host": "127.0.0.1", "port": 0, "tls": {}}):
+            pass
+
+
+def _junk(rng: Any, depth: int = 0) -> Any:
+    """A JSON value of any shape, sometimes of the shape an operation wants."""
+    choice = rng.randrange(9 if depth < 3 else 6)
+    if choice == 0:
+        return None
+    if choice == 1:
+        return rng.choice([True, False])
+    if choice == 2:
+        return rng.choice([0, -1, 1, 150, 151, 2**31, -(2**63), 10**30])
+    if choice == 3:
+        return rng.choice([0.5, -1e308, 1e-320, 3.0])
+    if choice == 4:
+        return rng.choice(["", "demo.nc", "x" * 300, "\u0000\u202e", "<script>", "../../etc/passwd"])
+    if choice == 5:
+        return rng.choice(["laser-sim", "J000001", "Feed/Override"])
+    if choice == 6:
+        return [_junk(rng, depth + 1) for _ in range(rng.randrange(4))]
+    keys = ["value", "args", "deadline", "comment", "priority", "name", "x"]
+    return {rng.choice(keys): _junk(rng, depth + 1) for _ in range(rng.randrange(4))}
+
+
+SEGMENTS = ["laser-sim", "nope", "Commands", "Programs", "start", "List", "Feed/Override", "J000001", "1",
+            "abc", "%2e%2e", "x" * 200, "Axes/X", "cert.der"]  # fmt: skip
+
+
+async def test_random_requests_over_the_openapi_document_never_get_a_server_error(api: WebRig) -> None:
+    """What schemathesis would do, without its dependencies: every operation of the document, with path
+    parameters, queries and JSON bodies drawn at random (seeded, so a failure repeats)."""
+    import random
+
+    rng = random.Random(16)
+    session = await api.session("erik")
+    operations = [(m.upper(), p) for p, ops in document()["paths"].items() for m in ops]
+    failures = []
+    for i in range(400):
+        method, template = operations[i % len(operations)]
+        path = template
+        while "{" in path:
+            start = path.index("{")
+            path = path[:start] + rng.choice(SEGMENTS) + path[path.index("}") + 1 :]
+        if method == "POST" and path.endswith("/methods/Programs/Delete"):
+            continue  # a real deletion of the simulator's program is not a refusal to test
+        query = {
+            rng.choice(["limit", "machine", "state", "view", "since", "path", "prefix"]): str(_junk(rng))
+        }
+        body = json.dumps(_junk(rng)).encode() if rng.random() < 0.8 else b"\xff\xfe{"
+        async with session.request(
+            method, path, params=query, data=body, headers={"Content-Type": "application/json"}
+        ) as r:
+            text = await r.text()
+            if r.status >= 500 and r.status not in (502, 503, 504):
+                failures.append(f"{method} {path} {query}: {r.status} {text[:200]}")
+            elif r.status >= 400 and r.headers.get("Content-Type", "").startswith("application/json"):
+                error = json.loads(text)["error"]
+                if not (error["status"].startswith("Bad") and error["reason"]):
+                    failures.append(f"{method} {path}: {text[:200]}")
+    assert not failures, "\n".join(failures[:20])
