@@ -98,7 +98,20 @@ function update(row) {
   }
 }
 
+const DRIP_KEYS = ["block", "lead", "sent", "lines", "paused", "restart_block"];
+
+// The drip-feed fields of a job record (the serial DNC transport adds them), as "block 120, lead 8.5".
+function dripText(job) {
+  const source = job.drip && typeof job.drip === "object" ? job.drip : job;
+  const parts = DRIP_KEYS.filter((k) => source[k] !== undefined && source[k] !== null).map((k) => k + " " + source[k]);
+  return parts.join(", ");
+}
+
 function onJob(job) {
+  const drip = dripText(job);
+  document.querySelectorAll('[data-drip="' + job.machine + '"]').forEach((el) => {
+    el.textContent = job.state === "SENDING" && drip ? job.id + " " + drip : "–";
+  });
   document.querySelectorAll('tr.job[data-job="' + job.id + '"]').forEach((tr) => {
     tr.dataset.state = job.state;
     const state = tr.querySelector(".state");
@@ -109,7 +122,9 @@ function onJob(job) {
     const reason = tr.querySelector(".reason");
     if (reason) reason.textContent = job.reason || "";
     const progress = tr.querySelector(".progress");
-    if (progress && typeof job.progress === "number") progress.textContent = Math.round(job.progress) + " %";
+    if (progress && typeof job.progress === "number") {
+      progress.textContent = Math.round(job.progress) + " %" + (drip ? " · " + drip : "");
+    }
   });
   const table = document.getElementById("jobs");
   if (table && !document.querySelector('tr.job[data-job="' + job.id + '"]')) scheduleReload();
