@@ -449,3 +449,30 @@ async def test_random_requests_over_the_openapi_document_never_get_a_server_erro
                 if not (error["status"].startswith("Bad") and error["reason"]):
                     failures.append(f"{method} {path}: {text[:200]}")
     assert not failures, "\n".join(failures[:20])
+
+
+async def test_a_drip_fed_job_shows_its_progress_on_the_machines_page_and_in_the_metrics(api: WebRig) -> None:
+    """The serial DNC transport adds drip fields to a job's record; the console shows whatever is there."""
+    from gateway.model.events import Event
+
+    record = {"id": "J000777", "state": "SENDING", "filename": "long.nc", "progress": 12.5,
+              "drip": {"block": 120, "lead": 8.5, "sent": 4096}}  # fmt: skip
+    api.gateway.tree.events.publish(Event(MACHINE, "jobs/J000777", record, retain=True))
+    session = await api.session(None)
+
+    async def page() -> str | None:
+        async with session.get("/") as r:
+            text = await r.text()
+        return text if "J000777 block 120, lead 8.5, sent 4096" in text else None
+
+    await wait_until(page, message="the drip-feed on the machines page")
+    async with session.get("/metrics") as r:
+        text = await r.text()
+    assert f'cnc_gateway_dnc_bytes_sent{{machine="{MACHINE}"}} 4096.0' in text
+    assert f'cnc_gateway_dnc_lead_seconds{{machine="{MACHINE}"}} 8.5' in text
+    api.gateway.tree.events.publish(
+        Event(MACHINE, "jobs/J000777", {**record, "state": "DELIVERED"}, retain=True)
+    )
+    await wait_until(lambda: api.web.latest_jobs[MACHINE]["state"] == "DELIVERED", message="the job ended")
+    async with session.get("/metrics") as r:
+        assert "cnc_gateway_dnc_bytes_sent{" not in await r.text()
