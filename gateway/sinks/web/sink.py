@@ -232,7 +232,9 @@ class WebSink:
             caller = self.sessions.caller(req)
         except LoginRequired:
             caller = Caller(None, None, "anonymous")
-        response = self.pages.login(req, caller, message=f"{exc.status}: {exc.reason}", next_url="/")
+        response = self.pages.render(
+            req, caller, "error.html", title="Refused", page="error", status=exc.status, reason=exc.reason
+        )
         response.status = refused(exc).status
         return response
 
