@@ -71,12 +71,9 @@ def job_view(record: Mapping[str, Any]) -> dict[str, Any]:
     seconds = estimate.get("seconds") if isinstance(estimate, Mapping) else None
     out["estimate_text"] = f"{seconds:.0f} s" if isinstance(seconds, (int, float)) else DASH
     extents = estimate.get("extents") if isinstance(estimate, Mapping) else None
-    if isinstance(extents, Mapping) and extents:
-        out["extents_text"] = " ".join(
-            f"{axis.upper()} {_span(span)}" for axis, span in sorted(extents.items()) if span is not None
-        )
-    else:
-        out["extents_text"] = DASH
+    out["extents_text"] = _extents(extents) if isinstance(extents, Mapping) else DASH
+    if isinstance(estimate, Mapping) and isinstance(estimate.get("cut_mm"), (int, float)):
+        out["estimate_text"] += f", {estimate['cut_mm']:.0f} mm cut"
     progress = record.get("progress")
     drip = drip_of(record)
     out["drip"] = drip
@@ -88,10 +85,14 @@ def job_view(record: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _span(span: Any) -> str:
-    if isinstance(span, (list, tuple)) and len(span) == 2 and all(isinstance(v, (int, float)) for v in span):
-        return f"{span[0]:g}..{span[1]:g}"
-    return str(span)
+def _extents(extents: Mapping[str, Any]) -> str:
+    """The validator's extents (min_x, max_x, …) as `X 10..330 Y 5..150 Z 0..10`."""
+    parts = []
+    for axis in ("x", "y", "z"):
+        low, high = extents.get(f"min_{axis}"), extents.get(f"max_{axis}")
+        if isinstance(low, (int, float)) and isinstance(high, (int, float)):
+            parts.append(f"{axis.upper()} {low:g}..{high:g}")
+    return " ".join(parts) or DASH
 
 
 def uptime(seconds: float) -> str:
