@@ -18,5 +18,5 @@ WORKDIR /app
 COPY --from=build /wheels /wheels
 RUN pip install --no-cache-dir /wheels/*.whl && rm -rf /wheels
 COPY mappings ./mappings
-EXPOSE 4840 4841 2121 2122 5020
+EXPOSE 4840 4841 2121 2122 5000 5020 8080
 CMD ["cnc-gateway", "run", "mappings/laser-sim.yaml"]

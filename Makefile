@@ -32,7 +32,8 @@ $(PEER_STAMP): $(PEER)/package.json $(PEER)/package-lock.json
 
 install: $(STAMP)
 
-# Mosquitto is a real broker the MQTT tests start on a free loopback port.
+# Mosquitto is a real broker the MQTT tests start on a free loopback port; Chromium runs the web console's
+# browser tests (Playwright drives Debian's package; its own browser download is not used).
 system-deps:
 	@bash .ci/install-system-deps
 

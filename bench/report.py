@@ -78,6 +78,7 @@ class Results:
     )  # issue 13's: against the peer (Node-RED), tighter scale
     targets_15: list[Target] = field(default_factory=list)  # issue 15's: Sparkplug B beside the JSON sink
     targets_17: list[Target] = field(default_factory=list)  # issue 17's: MTConnect
+    targets_16: list[Target] = field(default_factory=list)  # issue 16's: the web console
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -120,6 +121,7 @@ class Results:
             "targets_13": [t.as_dict() for t in self.targets_13],
             "targets_15": [t.as_dict() for t in self.targets_15],
             "targets_17": [t.as_dict() for t in self.targets_17],
+            "targets_16": [t.as_dict() for t in self.targets_16],
             "details": self.details,
             "errors": self.errors,
         }
@@ -180,6 +182,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 15)", _targets(results.targets_15)]
     if results.targets_17:
         out += ["", "Targets (issue 17)", _targets(results.targets_17)]
+    if results.targets_16:
+        out += ["", "Targets (issue 16)", _targets(results.targets_16)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -24,7 +24,7 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, jobs, mirror, mtconnect, naive, peer, scale, sparkplug
+from bench.scenarios import baselines, jobs, mirror, mtconnect, naive, peer, scale, sparkplug, web
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -38,6 +38,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "jobs": jobs.run,
     "sparkplug": sparkplug.run,
     "mtconnect": mtconnect.run,
+    "web": web.run,
 }
 
 

@@ -130,6 +130,7 @@ def judge(ctx: Context) -> None:
     r.targets_13 = judge_13(ctx)
     r.targets_15 = judge_15(ctx)
     r.targets_17 = judge_17(ctx)
+    r.targets_16 = judge_16(ctx)
 
 
 def judge_15(ctx: Context) -> list[Target]:
@@ -205,6 +206,32 @@ def judge_17(ctx: Context) -> list[Target]:
         Target(
             "mirror changes/s with 5 streaming clients, relative to none", 0.9, 0.97, "x",
             value=mirror.get("ratio"), source=f"{five:,.0f}/s vs {none:,.0f}/s (window medians)",
+
+
+def judge_16(ctx: Context) -> list[Target]:
+    """The web console (bench/scenarios/web.py); empty when the scenario did not run."""
+    web: dict[str, Any] = ctx.results.details.get("web", {})
+    if not web:
+        return []
+    page = web.get("machines_page_ms") or {}
+    mirror = web.get("mirror") or {}
+    browser = web.get("browser") or {}
+    size = f"{web.get('machines')} machines × {web.get('per_machine')}"
+    return [
+        Target(
+            f"Machines page, {size} variables, server time (p50)", 200, 50, "ms", higher_is_better=False,
+            value=page.get("p50"), source=f"p95 {page.get('p95', 0):.1f} ms" if page else "not measured",
+        ),
+        Target(
+            "Mirror changes/s with 5 pages watching a busy machine, relative to none", 0.9, 0.97, "×",
+            value=mirror.get("ratio"),
+            source=(f"per gateway CPU-s; wall clock {mirror.get('wall_ratio', 0):.2f}" if mirror else "not measured"),
+        ),
+        Target(
+            "Browser update latency source → DOM, p99 at 5,000 changes/s", 250, 100, "ms",
+            higher_is_better=False, value=browser.get("p99"),
+            source=(f"Chromium, {browser.get('n')} samples, p50 {browser.get('p50', 0):.0f} ms"
+                    if browser else "no Chromium"),
         ),
     ]  # fmt: skip
 

@@ -14,7 +14,7 @@ import logging
 import signal
 from collections.abc import Awaitable, Callable, Coroutine, Iterator
 from contextlib import AsyncExitStack
-from typing import TYPE_CHECKING, Self, TypeVar, overload
+from typing import TYPE_CHECKING, Any, Self, TypeVar, overload
 
 from gateway.audit.store import audit_path
 from gateway.audit.trail import AuditTrail
@@ -143,6 +143,36 @@ def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None 
     return sinks
 
 
+def build_web(
+    config: Config,
+    gateway: Gateway,
+    jobs: JobService | None,
+    alarms: AlarmService | None,
+    audit: AuditTrail,
+    sinks: list[Sink],
+) -> Sink | None:
+    """The web console, REST API and /metrics (`http:` in the gateway file; `http: null` turns it off).
+
+    It reaches the job queue, the alarms, the audit table and the OPC UA trust list only
+    through the ports of gateway/sinks/web/ports.py, which these objects implement."""
+    http = config.gateway.http
+    if http is None:
+        return None
+    from gateway.sinks.opcua.security import TrustList
+    from gateway.sinks.web.ports import Ports
+    from gateway.sinks.web.sink import WebSink
+
+    pki = next((getattr(s, "pki", None) for s in sinks if s.name == "opcua"), None)
+    ports = Ports(
+        gateway=gateway,
+        jobs=jobs,
+        alarms=alarms,
+        audit=audit,
+        trust=TrustList(pki) if pki is not None else None,
+    )
+    return WebSink(gateway.tree, config, http, ports)
+
+
 def build_jobs(config: Config, tree: VariableTree) -> JobService | None:
     """The FTP job queue, when some machine has a `jobs:` section (None otherwise)."""
     if not any(m.jobs is not None for m in config.machines):
@@ -180,6 +210,9 @@ class Gateway:
         self.jobs = build_jobs(
             config, self.tree
         )  # before the sinks start: it adds Jobs/ variables and methods
+        web = build_web(config, self, self.jobs, self.alarms, self.audit, self.sinks)
+        if web is not None:  # after the job service: the console submits through it
+            self.sinks.append(web)
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
 
@@ -197,6 +230,28 @@ class Gateway:
                     raise TypeError(f"sink {name!r} is a {type(sink).__name__}, not a {kind.__name__}")
                 return sink
         raise KeyError(name)
+
+    def diagnostics(self) -> dict[str, Any]:
+        """gateway/diagnostics.py's snapshot (the web console's GatewayPort)."""
+        from gateway.diagnostics import snapshot
+
+        return snapshot(self)
+
+    def not_ready(self) -> list[str]:
+        """What keeps the gateway from being ready: start-up, a sink not up, a machine not yet tried."""
+        waiting = [] if self.ready.is_set() else ["start-up"]
+        for sink in self.sinks:
+            up = getattr(sink, "up", None)
+            if up is None:  # the MQTT sink says its link's state
+                state = getattr(sink, "state", None)
+                up = state is None or state == "connected"
+            if not up:
+                waiting.append(f"sink {sink.name}")
+        for name, machine in self.tree.machines.items():
+            status = machine.status
+            if not (status.is_connected or status.last_error):
+                waiting.append(f"machine {name}")
+        return waiting
 
     async def __aenter__(self) -> Self:
         self.config.state_dir.mkdir(parents=True, exist_ok=True)

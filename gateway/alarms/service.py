@@ -16,10 +16,11 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
-from gateway.alarms.manager import AlarmManager
+from gateway.alarms.manager import AlarmManager, UnknownAlarm
 from gateway.alarms.store import AlarmStore, store_path
 from gateway.config.mapping import MachineMapping
 from gateway.errors import AlarmStoreError, SinkError
+from gateway.model.context import WriteContext
 from gateway.model.tree import VariableTree
 
 log = logging.getLogger("gateway.alarms")
@@ -61,6 +62,45 @@ class AlarmService:
             self._opened = False
             await self.db(self.store.close)
         await asyncio.to_thread(self._pool.shutdown, True)
+
+    # --- the web console's port (gateway/sinks/web/ports.py AlarmsPort) ----------------------------
+
+    @property
+    def alarm_machines(self) -> list[str]:
+        return sorted(self.managers)
+
+    def active_alarms(self, machine: str | None = None) -> list[dict[str, Any]]:
+        """The retained occurrences (active, or waiting for an acknowledgement or confirmation)."""
+        managers = [self.managers[machine]] if machine in self.managers else []
+        if machine is None:
+            managers = list(self.managers.values())
+        return [{"machine": m.name, **r.as_dict()} for m in managers for r in m.retained()]
+
+    async def alarm_history(self, machine: str | None, limit: int) -> list[dict[str, Any]]:
+        records = await self.db(functools.partial(self.store.history, machine, limit=limit))
+        return [{"machine": r.machine, **r.as_dict()} for r in records]
+
+    def acknowledge_role(self, machine: str) -> str | None:
+        manager = self.managers.get(machine)
+        return None if manager is None else manager.config.acknowledge_role
+
+    async def acknowledge_alarm(
+        self, machine: str, occurrence: int, ctx: WriteContext, comment: str
+    ) -> dict[str, Any]:
+        record = await self._manager(machine).acknowledge(occurrence, ctx, comment)
+        return {"machine": machine, **record.as_dict()}
+
+    async def confirm_alarm(
+        self, machine: str, occurrence: int, ctx: WriteContext, comment: str
+    ) -> dict[str, Any]:
+        record = await self._manager(machine).confirm(occurrence, ctx, comment)
+        return {"machine": machine, **record.as_dict()}
+
+    def _manager(self, machine: str) -> AlarmManager:
+        manager = self.managers.get(machine)
+        if manager is None:
+            raise UnknownAlarm(f"{machine!r} has no alarms")
+        return manager
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:

@@ -119,6 +119,8 @@ class AuditStore(SqliteFile):
         user: str | None = None,
         since: datetime | None = None,
         limit: int = 100,
+        origin: str | None = None,
+        kind: str | None = None,
     ) -> list[AuditRow]:
         """Newest first."""
         where: list[str] = []
@@ -129,6 +131,12 @@ class AuditStore(SqliteFile):
         if user is not None:
             where.append("user = ?")
             params.append(user)
+        if origin is not None:
+            where.append("origin = ?")
+            params.append(origin)
+        if kind is not None:
+            where.append("kind = ?")
+            params.append(kind)
         if since is not None:
             where.append("ts >= ?")
             params.append(iso(since))

@@ -15,6 +15,7 @@ import concurrent.futures
 import logging
 import queue
 import threading
+from datetime import datetime
 from pathlib import Path
 from typing import Self
 
@@ -52,6 +53,8 @@ class AuditTrail:
         self._thread: threading.Thread | None = None
         self._ready: concurrent.futures.Future[None] = concurrent.futures.Future()
         self._drop_logged = 0
+        self._reader: AuditStore | None = None  # for query_audit, opened at its first use
+        self._reader_lock = threading.Lock()
 
     async def __aenter__(self) -> Self:
         self._thread = threading.Thread(target=self._run, name="audit-writer", daemon=True)
@@ -65,6 +68,10 @@ class AuditTrail:
             return
         await asyncio.to_thread(self._queue.put, _STOP)  # blocks only while the queue is full
         await asyncio.to_thread(thread.join)
+        with self._reader_lock:
+            reader, self._reader = self._reader, None
+        if reader is not None:
+            reader.close()
 
     def record(self, entry: AuditEntry) -> None:
         """Log the entry and queue it for the table; never blocks."""
@@ -89,6 +96,29 @@ class AuditTrail:
         marker = _Flush()
         await asyncio.to_thread(self._queue.put, marker)
         await asyncio.wrap_future(marker.done)
+
+    async def query_audit(
+        self,
+        *,
+        machine: str | None = None,
+        user: str | None = None,
+        origin: str | None = None,
+        kind: str | None = None,
+        since: datetime | None = None,
+        limit: int = 100,
+    ) -> list[AuditEntry]:
+        """Entries newest first, from the table (the web console's AuditPort), in a thread of its own."""
+
+        def read() -> list[AuditEntry]:
+            with self._reader_lock:
+                if self._reader is None:
+                    self._reader = AuditStore(self.path, create=False)
+                rows = self._reader.query(
+                    machine=machine, user=user, origin=origin, kind=kind, since=since, limit=limit
+                )
+            return [row.entry for row in rows]
+
+        return await asyncio.to_thread(read)
 
     # --- the writer thread ----------------------------------------------------------------------
 

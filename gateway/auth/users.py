@@ -61,6 +61,12 @@ class UserDirectory:
     def has_users(self) -> bool:
         return bool(self._users)
 
+    def role_of(self, name: str) -> str | None:
+        """The role of a configured user (None: no such user), for credentials other than a password
+        (the web console's API tokens), which must follow the user's current role."""
+        known = self._users.get(name)
+        return None if known is None else known[1]
+
     def anonymous(self, address: str, via: str = "OPC UA") -> Identity | None:
         if not self.anonymous_allowed:
             log.info("%s: anonymous login from %s refused (access.anonymous: refuse)", via, address)

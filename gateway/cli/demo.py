@@ -29,6 +29,7 @@ from gateway.cli.check import report_config_error
 from gateway.cli.demo_driver import keep_program_running
 from gateway.config.access import AccessConfig, UserConfig
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.http import HttpConfig
 from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
@@ -43,7 +44,7 @@ log = logging.getLogger("gateway.demo")
 DEMO_INBOX_USER = "nesting"
 DEMO_INBOX_PASSWORD = "nesting"  # a demo-only default, printed in the banner
 DEMO_INBOX_PASSWORD_ENV = "CNC_DEMO_INBOX_PASSWORD"
-DEMO_USERS = ("viewer", "operator", "engineer")  # OPC UA logins, each with the role of its name
+DEMO_USERS = ("viewer", "operator", "engineer", "admin")  # logins (OPC UA, web console), role = name
 DEMO_PASSWORD_ENV = "CNC_DEMO_PASSWORD"  # their password; default: the user name
 
 
@@ -68,6 +69,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--sim-shdr-port", type=_port_or_off, default=_sim_shdr_default(),
         help="simulator's MTConnect adapter (SHDR) port (default $CNC_SIM_SHDR_PORT or 7878; 'off')",
     )  # fmt: skip
+    p.add_argument(
+        "--http-port",
+        type=int,
+        default=8080,
+        help="web console, REST API and /metrics (default 8080; 0: off)",
+    )
+    p.add_argument("--http-host", default="127.0.0.1", help="web console address (default 127.0.0.1)")
     p.add_argument("--speed", type=float, default=1.0, help="simulator speed factor (default 1)")
     p.add_argument("--state-dir", type=Path, default=Path("state/demo"))
     p.add_argument("--mqtt-host", default="127.0.0.1", help="MQTT broker (default 127.0.0.1)")
@@ -153,6 +161,7 @@ def handle(args: argparse.Namespace) -> int:
         mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
         sparkplug=demo_sparkplug(args),
         mtconnect=None if args.mtconnect_port is None else AgentConfig(port=args.mtconnect_port),
+        http=HttpConfig(host=args.http_host, port=args.http_port) if args.http_port else None,
         **demo_access(),
     )
     config = Config(gateway, (mapping,), Path.cwd(), base.files)
@@ -347,7 +356,7 @@ def print_banner(
             "(None, Basic256Sha256, Aes128/Aes256 endpoints; trust a client by moving its certificate from "
             f"{args.state_dir}/pki/rejected/ to trusted/)"
         ),
-        "  OPC UA users     viewer, operator, engineer; "
+        "  users            viewer, operator, engineer, admin (OPC UA and the web console); "
         + (
             f"password from {DEMO_PASSWORD_ENV}"
             if os.environ.get(DEMO_PASSWORD_ENV)
@@ -388,6 +397,7 @@ def print_banner(
                 "the program starts when the machine is idle"
             ),
         ]
+    lines += web_banner(gw)
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     lines += mtconnect_banner(gw, args, external)
     if not external:
@@ -433,6 +443,21 @@ def mtconnect_banner(gw: Gateway, args: argparse.Namespace, external: bool) -> l
             "mappings/laser-sim-shdr.yaml reads it: README, MTConnect)"
         )
     return lines
+
+
+def web_banner(gw: Gateway) -> list[str]:
+    """Where the web console, the REST API and /metrics are."""
+    try:
+        web = gw.sink("web")
+    except KeyError:
+        return []
+    url = str(getattr(web, "url", ""))
+    return [
+        f"  web console      {url}  (log in as a user above; anonymous visitors look as viewers)",
+        f"  REST API         {url}api/openapi.json; token: cnc-gateway tokens create --user operator "
+        f"--state-dir {gw.config.state_dir}",
+        f"  metrics          {url}metrics  (Prometheus), {url}readyz",
+    ]
 
 
 def copydata_banner(mapping: MachineMapping, mapping_file: str) -> list[str]:

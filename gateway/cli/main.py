@@ -20,9 +20,12 @@ from gateway.cli import (
     run,
     schema,
     sparkplug,
+    tokens,
 )
 
-COMMANDS = (run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms, sparkplug)
+COMMANDS = (
+    run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms, sparkplug, tokens
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

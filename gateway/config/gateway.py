@@ -16,8 +16,10 @@ from gateway.config.access import (
     check_access,
     check_roles,
     check_users,
+    unknown_role,
 )
 from gateway.config.base import Strict
+from gateway.config.http import HttpConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
@@ -97,6 +99,10 @@ class GatewayConfig(Strict):
         validate_default=True,  # its default roles must exist too
         description="Role enforcement, anonymous logins, roles of MQTT, COPYDATA and job writers",
     )
+    http: HttpConfig | None = Field(
+        default_factory=HttpConfig,
+        description="The web console, REST API and /metrics (gateway/config/http.py); null: off",
+    )
 
     @field_validator("roles")
     @classmethod
@@ -121,6 +127,18 @@ class GatewayConfig(Strict):
         if value is not None and "mqtt" in info.data:
             value.connection(info.data["mqtt"])  # a broker of its own, or the mqtt: section's
         return value
+
+    @field_validator("http")
+    @classmethod
+    def _http(cls, http: HttpConfig | None, info: ValidationInfo) -> HttpConfig | None:
+        roles = info.data.get("roles")
+        if http is None or roles is None:
+            return http
+        for key in ("jobs_role", "admin_role"):
+            problem = unknown_role(getattr(http, key), roles) if getattr(http, key) else None
+            if problem:
+                raise ValueError(f"http.{key}: {problem}")
+        return http
 
     def user_directory(self) -> UserDirectory:
         """The users, the anonymous role and the lockout, as gateway/auth/users.py checks logins."""

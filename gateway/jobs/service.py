@@ -26,13 +26,21 @@ import hashlib
 import logging
 import os
 import uuid
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import Config
-from gateway.errors import ConfigError, JobError, PathRefused, SinkError
+from gateway.errors import (
+    ConfigError,
+    InvalidArgument,
+    InvalidState,
+    JobError,
+    NotFound,
+    PathRefused,
+    SinkError,
+)
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.worker import DeliveryWorker
@@ -41,7 +49,7 @@ from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_co
 from gateway.jobs.inbox.paths import check_file_name
 from gateway.jobs.programs import program_methods
 from gateway.jobs.queue.publish import JobPublisher
-from gateway.jobs.queue.store import Job, JobQueue, JobState
+from gateway.jobs.queue.store import Job, JobQueue, JobState, Transition, parse_job_id
 from gateway.jobs.threads import JobThreads
 from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
@@ -379,6 +387,120 @@ class JobService:
                     self.queue.reject, job.seq, "the upload was lost when the gateway stopped; send it again"
                 )
 
+    # --- the web console's port (gateway/sinks/web/ports.py JobsPort) -----------------------------------
+    # The same staging folder, the same submit() and so the same validation and queue as the FTP inbox.
+
+    @property
+    def job_machines(self) -> list[str]:
+        return sorted(self.machines)
+
+    @property
+    def max_upload(self) -> int:
+        return int(self.config.gateway.inbox.max_file_size)
+
+    def staging_file(self) -> Path:
+        """A fresh name in the inbox's staging folder (cleared at start-up) for an upload as it arrives."""
+        return self.inbox_root / STAGING / uuid.uuid4().hex
+
+    async def submit_file(
+        self,
+        machine: str,
+        filename: str,
+        path: Path,
+        *,
+        size: int,
+        sha256: str,
+        user: str,
+        origin: str,
+        priority: int = 0,
+    ) -> UploadReply:
+        """A program uploaded other than through FTP (the web console), already in a staging file."""
+        try:
+            check_file_name(filename)
+        except PathRefused as exc:
+            await self.threads.work(functools.partial(path.unlink, missing_ok=True))
+            return UploadReply(False, exc.reason)
+        return await self.submit(Upload(machine, filename, path, size, sha256, user, origin, priority))
+
+    def _open(self) -> None:
+        if not self._opened:
+            raise InvalidState("the job queue is not open yet (the gateway is starting)")
+
+    async def list_jobs(
+        self, *, machine: str | None, states: Sequence[str], limit: int
+    ) -> list[dict[str, Any]]:
+        self._open()
+        try:
+            wanted = tuple(JobState(s.upper()) for s in states)
+        except ValueError:
+            raise InvalidArgument(
+                f"states are {', '.join(s.value for s in JobState)}; got {', '.join(states)}"
+            ) from None
+        jobs = await self.threads.queue(self.queue.list, machine=machine, states=wanted, limit=limit)
+        return [job.as_dict() for job in jobs]
+
+    async def show_job(self, job_id: str) -> dict[str, Any]:
+        self._open()
+        seq = _seq(job_id)
+
+        def read() -> tuple[Job, list[Transition]]:
+            return self.queue.get(seq), self.queue.history(seq)
+
+        try:
+            job, history = await self.threads.queue(read)
+        except JobError as exc:
+            raise NotFound(str(exc)) from None
+        record = job.as_dict()
+        record["history"] = [
+            {
+                "state": t.state.value,
+                "previous": t.previous.value if t.previous else None,
+                "reason": t.reason,
+                "ts": t.ts.isoformat(),
+            }
+            for t in history
+        ]
+        return record
+
+    async def retry_job(self, job_id: str, by: str) -> dict[str, Any]:
+        return await self._operate(self.queue.retry, job_id, by)
+
+    async def cancel_job(self, job_id: str, by: str) -> dict[str, Any]:
+        return await self._operate(self.queue.cancel, job_id, by)
+
+    async def prioritize_job(self, job_id: str, priority: int) -> dict[str, Any]:
+        return await self._operate(self.queue.set_priority, job_id, priority)
+
+    async def _operate(self, call: Callable[..., Job], job_id: str, arg: Any) -> dict[str, Any]:
+        self._open()
+        seq = _seq(job_id)
+        try:
+            await self.threads.queue(self.queue.get, seq)
+        except JobError as exc:
+            raise NotFound(str(exc)) from None
+        try:
+            job = await self._q(call, seq, arg)
+        except JobError as exc:
+            raise InvalidState(str(exc)) from None
+        worker = self.workers.get(job.machine)
+        if worker is not None:
+            worker.wake()
+        return job.as_dict()
+
+    async def job_counts(self) -> dict[str, dict[str, int]]:
+        if not self._opened:
+            return {}
+        if not self._opened:
+            return {}
+
+        def read() -> dict[str, dict[str, int]]:
+            return {
+                name: {state.value: self.queue.count(machine=name, states=(state,)) for state in JobState}
+                for name in self.machines
+            }
+
+        return await self.threads.queue(read)
+
     # --- for the demo ----------------------------------------------------------------------------------
 
     def machine_busy(self, machine: str) -> bool:
@@ -479,6 +601,13 @@ class JobService:
             }
 
         self.publisher.summary(machine, **await self.threads.queue(read))
+
+
+def _seq(job_id: str) -> int:
+    try:
+        return parse_job_id(job_id)
+    except JobError as exc:
+        raise NotFound(str(exc)) from None
 
 
 def _validated_reason(verdict: Verdict) -> str:

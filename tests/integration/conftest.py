@@ -16,9 +16,10 @@ import pytest
 from tests.integration.mqtt.conftest import Mosquitto, Recorder
 from tests.waiting import free_port
 
-# Gateway OPC UA, simulator OPC UA, FTP inbox, simulator FTP, COPYDATA, MTConnect agent, simulator SHDR.
-# (1883 is the system broker's.)
-DEFAULT_PORTS = (4840, 4841, 2121, 2122, 5020, 5000, 7878)
+# Gateway OPC UA, simulator OPC UA, FTP inbox, simulator FTP, COPYDATA, MTConnect agent, simulator SHDR, web
+# console. (1883 is the system broker's.) A gateway a test starts without an `http:` port of its own finds
+# 8080 taken and runs without its console, retrying in the background.
+DEFAULT_PORTS = (4840, 4841, 2121, 2122, 5020, 5000, 7878, 8080)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -43,6 +43,7 @@ from gateway.jobs.inbox.server import (
     UploadReply,
 )
 from gateway.shims.aioftp_server import close_server
+from gateway.tls import server_context
 
 __all__ = ["STAGING", "Inbox", "Submit", "Upload", "UploadReply", "tls_context"]
 
@@ -51,20 +52,7 @@ log = logging.getLogger("gateway.jobs.inbox")
 
 def tls_context(state_dir: Path, cert: str, key: str) -> ssl.SSLContext:
     """The server context for implicit FTPS; SinkError says which file is missing or wrong."""
-    cert_path, key_path = state_dir / cert, state_dir / key
-    for path in (cert_path, key_path):
-        if not path.is_file():
-            raise SinkError(
-                f"FTP inbox TLS: {path} does not exist; create it, e.g. "
-                "`openssl req -x509 -newkey rsa:2048 -nodes "
-                f"-days 3650 -subj /CN=cnc-gateway -keyout {key_path} -out {cert_path}`"
-            )
-    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
-    try:
-        context.load_cert_chain(cert_path, key_path)
-    except (ssl.SSLError, OSError) as exc:
-        raise SinkError(f"FTP inbox TLS: cannot load {cert_path} / {key_path}: {exc}") from None
-    return context
+    return server_context(state_dir, cert, key, "FTP inbox")
 
 
 class Inbox:

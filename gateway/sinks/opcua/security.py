@@ -43,7 +43,7 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from gateway.config.security import is_secure
-from gateway.errors import SinkError
+from gateway.errors import NotFound, SinkError
 from gateway.shims.ua import new_status_code
 
 log = logging.getLogger(__name__)
@@ -290,6 +290,57 @@ def _is_ca(cert: x509.Certificate) -> bool:
 
 def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.@\- ]", "_", text)[:64] or "unnamed"
+
+
+# --- the trust list as an administrator sees it (the web console's TrustPort) ----------------------
+
+
+class TrustList:
+    """The certificates in trusted/ and rejected/, and moving one from either to the other.
+
+    Moving a file into trusted/ is all that trusting takes: `ClientCertificates`
+    re-reads the folder when it changes, so the client's next attempt succeeds.
+    Names are plain file names of one of the two folders: nothing else can be moved.
+    """
+
+    def __init__(self, pki: Pki) -> None:
+        self.pki = pki
+
+    def certificates(self) -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = []
+        for state, folder in (("rejected", self.pki.rejected), ("trusted", self.pki.trusted)):
+            for path in sorted(folder.glob("*")) if folder.is_dir() else []:
+                cert = _load_any(path)
+                if cert is None:
+                    continue
+                out.append(
+                    {
+                        "name": path.name,
+                        "state": state,
+                        "subject": common_name(cert),
+                        "thumbprint": thumbprint(cert),
+                        "application_uris": application_uris(cert),
+                        "not_before": cert.not_valid_before_utc,
+                        "not_after": cert.not_valid_after_utc,
+                        "ca": _is_ca(cert),
+                    }
+                )
+        return out
+
+    def trust(self, name: str) -> dict[str, Any]:
+        return self._move(name, self.pki.rejected, self.pki.trusted)
+
+    def reject(self, name: str) -> dict[str, Any]:
+        return self._move(name, self.pki.trusted, self.pki.rejected)
+
+    def _move(self, name: str, source: Path, target: Path) -> dict[str, Any]:
+        path = source / name
+        if Path(name).name != name or name.startswith(".") or not path.is_file() or _load_any(path) is None:
+            raise NotFound(f"no certificate {name!r} in {source.name}/")
+        target.mkdir(parents=True, exist_ok=True)
+        os.replace(path, target / name)
+        log.warning("OPC UA trust list: %s moved from %s/ to %s/", name, source.name, target.name)
+        return next(c for c in self.certificates() if c["name"] == name and c["state"] == target.name)
 
 
 # --- applying it to the server ---------------------------------------------------------------------

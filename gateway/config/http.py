@@ -1,0 +1,97 @@
+"""The gateway file's `http:` section: the web console, the REST API and `/metrics` (gateway/sinks/web/).
+
+```yaml
+http:
+  host: 0.0.0.0          # every interface: the console is for the shop floor, /metrics for plant IT
+  port: 8080
+  tls: {cert: http-cert.pem, key: http-key.pem}   # optional, relative to the state directory (as inbox.tls)
+  jobs_role: operator    # submit, retry, cancel and reprioritise jobs from the console or the API
+  admin_role: null       # trust OPC UA certificates, see the effective configuration (null: the highest role)
+  session_idle: 28800    # s a console session lasts without a request
+```
+
+`http: null` turns the console, the API and the metrics off. Without the key the
+section's defaults apply: the console listens on 0.0.0.0:8080. Like the OPC UA
+server (4840) and the FTP inbox (2121), it is meant to be reached from the shop
+network (a technician's laptop, Prometheus on another host); anonymous visitors
+get `access.anonymous`'s role (viewer: they only look), so nothing anonymous may
+change a machine unless the gateway file says so. Logins over plain HTTP cross the
+network in clear: use `tls:` (or `host: 127.0.0.1` behind a reverse proxy) where
+that matters.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Annotated, Any
+
+from pydantic import BaseModel, Field, SecretStr, field_validator
+
+from gateway.config.access import check_role_name
+from gateway.config.base import Strict
+
+
+class HttpTls(Strict):
+    """HTTPS instead of HTTP. Files are relative to the state directory, as for the FTP inbox's TLS."""
+
+    cert: str = Field(
+        default="http-cert.pem", description="PEM certificate (chain), relative to the state directory"
+    )
+    key: str = Field(default="http-key.pem", description="PEM private key, relative to the state directory")
+
+
+class HttpConfig(Strict):
+    """The web console, the REST API (/api, described at /api/openapi.json) and /metrics."""
+
+    host: str = Field(
+        default="0.0.0.0",
+        description="Address to listen on; 0.0.0.0 (every interface) so that the shop floor and monitoring "
+        "reach it; anonymous visitors only get access.anonymous's role",
+    )
+    port: Annotated[int, Field(ge=0, le=65535)] = 8080
+    tls: HttpTls | None = Field(default=None, description="Serve HTTPS; session cookies are then Secure")
+    jobs_role: str = Field(
+        default="operator", description="Lowest role that may submit, retry, cancel and reprioritise jobs"
+    )
+    admin_role: str | None = Field(
+        default=None,
+        description="Lowest role that may trust or reject OPC UA client certificates and read the effective "
+        "configuration; null: the highest role",
+    )
+    session_idle: float = Field(
+        default=8 * 3600.0, gt=0, description="Seconds a console session lasts without a request"
+    )
+    max_body: Annotated[int, Field(ge=1024)] = Field(
+        default=1024 * 1024, description="Largest JSON request body, in bytes (uploads: inbox.max_file_size)"
+    )
+
+    @field_validator("jobs_role", "admin_role")
+    @classmethod
+    def _roles(cls, value: str | None) -> str | None:
+        return None if value is None else check_role_name(value)
+
+    def admin(self, roles: list[str]) -> str:
+        """The role that administers the gateway from the console."""
+        return self.admin_role or roles[-1]
+
+
+SECRET_WORDS = ("password", "secret", "token", "passphrase")
+MASK = "********"
+
+
+def masked(model: BaseModel) -> dict[str, Any]:
+    """A configuration as plain JSON data, every secret masked (for the console's Gateway page)."""
+    return _mask(model.model_dump(mode="json"))  # type: ignore[no-any-return]
+
+
+def _mask(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {
+            k: (MASK if v is not None and any(w in str(k).lower() for w in SECRET_WORDS) else _mask(v))
+            for k, v in value.items()
+        }
+    if isinstance(value, list):
+        return [_mask(v) for v in value]
+    if isinstance(value, SecretStr):  # pragma: no cover - model_dump(mode="json") has already hidden it
+        return MASK
+    return value
