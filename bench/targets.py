@@ -206,6 +206,8 @@ def judge_17(ctx: Context) -> list[Target]:
         Target(
             "mirror changes/s with 5 streaming clients, relative to none", 0.9, 0.97, "x",
             value=mirror.get("ratio"), source=f"{five:,.0f}/s vs {none:,.0f}/s (window medians)",
+        ),
+    ]  # fmt: skip
 
 
 def judge_16(ctx: Context) -> list[Target]:
@@ -225,7 +227,8 @@ def judge_16(ctx: Context) -> list[Target]:
         Target(
             "Mirror changes/s with 5 pages watching a busy machine, relative to none", 0.9, 0.97, "×",
             value=mirror.get("ratio"),
-            source=(f"per gateway CPU-s; wall clock {mirror.get('wall_ratio', 0):.2f}" if mirror else "not measured"),
+            source=(f"per gateway CPU-s; wall clock {mirror.get('wall_ratio', 0):.2f}"
+                    if mirror else "not measured"),
         ),
         Target(
             "Browser update latency source → DOM, p99 at 5,000 changes/s", 250, 100, "ms",

@@ -15,7 +15,7 @@ configured by a gateway file; no controller: the benchmark feeds each machine's 
   five browsers would share this machine's two cores with the gateway and measure the browsers.
 - **Browser latency**: Debian's Chromium (Playwright) on the machine page while 5,000 changes/s go into
   that machine; one of its variables carries the time it was ingested (ms since the epoch) and a
-  MutationObserver in the page records, at each update of that cell, now − that time. p50/p99, and how
+  MutationObserver in the page records, at each update of that cell, now - that time. p50/p99, and how
   many updates a second that one variable got.
 """
 

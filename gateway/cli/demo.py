@@ -454,8 +454,10 @@ def web_banner(gw: Gateway) -> list[str]:
     url = str(getattr(web, "url", ""))
     return [
         f"  web console      {url}  (log in as a user above; anonymous visitors look as viewers)",
-        f"  REST API         {url}api/openapi.json; token: cnc-gateway tokens create --user operator "
-        f"--state-dir {gw.config.state_dir}",
+        (
+            f"  REST API         {url}api/openapi.json; token: cnc-gateway tokens create --user operator "
+            f"--state-dir {gw.config.state_dir}"
+        ),
         f"  metrics          {url}metrics  (Prometheus), {url}readyz",
     ]
 

@@ -24,7 +24,19 @@ from gateway.cli import (
 )
 
 COMMANDS = (
-    run, check, schema, discover, demo, jobs, programs, passwords, frames, audit, alarms, sparkplug, tokens
+    run,
+    check,
+    schema,
+    discover,
+    demo,
+    jobs,
+    programs,
+    passwords,
+    frames,
+    audit,
+    alarms,
+    sparkplug,
+    tokens,
 )
 
 
