@@ -9,9 +9,10 @@ option) and the simulator. Design choices, and why:
   what controllers handle best, and it re-resolves `nsu=` namespaces each time.
 * **Own publish loop.** asyncua's loop hands every notification to a new task (or
   a queue) and logs stack traces when the socket drops. Here one task sends the
-  Publish requests and feeds each DataChangeNotification straight into
-  `Machine.ingest`, synchronously, through a ClientHandle → node dict. That keeps
-  the cost per change to a few attribute reads and one call.
+  Publish requests and feeds each data change straight into `Machine.ingest`,
+  synchronously, through a ClientHandle → node dict. The answers are read by
+  gateway.sources.publish_decode: a compiled reader for the usual data changes,
+  asyncua's own decoding for everything else.
 * **Errors stop here.** asyncua's exceptions are translated into gateway.errors
   (writes) or into a Bad status plus one readable log line (connection), never
   a traceback for something as ordinary as a controller being switched off.
@@ -52,6 +53,7 @@ from gateway.reconnect import Backoff, OutageLog
 from gateway.shims.ua import new_node_id, new_status_error
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
+from gateway.sources.publish_decode import Change, from_notifications, publish
 
 log = logging.getLogger(__name__)
 
@@ -440,13 +442,13 @@ class OpcUaSource:
         while True:
             try:
                 async with asyncio.timeout(stall_after):
-                    response = await session.publish(acks)
+                    response = await publish(session, acks)
             except (BadTimeout, BadTooManyPublishRequests):
                 acks = []
                 await asyncio.sleep(0.05)
                 continue
             except UaStructParsingError:
-                acks = []  # one undecodable message (asyncua has logged it); the next one may be fine
+                acks = []  # one undecodable message (logged); the next one may be fine
                 continue
             except TimeoutError:
                 lost("BadCommunicationError", "subscription stalled (no publish response)")
@@ -455,61 +457,47 @@ class OpcUaSource:
                 status, reason, _ = describe_error(exc)
                 lost(status, reason)
                 return
-            header_status = response.ResponseHeader.ServiceResult.value
-            if header_status & 0x80000000:
-                lost(*describe_error(new_status_error(header_status))[:2])
+            if response.service_result & 0x80000000:
+                lost(*describe_error(new_status_error(response.service_result))[:2])
                 return
-            result = response.Parameters
-            message = result.NotificationMessage
             acks = []
-            if message.NotificationData:
+            if response.notifications:
                 acks.append(
                     ua.SubscriptionAcknowledgement(
-                        SubscriptionId=result.SubscriptionId, SequenceNumber=message.SequenceNumber
+                        SubscriptionId=response.subscription_id, SequenceNumber=response.sequence_number
                     )
                 )
-                self._process(message.NotificationData, lost)
+                self._process(response.changes, response.statuses, lost)
 
     def _on_informed(self, lost: Lost) -> Callable[[ua.PublishResult], None]:
         """The callback asyncua calls when its supervisor tells subscriptions the connection is gone."""
 
         def callback(result: ua.PublishResult) -> None:
-            data = result.NotificationMessage.NotificationData
-            if data:
-                self._process(data, lost)
+            self._process(*from_notifications(result.NotificationMessage.NotificationData), lost)
 
         return callback
 
-    def _process(self, notifications: list[Any], lost: Lost) -> None:
+    def _process(self, changes: list[Change], statuses: list[int], lost: Lost) -> None:
         """Hot path: every data change goes straight to `Machine.ingest`."""
         handles = self._handles
         ingest = self.machine.ingest
-        for notification in notifications:
-            if type(notification) is ua.DataChangeNotification:
-                for item in notification.MonitoredItems:
-                    entry = handles.get(item.ClientHandle)
-                    if entry is None:
-                        continue
-                    node, expected = entry
-                    dv = item.Value
-                    variant = dv.Value
-                    value = None if variant is None else variant.Value
-                    ts = dv.SourceTimestamp or dv.ServerTimestamp
-                    if ts is None or ts.year < 1971:
-                        ts = utcnow()
-                    code = dv.StatusCode
-                    try:
-                        if (code is None or code.value == 0) and type(value) is expected:
-                            ingest(node, value, ts)
-                        else:
-                            self._ingest_other(node, value, ts, 0 if code is None else code.value)
-                    except Exception as exc:  # noqa: BLE001 - one odd value must not stop the others
-                        self._ingest_failed(node, value, exc)
-            elif isinstance(notification, ua.StatusChangeNotification):
-                code = notification.Status.value
-                if code & 0x80000000:
-                    status, reason, _ = describe_error(new_status_error(code))
-                    lost(status, reason)
+        for handle, value, stamp, code in changes:
+            entry = handles.get(handle)
+            if entry is None:
+                continue
+            node, expected = entry
+            ts = utcnow() if stamp is None or stamp.year < 1971 else stamp
+            try:
+                if code == 0 and type(value) is expected:
+                    ingest(node, value, ts)
+                else:
+                    self._ingest_other(node, value, ts, code)
+            except Exception as exc:  # noqa: BLE001 - one odd value must not stop the others
+                self._ingest_failed(node, value, exc)
+        for code in statuses:
+            if code & 0x80000000:
+                status, reason, _ = describe_error(new_status_error(code))
+                lost(status, reason)
 
     def _ingest_failed(self, node: VariableNode, value: Any, exc: Exception) -> None:
         reason = f"cannot take {value!r:.40}: {type(exc).__name__}: {exc}"

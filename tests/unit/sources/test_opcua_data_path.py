@@ -1,13 +1,20 @@
-"""The receive path, fed with real asyncua notification objects (no network needed)."""
+"""The receive path, fed with PublishResponses encoded by asyncua (no network needed).
+
+Each response goes through gateway.sources.publish_decode as one off the wire would: the compiled
+reader where it is built, asyncua's decoding with CNC_GATEWAY_PURE_PUBLISH=1 (run both).
+"""
 
 from datetime import UTC, datetime
 from typing import Any
 
 from asyncua import ua
+from asyncua.common.utils import Buffer
+from asyncua.ua.ua_binary import struct_to_binary
 
 from gateway.config.mapping import MachineMapping
 from gateway.model.tree import Machine, VariableTree
 from gateway.sources.opcua_client import OpcUaSource
+from gateway.sources.publish_decode import decode
 
 TS = datetime(2024, 5, 6, 7, 8, 9, tzinfo=UTC)
 SERVER_TS = datetime(2024, 5, 6, 7, 8, 10, tzinfo=UTC)
@@ -47,10 +54,18 @@ def change(
     return ua.MonitoredItemNotification(ClientHandle=handle(source, path), Value=dv)
 
 
-def feed(source: OpcUaSource, *items: ua.MonitoredItemNotification) -> list[tuple[str, str]]:
+def receive(source: OpcUaSource, *notifications: Any) -> list[tuple[str, str]]:
+    """Encode a PublishResponse carrying `notifications`, decode it as the source does, process it."""
+    response = ua.PublishResponse()
+    response.Parameters.NotificationMessage.NotificationData = list(notifications)
+    published = decode(Buffer(struct_to_binary(response)))
     lost: list[tuple[str, str]] = []
-    source._process([ua.DataChangeNotification(MonitoredItems=list(items))], lambda s, r: lost.append((s, r)))
+    source._process(published.changes, published.statuses, lambda s, r: lost.append((s, r)))
     return lost
+
+
+def feed(source: OpcUaSource, *items: ua.MonitoredItemNotification) -> list[tuple[str, str]]:
+    return receive(source, ua.DataChangeNotification(MonitoredItems=list(items)))
 
 
 def test_values_reach_the_tree_with_their_source_timestamp() -> None:
@@ -119,7 +134,6 @@ def test_an_unparseable_address_gets_no_handle() -> None:
 
 def test_server_shutdown_status_change_reports_the_loss() -> None:
     source, _ = make_source()
-    lost: list[tuple[str, str]] = []
     notification = ua.StatusChangeNotification(Status=ua.StatusCode(ua.StatusCodes.BadShutdown))
-    source._process([notification], lambda s, r: lost.append((s, r)))
+    lost = receive(source, notification)
     assert lost == [("BadNotConnected", "server shut down")]
