@@ -1,0 +1,105 @@
+"""Real PublishResponses from the simulator, as the bytes asyncua hands its decoder.
+
+`python -m bench.publish_capture OUT [--seconds S] [--noise N] [--rate R]` runs the simulator in
+process (the demo program looping, plus N noise Doubles at R changes/s), subscribes an asyncua
+client to every variable, and records the body of each PublishResponse (from its TypeId on) as
+`struct_from_binary` would read it. The records are stored as a 4-byte little-endian length and
+the body, one after another: tests/corpus/opcua/publish-responses.bin is such a file (the
+differential tests of the compiled reader read it), and the decode micro-bench captures its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import socket
+import struct
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from asyncua import Client, ua
+
+from simulator.noise import NoiseSpec
+from simulator.runner import Simulator
+from simulator.variables import NAMESPACE_URI, build_variables
+
+_LENGTH = struct.Struct("<I")
+
+
+def write_records(path: Path, bodies: list[bytes]) -> None:
+    path.write_bytes(b"".join(_LENGTH.pack(len(b)) + b for b in bodies))
+
+
+def read_records(path: Path) -> Iterator[bytes]:
+    data = path.read_bytes()
+    pos = 0
+    while pos < len(data):
+        (n,) = _LENGTH.unpack_from(data, pos)
+        yield data[pos + 4 : pos + 4 + n]
+        pos += 4 + n
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class _Quiet:
+    """A subscription handler that takes the notifications and does nothing with them."""
+
+    def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
+        pass
+
+
+async def capture(seconds: float, noise: int, rate: float, interval_ms: float = 50.0) -> list[bytes]:
+    """PublishResponse bodies received in `seconds` from a fresh simulator."""
+    bodies: list[bytes] = []
+    with tempfile.TemporaryDirectory(prefix="cnc-capture-") as store:
+        spec = NoiseSpec(noise, rate) if noise else None
+        async with Simulator(
+            opcua_port=_free_port(), ftp_port=0, store=Path(store), loop_program="demo.nc", speed=5.0, noise=spec
+        ) as sim:
+            client = Client(sim.opcua_endpoint)
+            await client.connect()
+            try:
+                session = client.uaclient.session
+                send = session._send_request
+
+                async def recording(request: Any, *args: Any, **kwargs: Any) -> Any:
+                    data = await send(request, *args, **kwargs)
+                    if isinstance(request, ua.PublishRequest):
+                        bodies.append(bytes(data))
+                    return data
+
+                session._send_request = recording
+                ns = await client.get_namespace_index(NAMESPACE_URI)
+                ids = [v.node_id for v in build_variables()]
+                if spec is not None:
+                    ids += [spec.node_id(i) for i in range(noise)]
+                subscription = await client.create_subscription(interval_ms, _Quiet())
+                nodes = [client.get_node(ua.NodeId(i, ns)) for i in ids]
+                await subscription.subscribe_data_change(nodes, queuesize=1)
+                await asyncio.sleep(seconds)
+                await subscription.delete()
+            finally:
+                await client.disconnect()
+    return bodies
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--noise", type=int, default=100)
+    parser.add_argument("--rate", type=float, default=500.0)
+    args = parser.parse_args()
+    bodies = asyncio.run(capture(args.seconds, args.noise, args.rate))
+    write_records(args.out, bodies)
+    print(f"{len(bodies)} PublishResponses, {sum(map(len, bodies)):,} bytes, in {args.out}")
+
+
+if __name__ == "__main__":
+    main()
