@@ -59,9 +59,15 @@ async def capture(seconds: float, noise: int, rate: float, interval_ms: float = 
     bodies: list[bytes] = []
     with tempfile.TemporaryDirectory(prefix="cnc-capture-") as store:
         spec = NoiseSpec(noise, rate) if noise else None
-        async with Simulator(
-            opcua_port=_free_port(), ftp_port=0, store=Path(store), loop_program="demo.nc", speed=5.0, noise=spec
-        ) as sim:
+        simulator = Simulator(
+            opcua_port=_free_port(),
+            ftp_port=0,
+            store=Path(store),
+            loop_program="demo.nc",
+            speed=5.0,
+            noise=spec,
+        )
+        async with simulator as sim:
             client = Client(sim.opcua_endpoint)
             await client.connect()
             try:

@@ -33,13 +33,13 @@ from bench.publish_capture import read_records
 from gateway.sources import publish_decode
 from gateway.sources.publish_decode import Publish, decode, decode_fast, from_response
 
+TYPE_ID = b"\x01\x00\x3d\x03"  # PublishResponse_Encoding_DefaultBinary, a four-byte NodeId
 CORPUS = Path(__file__).resolve().parents[2] / "corpus" / "opcua"
 CAPTURED = list(read_records(CORPUS / "publish-responses.bin"))
 CASES: list[dict[str, Any]] = yaml.safe_load((CORPUS / "publish.yaml").read_text(encoding="utf-8"))
 
-needs_compiled = pytest.mark.skipif(
-    publish_decode.compiled is None or publish_decode.PURE, reason="the compiled reader is not built or forced off"
-)
+FAST = publish_decode.compiled is not None and not publish_decode.PURE
+needs_compiled = pytest.mark.skipif(not FAST, reason="the compiled reader is not built or forced off")
 
 
 def strict(x: Any) -> Any:
@@ -103,9 +103,10 @@ def response(
 
 def test_the_compiled_reader_is_built_where_a_compiler_is() -> None:
     """`pip install -e .` builds `_publish.c`; a silent fallback would cost the gateway its CPU."""
-    if publish_decode.compiled is None and not (os.environ.get("CI") or shutil.which("cc") or shutil.which("gcc")):
+    compiler = os.environ.get("CI") or shutil.which("cc") or shutil.which("gcc")
+    if publish_decode.compiled is None and not compiler:
         pytest.skip("no C compiler here: asyncua decodes every response")
-    assert publish_decode.compiled is not None, "gateway/sources/_publish.c was not built: run `pip install -e .`"
+    assert publish_decode.compiled is not None, "gateway/sources/_publish.c was not built: pip install -e ."
 
 
 def test_the_captured_corpus_is_real() -> None:
@@ -118,7 +119,7 @@ def test_the_captured_corpus_is_real() -> None:
 @pytest.mark.parametrize("index", range(len(CAPTURED)))
 def test_every_captured_response_reads_the_same(index: int) -> None:
     fast = both(CAPTURED[index], start=index % 7)
-    if publish_decode.compiled is not None and not publish_decode.PURE:
+    if FAST:
         assert fast is not None, "the compiled reader declined a plain data-change response"
 
 
@@ -128,7 +129,7 @@ def test_every_corpus_case_reads_the_same(case: dict[str, Any]) -> None:
     fast = both(body)
     expected = reference(body)
     assert case["asyncua"] == ("error" if isinstance(expected, Exception) else "decodes")
-    if publish_decode.compiled is not None and not publish_decode.PURE:
+    if FAST:
         assert case["compiled"] == ("declines" if fast is None else "reads")
 
 
@@ -166,7 +167,7 @@ OTHERS: dict[ua.VariantType, st.SearchStrategy[Any]] = {
     V.NodeId: st.integers(0, 2**32 - 1).map(lambda i: ua.NodeId(i, 2)),
     V.StatusCode: st.integers(0, 2**32 - 1).map(ua.StatusCode),
     V.QualifiedName: texts.map(lambda t: ua.QualifiedName(t, 1)),
-    V.LocalizedText: texts.map(lambda t: ua.LocalizedText(t)),
+    V.LocalizedText: texts.map(ua.LocalizedText),
 }
 
 
@@ -184,10 +185,13 @@ def variants(draw: st.DrawFn, types: dict[ua.VariantType, st.SearchStrategy[Any]
 
 
 @st.composite
-def data_values(draw: st.DrawFn, values: st.SearchStrategy[ua.Variant | None], drop: bool = True) -> ua.DataValue:
+def data_values(
+    draw: st.DrawFn, values: st.SearchStrategy[ua.Variant | None], drop: bool = True
+) -> ua.DataValue:
+    codes = st.sampled_from([0, 0x00A80000, 0x40000000, 0x80340000]).map(ua.StatusCode)
     dv = ua.DataValue(
         Value=draw(values),
-        StatusCode=draw(st.none() | st.sampled_from([0, 0x00A80000, 0x40000000, 0x80340000]).map(ua.StatusCode)),
+        StatusCode=draw(st.none() | codes),
         SourceTimestamp=draw(st.none() | timestamps),
         ServerTimestamp=draw(st.none() | timestamps),
         SourcePicoseconds=draw(st.none() | st.integers(0, 2**16 - 1)),
@@ -231,7 +235,7 @@ def test_data_change_responses_read_the_same_and_take_the_fast_path(
     notifications: list[Any] | None, header: dict[str, Any]
 ) -> None:
     fast = both(response(notifications, **header))  # type: ignore[arg-type]
-    if publish_decode.compiled is not None and not publish_decode.PURE:
+    if FAST:
         assert fast is not None, "the compiled reader declined a response of data changes it knows"
 
 
@@ -266,7 +270,10 @@ def test_other_notifications_go_to_asyncua_and_read_the_same(
     assert fast is None
 
 
-@given(epoch=st.integers(-(2**63), 2**63 - 1) | st.sampled_from([0, 1, 9, 10, 2650467743990000000 - 1, 2650467743990000000]))
+EDGES = [0, 1, 9, 10, 2650467743990000000 - 1, 2650467743990000000]  # asyncua clamps at the last
+
+
+@given(epoch=st.integers(-(2**63), 2**63 - 1) | st.sampled_from(EDGES))
 @example(epoch=-1)
 @settings(max_examples=600)
 def test_any_filetime_reads_as_asyncua_reads_it(epoch: int) -> None:
@@ -276,11 +283,11 @@ def test_any_filetime_reads_as_asyncua_reads_it(epoch: int) -> None:
     stamp = struct.pack("<q", ua.datetime_to_win_epoch(dv.SourceTimestamp))
     assert body.count(stamp) == 1
     fast = both(body.replace(stamp, struct.pack("<q", epoch)))
-    if publish_decode.compiled is not None and not publish_decode.PURE:
+    if FAST:
         assert fast is not None
 
 
-# --- (c) junk ------------------------------------------------------------------------------------------------
+# --- (c) junk ---------------------------------------------------------------------------------------------
 
 
 @settings(max_examples=1500, deadline=None)
@@ -290,7 +297,10 @@ def test_arbitrary_bytes_never_crash_and_read_the_same(body: bytes) -> None:
 
 
 @settings(max_examples=500, deadline=None)
-@given(prefix=st.sampled_from([b"\x01\x00\x3d\x03", b"\x01\x00\x3d\x03" + bytes(16) + b"\x00\xff\xff\xff\xff\x00\x00\x00"]), tail=st.binary(max_size=300))
+@given(
+    prefix=st.sampled_from([TYPE_ID, TYPE_ID + bytes(16) + b"\x00\xff\xff\xff\xff\x00\x00\x00"]),
+    tail=st.binary(max_size=300),
+)
 def test_bytes_after_a_valid_start_read_the_same(prefix: bytes, tail: bytes) -> None:
     both(prefix + tail)
 
@@ -307,7 +317,9 @@ def test_every_truncation_of_a_captured_response_reads_the_same(index: int) -> N
     index=st.integers(0, len(CAPTURED) - 1),
     changes=st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 255)), min_size=1, max_size=4),
 )
-def test_captured_responses_with_bytes_changed_read_the_same(index: int, changes: list[tuple[int, int]]) -> None:
+def test_captured_responses_with_bytes_changed_read_the_same(
+    index: int, changes: list[tuple[int, int]]
+) -> None:
     body = bytearray(CAPTURED[index])
     for at, value in changes:
         body[at % len(body)] = value
@@ -320,4 +332,4 @@ def test_start_and_size_outside_the_data_are_refused() -> None:
     assert publish_decode.compiled is not None
     for start, size in [(-1, 0), (0, -1), (5, 0), (0, 5), (2, 3)]:
         with pytest.raises(ValueError, match="within the data"):
-            publish_decode.compiled.decode(b"\x01\x00\x3d\x03", start, size)
+            publish_decode.compiled.decode(TYPE_ID, start, size)
