@@ -1,26 +1,34 @@
 """Real PublishResponses from the simulator, as the bytes asyncua hands its decoder.
 
-`python -m bench.publish_capture OUT [--seconds S] [--noise N] [--rate R]` runs the simulator in
+`python -m bench.publish_capture OUT [--seconds S] [--noise N] [--rate R] [--measure]` runs the simulator in
 process (the demo program looping, plus N noise Doubles at R changes/s), subscribes an asyncua
 client to every variable, and records the body of each PublishResponse (from its TypeId on) as
 `struct_from_binary` would read it. The records are stored as a 4-byte little-endian length and
 the body, one after another: tests/corpus/opcua/publish-responses.bin is such a file (the
-differential tests of the compiled reader read it), and the decode micro-bench captures its own.
+differential tests of the compiled reader read it). With `--measure` it then decodes the same
+captured responses over and over with asyncua (`struct_from_binary`, what `UaSession.publish` does)
+and with the source's compiled reader, and prints the notifications decoded per CPU second of each
+as JSON (bench/scenarios/baselines.py, `publish_decode`).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import socket
 import struct
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from asyncua import Client, ua
+from asyncua.common.utils import Buffer
+from asyncua.ua.ua_binary import struct_from_binary
 
+from gateway.sources import publish_decode
 from simulator.noise import NoiseSpec
 from simulator.runner import Simulator
 from simulator.variables import NAMESPACE_URI, build_variables
@@ -95,16 +103,52 @@ async def capture(seconds: float, noise: int, rate: float, interval_ms: float = 
     return bodies
 
 
+def _per_second(bodies: list[bytes], decode: Any, changes: int, minimum: float = 1.0) -> float:
+    """Notifications decoded per CPU second: the best of three passes of at least `minimum` s each."""
+    best = 0.0
+    for _ in range(3):
+        rounds, start = 0, time.process_time()
+        while (spent := time.process_time() - start) < minimum or rounds == 0:
+            for body in bodies:
+                decode(Buffer(body))
+            rounds += 1
+        best = max(best, rounds * changes / spent)
+    return best
+
+
+def measure(bodies: list[bytes]) -> dict[str, Any]:
+    """asyncua's decoding and the compiled reader on the same responses."""
+    published = [
+        publish_decode.from_response(struct_from_binary(ua.PublishResponse, Buffer(b))) for b in bodies
+    ]
+    changes = sum(len(p.changes) for p in published)
+    fast = [publish_decode.decode_fast(Buffer(b)) for b in bodies]
+    out: dict[str, Any] = {
+        "responses": len(bodies),
+        "changes": changes,
+        "fast_share": sum(f is not None for f in fast) / max(1, len(bodies)),
+        "asyncua": _per_second(bodies, lambda b: struct_from_binary(ua.PublishResponse, b), changes),
+        "compiled": None,
+    }
+    if publish_decode.compiled is not None and not publish_decode.PURE:
+        out["compiled"] = _per_second(bodies, publish_decode.decode, changes)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--noise", type=int, default=100)
     parser.add_argument("--rate", type=float, default=500.0)
+    parser.add_argument("--measure", action="store_true", help="then time both decoders on them (JSON)")
     args = parser.parse_args()
     bodies = asyncio.run(capture(args.seconds, args.noise, args.rate))
     write_records(args.out, bodies)
-    print(f"{len(bodies)} PublishResponses, {sum(map(len, bodies)):,} bytes, in {args.out}")
+    if args.measure:
+        print(json.dumps(measure(bodies)))
+    else:
+        print(f"{len(bodies)} PublishResponses, {sum(map(len, bodies)):,} bytes, in {args.out}")
 
 
 if __name__ == "__main__":

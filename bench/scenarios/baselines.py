@@ -8,6 +8,9 @@
   QoS 1, 80-byte payloads, publisher flat out.
 * the simulator's noise mode: what it sustains with no subscriber, so that the
   mirror figures are known not to be capped by the simulator.
+* PublishResponse decoding: data-change notifications per CPU second decoded by
+  asyncua's `struct_from_binary` and by the OPC UA source's compiled reader, on the
+  same responses captured from the simulator (bench/publish_capture.py).
 
 Each rate is the median of `repeats` short windows after a warm-up.
 """
@@ -16,7 +19,9 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import json
 import statistics
+import sys
 
 from bench.context import Context
 from bench.procs import Agent, Mosquitto, free_port
@@ -33,6 +38,7 @@ async def run(ctx: Context) -> None:
     await asyncua_ceiling(ctx)
     await paho_ceiling(ctx)
     await noise_ceiling(ctx)
+    await publish_decode(ctx)
     notify, qos0 = ctx.ceilings.get("asyncua_notify"), ctx.ceilings.get("paho_qos0")
     if notify and qos0:
         ctx.ceilings["lower"] = min(notify, qos0)
@@ -207,3 +213,35 @@ async def noise_ceiling(ctx: Context) -> None:
         )
     finally:
         await sim.stop()
+
+
+async def publish_decode(ctx: Context) -> None:
+    """asyncua's PublishResponse decoding against the source's compiled reader, same captured bytes."""
+    ctx.log("PublishResponse decoding: capturing from the simulator (1,000 noise variables at 5,000/s)")
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "bench.publish_capture", str(ctx.workdir / "publish-responses.bin"),
+        "--seconds", "2" if ctx.settings.quick else "4", "--noise", "1000", "--rate", "5000", "--measure",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL,
+    )  # fmt: skip
+    out, _ = await proc.communicate()
+    if proc.returncode != 0:
+        raise RuntimeError(f"bench.publish_capture exited with {proc.returncode}")
+    found = json.loads(out.decode().strip().splitlines()[-1])
+    ctx.results.details.setdefault("baselines", {})["publish_decode"] = found
+    ctx.ceilings["asyncua_decode"] = found["asyncua"]
+    ctx.results.add(
+        "baseline.decode.asyncua",
+        SECTION,
+        f"asyncua: PublishResponse notifications decoded per CPU second ({found['changes']:,} captured)",
+        found["asyncua"],
+        "changes/s",
+    )
+    ctx.results.add(
+        "baseline.decode.compiled",
+        SECTION,
+        f"the source's compiled reader, same responses ({100 * found['fast_share']:.0f} % taken)",
+        found["compiled"],
+        "changes/s",
+        baseline=found["asyncua"],
+        baseline_label="asyncua",
+    )
