@@ -16,6 +16,7 @@ import pytest
 from gateway.errors import ControllerRefused, ControllerUnavailable
 from gateway.model.context import WriteContext
 from gateway.model.tree import Machine
+from gateway.sources import publish_decode
 from gateway.sources.opcua_client import OpcUaSource
 from tests.integration.opcua.conftest import NS_URI, SOURCE_TS, Controller, make_machine, source_for
 from tests.waiting import free_port, wait_until
@@ -54,7 +55,28 @@ def all_good(machine: Machine) -> bool:
     return all(node.sample.good for node in machine.mapped)
 
 
-async def test_values_flow_into_the_tree_with_source_timestamps(controller: Controller) -> None:
+@pytest.fixture(params=["compiled", "asyncua"])
+def decoding(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> tuple[str, list[int]]:
+    """Read PublishResponses with the compiled reader or asyncua; the list counts what the reader took."""
+    if request.param == "compiled" and publish_decode.compiled is None:
+        pytest.skip("the compiled reader is not built here")
+    monkeypatch.setattr(publish_decode, "PURE", request.param == "asyncua")
+    taken: list[int] = []
+    original = publish_decode.decode_fast
+
+    def counting(data: object) -> publish_decode.Publish | None:
+        found = original(data)  # type: ignore[arg-type]
+        if found is not None:
+            taken.append(len(found.changes))
+        return found
+
+    monkeypatch.setattr(publish_decode, "decode_fast", counting)
+    return str(request.param), taken
+
+
+async def test_values_flow_into_the_tree_with_source_timestamps(
+    controller: Controller, decoding: tuple[str, list[int]]
+) -> None:
     machine = make_machine(controller.endpoint, variables(controller))
     async with running(machine):
         await wait_until(lambda: all_good(machine), message="every variable Good")
@@ -72,6 +94,11 @@ async def test_values_flow_into_the_tree_with_source_timestamps(controller: Cont
             lambda: machine.nodes["Axes/X/Position"].sample.value == 13.25, message="new position"
         )
         assert machine.nodes["Axes/X/Position"].sample.source_ts == later
+    mode, taken = decoding
+    if mode == "compiled":
+        assert sum(taken) >= 7, "the compiled reader took the data changes"
+    else:
+        assert not taken
 
 
 async def test_a_missing_or_malformed_address_turns_only_that_variable_bad(controller: Controller) -> None:

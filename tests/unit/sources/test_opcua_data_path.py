@@ -1,23 +1,34 @@
 """The receive path, fed with PublishResponses encoded by asyncua (no network needed).
 
-Each response goes through gateway.sources.publish_decode as one off the wire would: the compiled
-reader where it is built, asyncua's decoding with CNC_GATEWAY_PURE_PUBLISH=1 (run both).
+Each response goes through gateway.sources.publish_decode as one off the wire would, once read by the
+compiled reader and once by asyncua's decoding (every test runs on both paths).
 """
 
 from datetime import UTC, datetime
 from typing import Any
 
+import pytest
 from asyncua import ua
 from asyncua.common.utils import Buffer
 from asyncua.ua.ua_binary import struct_to_binary
 
 from gateway.config.mapping import MachineMapping
 from gateway.model.tree import Machine, VariableTree
+from gateway.sources import publish_decode
 from gateway.sources.opcua_client import OpcUaSource
 from gateway.sources.publish_decode import decode
 
 TS = datetime(2024, 5, 6, 7, 8, 9, tzinfo=UTC)
 SERVER_TS = datetime(2024, 5, 6, 7, 8, 10, tzinfo=UTC)
+
+
+@pytest.fixture(autouse=True, params=["compiled", "asyncua"])
+def decoding(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Both ways of reading a PublishResponse: the compiled reader, and asyncua's decoding."""
+    if request.param == "compiled" and publish_decode.compiled is None:
+        pytest.skip("the compiled reader is not built here")
+    monkeypatch.setattr(publish_decode, "PURE", request.param == "asyncua")
+    return str(request.param)
 
 
 def make_source() -> tuple[OpcUaSource, Machine]:
