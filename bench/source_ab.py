@@ -1,4 +1,4 @@
-"""The OPC UA source alone, A/B: CPU per 1,000 changes read with asyncua's decoding and with the compiled reader.
+"""The OPC UA source alone, A/B: CPU per 1,000 changes with asyncua's decoding and with the compiled reader.
 
 `python -m bench.source_ab [--variables N] [--rate R] [--window S] [--rounds K]` starts the simulator's
 noise mode in a process of its own, runs the gateway's real OPC UA source (gateway.sources.opcua_client)
