@@ -29,7 +29,9 @@ from gateway.sources.opcua_client import OpcUaSource
 from simulator.noise import NoiseSpec, noise_mapping
 
 
-async def measure(variables: int, rate: float, window: float, rounds: int) -> dict[str, Any]:
+async def measure(
+    variables: int, rate: float, window: float, rounds: int, modes: tuple[str, ...] = ("asyncua", "compiled")
+) -> dict[str, Any]:
     workdir = Path(tempfile.mkdtemp(prefix="cnc-source-ab-"))
     sim = await Agent.start(
         "source-ab-sim", "bench.agents.simulator", ["--variables", str(variables)], workdir
@@ -48,7 +50,7 @@ async def measure(variables: int, rate: float, window: float, rounds: int) -> di
             process(changes, statuses, lost)
 
         source._process = counting  # type: ignore[method-assign]
-        per_1000: dict[str, list[float]] = {"asyncua": [], "compiled": []}
+        per_1000: dict[str, list[float]] = {mode: [] for mode in modes}
         async with source:
             task = asyncio.create_task(source.run(), name="source-ab")
             try:
@@ -75,8 +77,7 @@ async def measure(variables: int, rate: float, window: float, rounds: int) -> di
             "variables": variables,
             "rate": rate,
             "windows": per_1000,
-            "asyncua": statistics.median(per_1000["asyncua"]),
-            "compiled": statistics.median(per_1000["compiled"]),
+            **{mode: statistics.median(values) for mode, values in per_1000.items()},
         }
     finally:
         await sim.stop()
@@ -88,8 +89,13 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=5000.0)
     parser.add_argument("--window", type=float, default=4.0)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument(
+        "--modes", nargs="+", choices=["asyncua", "compiled"], default=["asyncua", "compiled"],
+        help="decoders to alternate (one alone: to profile it, e.g. under py-spy)",
+    )  # fmt: skip
     args = parser.parse_args()
-    print(json.dumps(asyncio.run(measure(args.variables, args.rate, args.window, args.rounds))))
+    found = asyncio.run(measure(args.variables, args.rate, args.window, args.rounds, tuple(args.modes)))
+    print(json.dumps(found))
 
 
 if __name__ == "__main__":
