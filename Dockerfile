@@ -1,6 +1,7 @@
-# Validation's compiled reader (gateway/jobs/validation/_plain.c, built by setup.py) needs a C compiler,
-# which the image that runs the gateway does without: the wheel is built in a stage of its own, and the
-# build fails if the reader is not in it (setup.py marks the extension optional for installs elsewhere).
+# The compiled readers (validation's gateway/jobs/validation/_plain.c and the OPC UA source's
+# gateway/sources/_publish.c, built by setup.py) need a C compiler, which the image that runs the gateway
+# does without: the wheel is built in a stage of its own, and the build fails if a reader is not in it
+# (setup.py marks the extensions optional for installs elsewhere).
 FROM python:3.11-slim AS build
 RUN apt-get update && apt-get install -y --no-install-recommends gcc libc6-dev \
     && rm -rf /var/lib/apt/lists/*
@@ -11,7 +12,8 @@ COPY simulator ./simulator
 RUN pip wheel --no-cache-dir --no-deps --wheel-dir /wheels . \
     && python -c "import glob, sys, zipfile; \
 names = zipfile.ZipFile(glob.glob('/wheels/*.whl')[0]).namelist(); \
-sys.exit(0 if any('validation/_plain' in n for n in names) else 'the wheel has no compiled reader')"
+sys.exit(0 if all(any(m in n for n in names) for m in ('validation/_plain', 'sources/_publish')) \
+    else 'the wheel lacks a compiled reader')"
 
 FROM python:3.11-slim
 WORKDIR /app
