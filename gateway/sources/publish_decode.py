@@ -62,10 +62,11 @@ def decode(data: Buffer) -> Publish:
     fast = decode_fast(data)
     if fast is not None:
         return fast
+    size = len(data)
     try:
         response = struct_from_binary(ua.PublishResponse, data)
     except Exception as exc:
-        log.warning("undecodable PublishResponse (%d bytes): %s: %s", len(data), type(exc).__name__, exc)
+        log.warning("undecodable PublishResponse (%d bytes): %s: %s", size, type(exc).__name__, exc)
         raise UaStructParsingError from exc
     return from_response(response)
 
