@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-from collections.abc import Callable, Collection, Hashable
+from collections.abc import Callable, Collection, Hashable, Mapping
 from typing import Generic, TypeVar
 
 from gateway.model.sample import Sample
@@ -66,15 +66,15 @@ class Subscription(Generic[N]):
         every_change: bool = False,
         limit: int = 100_000,
         ordered: Collection[N] | None = None,
-        tally: Callable[[N], Hashable] | None = None,
+        tally: Mapping[N, Hashable] | None = None,
     ) -> None:
         self.name = name
         self.every_change = every_change
         self.limit = limit
         self.ordered = ordered  # mixed mode: these nodes' every change is kept (a live collection)
-        self.tally = tally  # groups the coalesced counts (`coalesced_by`), e.g. by machine
+        self.tally = tally  # node → group of the coalesced counts (`coalesced_by`), e.g. its machine
         self.coalesced = 0  # changes replaced by a newer sample before this sink took them
-        self.coalesced_by: dict[Hashable, int] = {}
+        self.coalesced_by: dict[Hashable | None, int] = {}
         self.delivered = 0
         self._latest: dict[N, Sample] = {}
         self._ordered: list[Change[N]] = []
@@ -101,7 +101,12 @@ class Subscription(Generic[N]):
         size = len(latest)
         latest[node] = sample
         if len(latest) == size:
-            self._coalesced(node)
+            self.coalesced += 1
+            tally = self.tally
+            if tally is not None:  # inline: under overload this runs for nearly every change
+                key = tally.get(node)
+                by = self.coalesced_by
+                by[key] = by.get(key, 0) + 1
         self._event.set()
 
     def _push_mixed(self, node: N, sample: Sample) -> None:
@@ -116,15 +121,13 @@ class Subscription(Generic[N]):
             size = len(latest)
             latest[node] = sample
             if len(latest) == size:
-                self._coalesced(node)
+                self.coalesced += 1
+                tally = self.tally
+                if tally is not None:
+                    key = tally.get(node)
+                    by = self.coalesced_by
+                    by[key] = by.get(key, 0) + 1
         self._event.set()
-
-    def _coalesced(self, node: N) -> None:
-        self.coalesced += 1
-        tally = self.tally
-        if tally is not None:
-            key = tally(node)
-            self.coalesced_by[key] = self.coalesced_by.get(key, 0) + 1
 
     def _collapse(self) -> None:
         latest = dict(self._ordered)
@@ -203,6 +206,7 @@ class Subscription(Generic[N]):
 class ChangeHub(Generic[N]):
     def __init__(self) -> None:
         self._subs: tuple[Subscription[N], ...] = ()
+        self._pushes: tuple[Callable[[N, Sample], None], ...] = ()
 
     def subscribe(
         self,
@@ -211,19 +215,21 @@ class ChangeHub(Generic[N]):
         every_change: bool = False,
         limit: int = 100_000,
         ordered: Collection[N] | None = None,
-        tally: Callable[[N], Hashable] | None = None,
+        tally: Mapping[N, Hashable] | None = None,
     ) -> Subscription[N]:
         sub = Subscription(self, name, every_change=every_change, limit=limit, ordered=ordered, tally=tally)
         self._subs = (*self._subs, sub)
+        self._pushes = tuple(s.push for s in self._subs)
         return sub
 
     def unsubscribe(self, sub: Subscription[N]) -> None:
         self._subs = tuple(s for s in self._subs if s is not sub)
+        self._pushes = tuple(s.push for s in self._subs)
 
     @property
     def subscriptions(self) -> tuple[Subscription[N], ...]:
         return self._subs
 
     def publish(self, node: N, sample: Sample) -> None:
-        for sub in self._subs:
-            sub.push(node, sample)
+        for push in self._pushes:
+            push(node, sample)

@@ -100,6 +100,7 @@ class MqttSink:
             raise SinkError(f"MQTT topics: {exc}") from None
         # Variables whose every change is published (QoS 1/2): the hub keeps those in order; the others coalesce.
         self._ordered: set[VariableNode] = {n for n, r in self.routes.by_node.items() if r.qos}
+        self._machine_of: dict[VariableNode, str] = {n: n.machine.name for n in tree.nodes()}  # coalesced counts
         self._status_nodes = {name: status_nodes(m) for name, m in tree.machines.items()}
         self._status_owner = {n: name for name, nodes in self._status_nodes.items() for n in nodes}
         self._last_status: dict[str, bytes] = {}
@@ -202,7 +203,7 @@ class MqttSink:
             self.name,
             ordered=self._ordered,
             limit=max(self.config.buffer.limit, 1000),
-            tally=_machine_name,
+            tally=self._machine_of,
         )
         self._events = self.tree.events.subscribe(self.name)
         snapshot = [(n, n.sample) for n in self.tree.nodes() if n.sample.status != "BadWaitingForInitialData"]
@@ -460,6 +461,7 @@ class MqttSink:
     def _late(self, node: VariableNode) -> Route | None:
         """A node without a route: a status variable (folded into the status document), one kept out
         of MQTT, or one that appeared after start-up."""
+        self._machine_of.setdefault(node, node.machine.name)
         owner = self._status_owner.get(node)
         if owner is not None:
             self._dirty.add(owner)
@@ -634,7 +636,3 @@ class MqttSink:
                     backlog.dropped_total,
                 )
             self._commit()
-
-
-def _machine_name(node: VariableNode) -> str:
-    return node.machine.name

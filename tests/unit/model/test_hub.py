@@ -90,7 +90,7 @@ async def test_mixed_mode_keeps_every_change_of_ordered_nodes_and_the_latest_of_
     hub = ChangeHub()
     kept, fresh = Node(), Node()
     ordered = {kept}
-    sub = hub.subscribe("mixed", ordered=ordered, tally=lambda node: "m1" if node is fresh else "m2")
+    sub = hub.subscribe("mixed", ordered=ordered, tally={fresh: "m1", kept: "m2"})
     for i in range(50):
         hub.publish(kept, sample(i))
         hub.publish(fresh, sample(i))
