@@ -139,10 +139,7 @@ def _print_profiles(ctx: Context) -> None:
             continue
         if not prof or "own" not in prof:
             continue
-        print(
-            f"\nWhere the gateway's time goes ({name}; py-spy, {prof['samples']} samples), "
-            "own time:"
-        )
+        print(f"\nWhere the gateway's time goes ({name}; py-spy, {prof['samples']} samples), own time:")
         for func, share in prof["own"][:12]:
             print(f"  {share:5.1f} %  {func}")
         if prof.get("parts"):

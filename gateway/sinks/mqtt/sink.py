@@ -100,7 +100,9 @@ class MqttSink:
             raise SinkError(f"MQTT topics: {exc}") from None
         # Variables whose every change is published (QoS 1/2): the hub keeps those in order; the others coalesce.
         self._ordered: set[VariableNode] = {n for n, r in self.routes.by_node.items() if r.qos}
-        self._machine_of: dict[VariableNode, str] = {n: n.machine.name for n in tree.nodes()}  # coalesced counts
+        self._machine_of: dict[VariableNode, str] = {
+            n: n.machine.name for n in tree.nodes()
+        }  # coalesced counts
         self._status_nodes = {name: status_nodes(m) for name, m in tree.machines.items()}
         self._status_owner = {n: name for name, nodes in self._status_nodes.items() for n in nodes}
         self._last_status: dict[str, bytes] = {}

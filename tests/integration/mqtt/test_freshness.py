@@ -91,7 +91,9 @@ async def test_a_stalled_broker_gets_the_latest_value_of_each_variable_and_every
             timeout=30,
             message="the latest value of every QoS 0 variable",
         )
-        await wait_until(lambda: len(rec.on("cnc/m1/counter")) >= 100, timeout=30, message="every QoS 1 change")
+        await wait_until(
+            lambda: len(rec.on("cnc/m1/counter")) >= 100, timeout=30, message="every QoS 1 change"
+        )
         assert [r.json()["value"] for r in rec.on("cnc/m1/counter")] == list(range(100))
         for topic in QOS0_TOPICS:  # each QoS 0 variable: a few values at most, the newest last
             values = [r.json()["value"] for r in rec.on(topic)]
