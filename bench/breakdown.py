@@ -7,8 +7,9 @@ the sink). Frames of the standard library's asyncio, of native code (py-spy
 `Event.set()` in the hub counts for the hub; a stack with no known frame at all
 is the event loop's own work when it passes through asyncio (selecting, running
 callbacks) and "other" otherwise. Threads parked in a wait (a lock, a queue,
-the selector), which py-spy `--native` cannot tell from working ones, are left out. asyncua's shared encoding code (`asyncua/ua`,
-`asyncua/common`) counts for the client or the server by who called it.
+the selector), which py-spy `--native` cannot tell from working ones, are left
+out. asyncua's shared encoding code (`asyncua/ua`, `asyncua/common`) counts for
+the client or the server by who called it.
 """
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterable, Mapping
 
-from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.codecs.mqtt_publish import first_byte, topic_field
+from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.config.mqtt import MachineMqtt, MqttConfig, VariableMqtt
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.mqtt.payloads import unit_suffix

@@ -10,8 +10,9 @@ is counted as coalesced), and the `mqtt:latest` task takes the next chunk of
 them only when paho has handed the previous one to the socket. Those go out as
 pre-encoded PUBLISH packets, one write per chunk. So under overload nothing
 queues between the source and the socket, and what a subscriber receives stays
-fresh (issue 13: the queue used to be paho's, up to 50,000 packets deep). Broker acknowledgements free the window and pull the next messages
-from the backlog, oldest first. When the connection drops, the unacknowledged
+fresh (issue 13: the queue used to be paho's, up to 50,000 packets deep).
+Broker acknowledgements free the window and pull the next messages from the
+backlog, oldest first. When the connection drops, the unacknowledged
 messages go back to the front of the backlog; on reconnect they are sent again,
 then the rest. The hot path never awaits per message.
 
@@ -98,7 +99,7 @@ class MqttSink:
             self.routes = Routes(tree, config, mappings)
         except TopicClash as exc:
             raise SinkError(f"MQTT topics: {exc}") from None
-        # Variables whose every change is published (QoS 1/2): the hub keeps those in order; the others coalesce.
+        # Variables whose every change is published (QoS 1/2): kept in order by the hub; the rest coalesce.
         self._ordered: set[VariableNode] = {n for n, r in self.routes.by_node.items() if r.qos}
         self._machine_of: dict[VariableNode, str] = {
             n: n.machine.name for n in tree.nodes()
@@ -156,8 +157,9 @@ class MqttSink:
             "(the broker was away longer than the buffer holds)", 0,
         )  # fmt: skip
         self._coalesced_nodes[machine.name] = machine.add_internal(
-            "Status/MqttCoalesced", "UInt64", "Changes of this machine's QoS 0 topics replaced by a newer value "
-            "before they could be sent (the broker or the network took less than the machine changed)", 0,
+            "Status/MqttCoalesced", "UInt64", "Changes of this machine's QoS 0 topics replaced by a newer "
+            "value before they could be sent (the broker or the network took less than the machine changed)",
+            0,
         )  # fmt: skip
 
     @property

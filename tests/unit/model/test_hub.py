@@ -141,5 +141,5 @@ async def test_a_slow_subscriber_gets_the_latest_value_of_each_variable_and_the_
     got: dict[Node, object] = {}
     while sub.backlog:
         got.update((n, s.value) for n, s in await asyncio.wait_for(sub.next_latest(7), 1))
-    assert got == {node: 99 for node in nodes}
+    assert got == dict.fromkeys(nodes, 99)
     assert sub.coalesced == 2000 - 20 and sub.delivered == 20
