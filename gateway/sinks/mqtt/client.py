@@ -441,7 +441,7 @@ class MqttClient:
         return info.mid
 
     def publish_packets(self, packets: bytes) -> None:
-        """Queue QoS 0 PUBLISH packets, encoded by the caller, as one write (nothing to acknowledge).
+        """Write QoS 0 PUBLISH packets, encoded by the caller, as one write (nothing to acknowledge).
 
         Uses paho's packet queue, so that they keep their place among paho's own packets (a PUBLISH
         at QoS 1 before them is written before them); paho calls `on_published` once, for the batch.
@@ -451,6 +451,7 @@ class MqttClient:
             raise BrokerError("not connected to the broker")
         mid = client._mid_generate()
         client._packet_queue(PUBLISH, packets, mid, 0, paho.MQTTMessageInfo(mid))
+        self._writable()  # now, not at the loop's next turn: what the socket does not take waits for it
 
     def publish_reply(self, topic: str, payload: bytes, correlation_data: bytes | None = None) -> None:
         """An answer to a request: QoS 1, not retained, with the request's correlation data (MQTT v5)."""

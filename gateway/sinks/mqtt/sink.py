@@ -8,7 +8,7 @@ room, and otherwise put in the `Backlog`. QoS 0 topics promise the latest value:
 the hub keeps one sample per variable (a newer one replaces the waiting one, and
 is counted as coalesced), and the `mqtt:latest` task takes the next chunk of
 them only when paho has handed the previous one to the socket. Those go out as
-pre-encoded PUBLISH packets, one write per chunk. So under overload nothing
+pre-encoded PUBLISH packets, written at once, one write per chunk. So under overload nothing
 queues between the source and the socket, and what a subscriber receives stays
 fresh (issue 13: the queue used to be paho's, up to 50,000 packets deep).
 Broker acknowledgements free the window and pull the next messages from the
@@ -63,7 +63,10 @@ BACKLOG_FILE = "mqtt-backlog.sqlite3"
 YIELD_EVERY = 2000  # changes encoded between turns for the rest of the loop
 STABLE_AFTER = 10.0  # s a connection must last before the reconnect backoff starts again from `initial`
 SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to acknowledge what is in flight
-LATEST_CHUNK = 500  # QoS 0 variables encoded and written at a time (the rest keep coalescing meanwhile)
+# QoS 0 variables taken, encoded and written at a time; the rest keep coalescing meanwhile. Large: a take
+# happens once per turn of the loop at most (after the source's batch that changed them), so a small chunk
+# would cap the rate at chunk x turns/s when the source's decoding makes the turns long.
+LATEST_CHUNK = 5000
 PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before QoS 0 changes are shed
 REMIND_EVERY = 60.0  # s between "still buffering" log lines during an outage
 
