@@ -26,7 +26,7 @@ PARTS = (
     "paho",
     "event loop",
     "garbage collector",
-    "other",
+    "other (other sinks, jobs, alarms, …)",
 )
 CLIENT, TREE, SERVER, JSON, SINK, PAHO, LOOP, GC, OTHER = PARTS
 
@@ -36,11 +36,14 @@ _RULES: tuple[tuple[str, str], ...] = (
     ("json/", JSON),
     ("paho/", PAHO),
     ("gateway/sinks/mqtt/", SINK),
+    ("gateway/codecs/mqtt_publish.py", SINK),
     ("gateway/model/", TREE),
     ("gateway/sinks/opcua/", SERVER),
     ("asyncua/server/", SERVER),
+    ("gateway/shims/asyncua_server.py", SERVER),
     ("gateway/sources/", CLIENT),
     ("asyncua/client/", CLIENT),
+    ("gateway/", OTHER),  # the other sinks (web console, COPYDATA, …), jobs, alarms: not the event loop's
 )
 _SHARED = ("asyncua/",)  # decided by a caller further out
 _LOOP = ("asyncio/", "selectors.py", "uvloop")
