@@ -139,12 +139,14 @@ def _print_profiles(ctx: Context) -> None:
             continue
         if not prof or "own" not in prof:
             continue
-        print(
-            f"\nWhere the gateway's time goes ({name}, flat out; py-spy, {prof['samples']} samples), "
-            "own time:"
-        )
+        print(f"\nWhere the gateway's time goes ({name}; py-spy, {prof['samples']} samples), own time:")
         for func, share in prof["own"][:12]:
             print(f"  {share:5.1f} %  {func}")
+        if prof.get("parts"):
+            native = "with native frames" if prof.get("native") else "Python frames only"
+            print(f"  by part ({prof['parts_samples']} samples of every thread, {native}):")
+            for part, share in prof["parts"].items():
+                print(f"  {share:5.1f} %  {part}")
 
 
 if __name__ == "__main__":

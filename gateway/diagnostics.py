@@ -101,7 +101,7 @@ def _sink(sink: Any) -> dict[str, Any]:
     if backlog is not None:
         out["backlog"] = len(backlog)
         out["dropped"] = getattr(backlog, "dropped_total", 0)
-    for name in ("in_flight", "discarded", "connects", "online", "state"):
+    for name in ("in_flight", "discarded", "coalesced", "socket_queue", "connects", "online", "state"):
         value = getattr(sink, name, None)
         if isinstance(value, (int, float, str, bool)):
             out[name] = value

@@ -19,6 +19,7 @@ from bench.agents.protocol import serve, setup_logging
 from gateway.app import Gateway
 from gateway.config.loader import load
 from gateway.diagnostics import GC_PAUSES, snapshot
+from gateway.shims.loop import ENV, LOOPS, loop_factory, run
 
 
 async def main(args: argparse.Namespace) -> None:
@@ -65,5 +66,7 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser()
     parser.add_argument("--config", type=Path, required=True)
     parser.add_argument("--inject", action="store_true")
+    parser.add_argument("--loop", choices=LOOPS, default=None, help=f"default: ${ENV}, else asyncio")
     setup_logging()
-    asyncio.run(main(parser.parse_args()))
+    arguments = parser.parse_args()
+    run(main(arguments), loop_factory(arguments.loop))

@@ -13,6 +13,7 @@ from typing import Any
 
 import yaml
 
+from bench.breakdown import breakdown, parse_collapsed
 from bench.procs import ROOT, free_port
 
 GATEWAY_URI = "urn:cnc-gateway"
@@ -95,20 +96,30 @@ def py_spy() -> str | None:
 
 
 async def profile(pid: int, seconds: float, out: Path) -> dict[str, Any] | None:
-    """Sample `pid` with py-spy for `seconds`; the top functions by own and by total time."""
+    """Sample `pid` with py-spy for `seconds` (with native frames where py-spy can unwind them): the top
+    functions by own and by total time, and the share of each part of the gateway (bench/breakdown.py)."""
     exe = py_spy()
     if exe is None:
         return None
     raw = out.with_suffix(".txt")
-    proc = await asyncio.create_subprocess_exec(
-        exe, "record", "--pid", str(pid), "--duration", str(max(1, round(seconds))), "--rate", "100",
-        "--format", "raw", "--output", str(raw),
-        stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    _, err = await proc.communicate()
-    if proc.returncode != 0 or not raw.exists():
-        return {"error": err.decode(errors="replace")[-500:]}
-    return summarize_collapsed(raw.read_text(errors="replace"))
+    err = b""
+    for native in (["--native"], []):  # --native needs unwinding support; without it, Python frames only
+        proc = await asyncio.create_subprocess_exec(
+            exe, "record", "--pid", str(pid), "--duration", str(max(1, round(seconds))), "--rate", "100",
+            "--format", "raw", "--output", str(raw), *native,
+            stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        _, err = await proc.communicate()
+        if proc.returncode == 0 and raw.exists():
+            text = raw.read_text(errors="replace")
+            summary = summarize_collapsed(text)
+            stacks = parse_collapsed(text)
+            summary["native"] = bool(native)
+            summary["parts"] = breakdown(stacks)
+            summary["parts_samples"] = sum(n for _, n in stacks)
+            summary["file"] = str(raw)
+            return summary
+    return {"error": err.decode(errors="replace")[-500:]}
 
 
 def summarize_collapsed(text: str, top: int = 15, thread: str = "BaseEventLoop._run_once") -> dict[str, Any]:

@@ -171,7 +171,7 @@ async def configuration(ctx: Context, source: str, n: int, qos: int) -> tuple[li
                     rate,
                     n,
                     broker=broker_meter,
-                    profile_as=f"{source}-q{qos}-n{n}" if s.profile and rate == s.mirror_rates[-1] else None,
+                    profile_as=f"{source}-q{qos}-n{n}-{rate_key(rate)}" if s.profile else None,
                 )
                 steps.append(step)
                 ctx.log(

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 from pathlib import Path
 
@@ -12,6 +11,7 @@ from gateway.cli.check import report_config_error
 from gateway.config.loader import Config, load
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
+from gateway.shims.loop import ENV, LOOPS, loop_factory, loop_name, run
 
 log = logging.getLogger("gateway")
 
@@ -22,6 +22,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("files", nargs="+", type=Path, metavar="FILE")
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default=None)
+    p.add_argument(
+        "--loop",
+        choices=LOOPS,
+        default=None,
+        help=f"event loop: asyncio's own (the default), uvloop (pip install 'cnc-gateway[fast]'), or auto: "
+        f"uvloop when installed; also ${ENV}",
+    )
     p.set_defaults(handler=handle)
 
 
@@ -32,7 +39,13 @@ def handle(args: argparse.Namespace) -> int:
         report_config_error(exc)
         return 2
     configure(args.log_level or config.gateway.log_level)
-    return asyncio.run(serve(config))
+    try:
+        factory = loop_factory(args.loop)
+    except ValueError as exc:
+        log.error("%s", exc)
+        return 2
+    log.debug("event loop: %s", loop_name(factory))
+    return run(serve(config), factory)
 
 
 async def serve(config: Config) -> int:

@@ -170,6 +170,7 @@ class Machine:
         self.methods: dict[tuple[str, str], Method] = {}
         self._hub = tree.hub
         self._last_change_push = 0.0
+        self.changes = 0  # samples published to the hub (/metrics: changes/s); counted here, not by a sink
         for variable in definition.variables:
             if variable.path in self.nodes:
                 raise ValueError(f"{self.name}: variable {variable.path!r} defined twice")
@@ -205,6 +206,7 @@ class Machine:
         node.sample = sample
         node._published = value
         self._hub.publish(node, sample)
+        self.changes += 1
 
     # --- from the source -------------------------------------------------------------------
 
@@ -235,6 +237,7 @@ class Machine:
         node.sample = sample
         node._published = value
         self._hub.publish(node, sample)
+        self.changes += 1
         now = time.monotonic()
         if now - self._last_change_push >= 1.0:
             self._last_change_push = now
@@ -271,6 +274,7 @@ class Machine:
         sample = Sample(prev.value, ts, status, reason)
         node.sample = sample
         self._hub.publish(node, sample)
+        self.changes += 1
 
     # --- from a sink -----------------------------------------------------------------------
 

@@ -15,6 +15,11 @@ How paho meets asyncio here:
   therefore never stalls the OPC UA server, and shutdown never waits for it.
 * **Errors.** paho's return codes, reason codes and socket/TLS exceptions
   become BrokerError / BrokerRefused with a sentence a person can act on.
+* **Batches of QoS 0.** `publish_packets()` queues QoS 0 PUBLISH packets that the
+  sink encoded itself (gateway/codecs/mqtt_publish.py) as one write: none of
+  paho's per-message objects, one socket write per batch instead of one per
+  message. `on_drained` says when paho has handed everything to the socket, so
+  that the sink gives it the next batch only then (the newest values, not a queue).
 * **No hidden queues.** paho's automatic re-sending after a reconnect is not
   used: `take_back()` empties paho's unacknowledged messages when the
   connection drops, and the sink re-sends them from its own backlog, so that
@@ -35,7 +40,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import paho.mqtt.client as paho
-from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode, MQTTProtocolVersion
+from paho.mqtt.enums import CallbackAPIVersion, MessageType, MQTTErrorCode, MQTTProtocolVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
@@ -47,6 +52,7 @@ _properties = cast(Callable[[int], Properties], Properties)
 
 log = logging.getLogger(__name__)
 
+PUBLISH = MessageType.PUBLISH
 MISC_INTERVAL = 1.0  # s between paho.loop_misc calls (keepalive pings, dead-connection detection)
 
 
@@ -135,8 +141,10 @@ class MqttClient:
         on_published: Callable[[int], None],
         on_lost: Callable[[str], None],
         on_unsubscribed: Callable[[int], None] | None = None,
+        on_drained: Callable[[], None] | None = None,
     ) -> None:
         self.settings = settings
+        self.on_drained = on_drained
         self.on_message = on_message
         self.on_published = on_published
         self.on_lost = on_lost
@@ -196,6 +204,11 @@ class MqttClient:
     @property
     def queued_bytes_pending(self) -> int:
         """Packets paho holds that the socket has not taken yet (a slow or stuck broker)."""
+        return len(self._client._out_packet)
+
+    @property
+    def queued_packets(self) -> int:
+        """Writes paho holds that the socket has not taken yet (a batch of `publish_packets` is one)."""
         return len(self._client._out_packet)
 
     # --- connecting --------------------------------------------------------------------------
@@ -320,7 +333,10 @@ class MqttClient:
                 break
 
     def _writable(self) -> None:
-        self._client.loop_write()
+        client = self._client
+        client.loop_write()
+        if not client._out_packet and self.on_drained is not None:
+            self.on_drained()
 
     def _run_misc(self) -> None:
         self._misc = None
@@ -423,6 +439,19 @@ class MqttClient:
         if info.rc not in (MQTTErrorCode.MQTT_ERR_SUCCESS, MQTTErrorCode.MQTT_ERR_NO_CONN):
             raise BrokerError(f"cannot publish to {topic[:200]!r}: {paho.error_string(info.rc)}")
         return info.mid
+
+    def publish_packets(self, packets: bytes) -> None:
+        """Write QoS 0 PUBLISH packets, encoded by the caller, as one write (nothing to acknowledge).
+
+        Uses paho's packet queue, so that they keep their place among paho's own packets (a PUBLISH
+        at QoS 1 before them is written before them); paho calls `on_published` once, for the batch.
+        """
+        client = self._client
+        if not self._connected or self._sock is None:
+            raise BrokerError("not connected to the broker")
+        mid = client._mid_generate()
+        client._packet_queue(PUBLISH, packets, mid, 0, paho.MQTTMessageInfo(mid))
+        self._writable()  # now, not at the loop's next turn: what the socket does not take waits for it
 
     def publish_reply(self, topic: str, payload: bytes, correlation_data: bytes | None = None) -> None:
         """An answer to a request: QoS 1, not retained, with the request's correlation data (MQTT v5)."""

@@ -9,8 +9,10 @@ one by one: they make up the machine's status document (`status.py`).
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterable, Mapping
 
+from gateway.codecs.mqtt_publish import first_byte, topic_field
 from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.config.mqtt import MachineMqtt, MqttConfig, VariableMqtt
 from gateway.model.tree import Machine, VariableNode, VariableTree
@@ -29,10 +31,30 @@ STATUS_PREFIX = "Status/"
 class Route:
     """Where and how one variable is published."""
 
-    __slots__ = ("latest_only", "machine", "node", "qos", "raw", "retain", "suffix", "topic", "writable")
+    __slots__ = (
+        "field",
+        "first",
+        "latest_only",
+        "machine",
+        "node",
+        "qos",
+        "raw",
+        "retain",
+        "suffix",
+        "topic",
+        "writable",
+    )
 
     def __init__(
-        self, node: VariableNode, topic: str, qos: int, retain: bool, raw: bool, writable: bool
+        self,
+        node: VariableNode,
+        topic: str,
+        qos: int,
+        retain: bool,
+        raw: bool,
+        writable: bool,
+        *,
+        v5: bool = False,
     ) -> None:
         self.node = node
         self.topic = topic
@@ -44,6 +66,13 @@ class Route:
         self.writable = writable
         # Retained state at QoS 0 promises no history: keep only the newest while the broker is away.
         self.latest_only = qos == 0 and retain
+        # QoS 0 changes go out as pre-encoded PUBLISH packets (gateway/codecs/mqtt_publish.py): the constant
+        # parts, once per variable.
+        self.first = first_byte(retain)
+        self.field = b""  # empty: through paho's publish(), which says what is wrong with the topic
+        if qos == 0:
+            with contextlib.suppress(ValueError):
+                self.field = topic_field(topic, v5=v5)
 
     def __repr__(self) -> str:
         return f"<Route {self.topic} q{self.qos}{' r' if self.retain else ''}{' w' if self.writable else ''}>"
@@ -80,7 +109,7 @@ def route_for(
         elif machine is not None:
             writable = machine.writable
     topic = variable_topic(cfg.prefix, node.machine.name, node.path, var.topic if var is not None else None)
-    return Route(node, topic, qos, retain, raw, writable)
+    return Route(node, topic, qos, retain, raw, writable, v5=cfg.protocol == "5")
 
 
 class Routes:

@@ -1,17 +1,25 @@
 """The MQTT sink: every machine's variables as topics, with liveness, store-and-forward and write-back.
 
-Flow of one change: the hub hands over a batch (every change, in order); each
-change becomes a topic (cached per variable in `Route`) and a payload; it is
-given to paho straight away when the broker is connected, nothing is waiting
-and the window of unacknowledged messages has room, and otherwise goes to the
-`Backlog`. Broker acknowledgements free the window and pull the next messages
-from the backlog, oldest first. When the connection drops, the unacknowledged
+Flow of one change. QoS 1/2 topics promise every change: the hub keeps their
+changes in order (its `ordered` nodes), and each becomes a topic (cached per
+variable in `Route`) and a payload, given to paho straight away when the broker
+is connected, nothing is waiting and the window of unacknowledged messages has
+room, and otherwise put in the `Backlog`. QoS 0 topics promise the latest value:
+the hub keeps one sample per variable (a newer one replaces the waiting one, and
+is counted as coalesced), and the `mqtt:latest` task takes the next chunk of
+them only when paho has handed the previous one to the socket. Those go out as
+pre-encoded PUBLISH packets, written at once, one write per chunk. So under overload nothing
+queues between the source and the socket, and what a subscriber receives stays
+fresh (issue 13: the queue used to be paho's, up to 50,000 packets deep).
+Broker acknowledgements free the window and pull the next messages from the
+backlog, oldest first. When the connection drops, the unacknowledged
 messages go back to the front of the backlog; on reconnect they are sent again,
 then the rest. The hot path never awaits per message.
 
 Liveness: `<prefix>/status` (online, with a last will saying offline) and one
-retained status document per machine. `Status/MqttState` and
-`Status/MqttDropped` show the broker link and the drop count to OPC UA as well.
+retained status document per machine. `Status/MqttState`, `Status/MqttDropped`
+and `Status/MqttCoalesced` show the broker link, the drop count and the QoS 0
+changes replaced by a newer value before they were sent to OPC UA as well.
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ from pathlib import Path
 from typing import Self
 
 from gateway import __version__
+from gateway.codecs.mqtt_publish import remaining_length
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
 from gateway.errors import BrokerError, BrokerRefused, SinkError
@@ -54,6 +63,10 @@ BACKLOG_FILE = "mqtt-backlog.sqlite3"
 YIELD_EVERY = 2000  # changes encoded between turns for the rest of the loop
 STABLE_AFTER = 10.0  # s a connection must last before the reconnect backoff starts again from `initial`
 SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to acknowledge what is in flight
+# QoS 0 variables taken, encoded and written at a time; the rest keep coalescing meanwhile. Large: a take
+# happens once per turn of the loop at most (after the source's batch that changed them), so a small chunk
+# would cap the rate at chunk x turns/s when the source's decoding makes the turns long.
+LATEST_CHUNK = 5000
 PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before QoS 0 changes are shed
 REMIND_EVERY = 60.0  # s between "still buffering" log lines during an outage
 
@@ -81,6 +94,7 @@ class MqttSink:
         # Gateway-owned variables, added now so that every sink (OPC UA too) sees them from the start.
         self._link_nodes: dict[str, VariableNode] = {}
         self._dropped_nodes: dict[str, VariableNode] = {}
+        self._coalesced_nodes: dict[str, VariableNode] = {}
         for machine in tree.machines.values():
             self._add_status_variables(machine)
         self.mappings = mappings
@@ -88,6 +102,11 @@ class MqttSink:
             self.routes = Routes(tree, config, mappings)
         except TopicClash as exc:
             raise SinkError(f"MQTT topics: {exc}") from None
+        # Variables whose every change is published (QoS 1/2): kept in order by the hub; the rest coalesce.
+        self._ordered: set[VariableNode] = {n for n, r in self.routes.by_node.items() if r.qos}
+        self._machine_of: dict[VariableNode, str] = {
+            n: n.machine.name for n in tree.nodes()
+        }  # coalesced counts
         self._status_nodes = {name: status_nodes(m) for name, m in tree.machines.items()}
         self._status_owner = {n: name for name, nodes in self._status_nodes.items() for n in nodes}
         self._last_status: dict[str, bytes] = {}
@@ -127,6 +146,8 @@ class MqttSink:
         self._lost = asyncio.Event()
         self._pump_scheduled = False
         self._dropped_reported = 0
+        self._coalesced_reported = 0
+        self._room = asyncio.Event()  # paho handed everything to the socket: the next QoS 0 chunk may go
         self._outage = OutageLog(log, remind_every=REMIND_EVERY)  # the broker's absence, said once a while
 
     def _add_status_variables(self, machine: Machine) -> None:
@@ -137,6 +158,11 @@ class MqttSink:
         self._dropped_nodes[machine.name] = machine.add_internal(
             "Status/MqttDropped", "UInt64", "Changes of this machine that MQTT store-and-forward had to drop "
             "(the broker was away longer than the buffer holds)", 0,
+        )  # fmt: skip
+        self._coalesced_nodes[machine.name] = machine.add_internal(
+            "Status/MqttCoalesced", "UInt64", "Changes of this machine's QoS 0 topics replaced by a newer "
+            "value before they could be sent (the broker or the network took less than the machine changed)",
+            0,
         )  # fmt: skip
 
     @property
@@ -152,6 +178,16 @@ class MqttSink:
         return len(self._inflight)
 
     @property
+    def coalesced(self) -> int:
+        """QoS 0 changes replaced by a newer value of their variable before they were sent."""
+        return self._sub.coalesced if self._sub is not None else 0
+
+    @property
+    def socket_queue(self) -> int:
+        """Writes paho holds that the socket has not taken yet."""
+        return self._client.queued_packets if self._client is not None else 0
+
+    @property
     def settled(self) -> bool:
         """Nothing left to do: every change taken from the hub, sent and acknowledged."""
         sub = self._sub
@@ -163,11 +199,18 @@ class MqttSink:
         journal = Journal(self.state_dir / BACKLOG_FILE) if self.config.buffer.persist else None
         self.backlog = Backlog(self.config.buffer.limit, journal)
         self._client = MqttClient(
-            self.settings, on_message=self._incoming, on_published=self._published, on_lost=self._on_lost
+            self.settings,
+            on_message=self._incoming,
+            on_published=self._published,
+            on_lost=self._on_lost,
+            on_drained=self._room.set,
         )
         # Subscribe before reading the current samples, so no change falls between the two.
         self._sub = self.tree.hub.subscribe(
-            self.name, every_change=True, limit=max(self.config.buffer.limit, 1000)
+            self.name,
+            ordered=self._ordered,
+            limit=max(self.config.buffer.limit, 1000),
+            tally=self._machine_of,
         )
         self._events = self.tree.events.subscribe(self.name)
         snapshot = [(n, n.sample) for n in self.tree.nodes() if n.sample.status != "BadWaitingForInitialData"]
@@ -234,6 +277,7 @@ class MqttSink:
         async with asyncio.TaskGroup() as tg:
             tg.create_task(self._connection(), name="mqtt:connection")
             tg.create_task(self._drain(self._sub), name="mqtt:publish")
+            tg.create_task(self._drain_latest(self._sub), name="mqtt:latest")
             if self._events is not None:
                 tg.create_task(self._drain_events(self._events), name="mqtt:events")
             tg.create_task(self._tick(), name="mqtt:tick")
@@ -311,6 +355,7 @@ class MqttSink:
         )
         self._pump()
         self._commit()
+        self._room.set()
 
     def _on_lost(self, reason: str) -> None:
         """The connection dropped: what the broker did not acknowledge goes back to the backlog."""
@@ -329,6 +374,7 @@ class MqttSink:
             len(self.backlog),
         )
         self._lost.set()
+        self._room.set()
 
     def _set_state(self, state: str, reason: str) -> None:
         self.state, self.last_error = state, reason
@@ -339,11 +385,29 @@ class MqttSink:
     # --- publishing ------------------------------------------------------------------------------
 
     async def _drain(self, sub: Subscription[VariableNode]) -> None:
+        """QoS 1/2 topics: every change, in order, at once (the window and the backlog bound them)."""
         while True:
-            batch = await sub.next_batch()
+            batch = await sub.next_ordered()
             await self._encode(batch)
             self._flush_statuses()
             self._commit()
+
+    async def _drain_latest(self, sub: Subscription[VariableNode]) -> None:
+        """QoS 0 topics (and the status variables): the latest sample per variable, taken only when
+        the socket has taken what went before, so that nothing older waits in a queue."""
+        while True:
+            await self._wait_room()
+            batch = await sub.next_latest(LATEST_CHUNK)
+            await self._encode(batch)
+            self._flush_statuses()
+            self._commit()
+
+    async def _wait_room(self) -> None:
+        client = self._client
+        assert client is not None
+        while self._online and client.queued_packets:
+            self._room.clear()
+            await self._room.wait()
 
     async def _drain_events(self, sub: EventSubscription) -> None:
         """Job progress, alarms, feedback: JSON on `<prefix>/<machine>/<channel>` at QoS 1.
@@ -359,8 +423,13 @@ class MqttSink:
             self._commit()
 
     async def _encode(self, batch: list[Change[VariableNode]]) -> None:
+        """Each change to its topic. QoS 0 while connected: into one batch of packets, written at once
+        (a retained one waits its turn behind the backlog, which may hold an older value of its topic)."""
         by_node = self.routes.by_node
         emit = self._emit
+        backlog = self.backlog
+        client = self._client
+        packets: list[bytes] | None = [] if self._online and client is not None and client.connected else None
         count = 0
         for node, sample in batch:
             route = by_node.get(node)
@@ -369,16 +438,37 @@ class MqttSink:
                 if route is None:
                     continue
             payload = encode_raw(sample.value) if route.raw else encode_json(sample, route.suffix)
-            emit(route.topic, payload, route.qos, route.retain, route.machine, route.latest_only)
+            field = route.field
+            if packets is not None and field and (not route.retain or not backlog):
+                packets += (route.first, remaining_length(len(field) + len(payload)), field, payload)
+            else:
+                emit(route.topic, payload, route.qos, route.retain, route.machine, route.latest_only)
             count += 1
             if count % YIELD_EVERY == 0:
+                packets = self._send_packets(packets)
                 self._flush_statuses()
                 self._commit()
                 await asyncio.sleep(0)
+        self._send_packets(packets)
+
+    def _send_packets(self, packets: list[bytes] | None) -> list[bytes] | None:
+        """Hand a batch of encoded QoS 0 packets to paho as one write; a fresh batch, or None when the
+        connection went meanwhile (the rest of the changes then take the `_emit` path)."""
+        client = self._client
+        if packets is None or client is None:
+            return None
+        if packets:
+            try:
+                client.publish_packets(b"".join(packets))
+            except BrokerError:  # the connection went while encoding: QoS 0 promises no more
+                self.discarded += len(packets) // 4
+                return None
+        return [] if self._online and client.connected else None
 
     def _late(self, node: VariableNode) -> Route | None:
         """A node without a route: a status variable (folded into the status document), one kept out
         of MQTT, or one that appeared after start-up."""
+        self._machine_of.setdefault(node, node.machine.name)
         owner = self._status_owner.get(node)
         if owner is not None:
             self._dirty.add(owner)
@@ -391,11 +481,14 @@ class MqttSink:
                 self._dirty.add(name)
             return None
         try:
-            return self.routes.add(node)
+            route = self.routes.add(node)
         except TopicClash as exc:
             log.error("MQTT: %s is not published: %s", node.full_path, exc)
             self.routes.unrouted.add(node)
             return None
+        if route is not None and route.qos:
+            self._ordered.add(node)  # its next changes are kept in order
+        return route
 
     def _emit(
         self, topic: str, payload: bytes, qos: int, retain: bool, machine: str | None, latest: bool
@@ -522,7 +615,8 @@ class MqttSink:
         return gateway_online(__version__, self.started, list(self.tree.machines), dropped)
 
     async def _tick(self) -> None:
-        """Once a second: drop counts into Status/MqttDropped and the status topic; reminders."""
+        """Once a second: drop counts into Status/MqttDropped and the status topic, coalesced counts into
+        Status/MqttCoalesced; reminders."""
         loop = asyncio.get_running_loop()
         last_reminder = loop.time()
         while True:
@@ -530,6 +624,12 @@ class MqttSink:
             backlog = self.backlog
             if backlog is None:
                 continue
+            coalesced = self.coalesced
+            if coalesced != self._coalesced_reported:
+                self._coalesced_reported = coalesced
+                by_machine = self._sub.coalesced_by if self._sub is not None else {}
+                for name, node in self._coalesced_nodes.items():
+                    self.tree.machines[name].set_internal(node, by_machine.get(name, 0))
             if backlog.dropped_total != self._dropped_reported:
                 self._dropped_reported = backlog.dropped_total
                 for name, node in self._dropped_nodes.items():

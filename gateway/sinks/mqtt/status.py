@@ -24,6 +24,7 @@ KEYS = {
     "Status/LastError": "reason",
     "Status/ReconnectCount": "reconnects",
     "Status/MqttDropped": "dropped",
+    "Status/MqttCoalesced": "coalesced",
     "Status/Endpoint": "endpoint",
 }
 # LastChange ticks every second while a machine runs: the values' own timestamps say the same, and a

@@ -30,9 +30,8 @@ from gateway.config.http import HttpConfig
 from gateway.config.loader import Config
 from gateway.errors import NotFound, RequestError, SinkError
 from gateway.model.events import EventSubscription
-from gateway.model.hub import Subscription
 from gateway.model.sample import quality_of
-from gateway.model.tree import VariableNode, VariableTree
+from gateway.model.tree import VariableTree
 from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.web.api import Api
 from gateway.sinks.web.http import HttpRequest, HttpResponse, json_response, redirect, refusal, refused
@@ -70,7 +69,6 @@ class WebSink:
             config.gateway.user_directory(), TokenStore(tokens_path(config.state_dir)), idle=http.session_idle
         )
         self.latest_jobs: dict[str, Mapping[str, Any]] = {}  # machine -> latest job record (for drip-feed)
-        self.changes: dict[str, int] = dict.fromkeys(tree.machines, 0)  # for /metrics
         self.api = Api(tree, config, http, ports, started=self.started)
         self.pages = Pages(tree, self.api, self.latest_jobs)
         self.live = Live(tree)
@@ -102,7 +100,6 @@ class WebSink:
             tls=tls,
         )
         self.listening = False
-        self._counter: Subscription[VariableNode] | None = None
         self._events: EventSubscription | None = None
         self._static_cache: dict[str, bytes] = {}
         self._bind_error = ""
@@ -115,12 +112,16 @@ class WebSink:
         return self.listening
 
     @property
+    def changes(self) -> dict[str, int]:
+        """Value changes per machine since start (`Machine.changes`; for /metrics)."""
+        return {name: machine.changes for name, machine in self.tree.machines.items()}
+
+    @property
     def url(self) -> str:
         host = "127.0.0.1" if self.http.host in ("0.0.0.0", "::", "") else self.http.host
         return f"{'https' if self.http.tls else 'http'}://{host}:{self.server.port or self.http.port}/"
 
     async def __aenter__(self) -> Self:
-        self._counter = self.tree.hub.subscribe("web:metrics", every_change=True)
         self._events = self.tree.events.subscribe("web")
         try:
             await self.server.start(self.http.host, self.http.port)
@@ -143,14 +144,12 @@ class WebSink:
     async def __aexit__(self, *exc_info: object) -> None:
         await self.server.stop()
         self.listening = False
-        for sub in (self._counter, self._events):
-            if sub is not None:
-                sub.close()
+        if self._events is not None:
+            self._events.close()
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:
             tg.create_task(self.live.run(), name="web:live")
-            tg.create_task(self._count(), name="web:count")
             tg.create_task(self._follow_events(), name="web:events")
             if not self.listening:
                 tg.create_task(self._bind(), name="web:bind")
@@ -171,17 +170,6 @@ class WebSink:
             self.listening = True
             outage.recovered("web console listening on %s:%d", self.http.host, self.http.port)
             self._report()
-
-    async def _count(self) -> None:
-        """Value changes per machine, for /metrics (every change, in order; one pass a second)."""
-        sub = self._counter
-        assert sub is not None
-        changes = self.changes
-        while True:
-            for node, _ in await sub.next_batch():
-                name = node.machine.name
-                changes[name] = changes.get(name, 0) + 1
-            await asyncio.sleep(1.0)
 
     async def _follow_events(self) -> None:
         sub = self._events
@@ -287,7 +275,7 @@ class WebSink:
             figures = MachineFigures(
                 connected=machine.status.is_connected,
                 reconnects=machine.status.reconnects,
-                changes=self.changes.get(name, 0),
+                changes=machine.changes,
                 quality=quality,
                 jobs=counts.get(name),
             )

@@ -23,12 +23,14 @@ from pathlib import Path
 from typing import Any
 
 import paho.mqtt.client as paho
+import pytest
 from paho.mqtt.enums import CallbackAPIVersion
 
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MqttConfig
+from tests.loops import LoopFactory, both
 from tests.waiting import free_port, wait_until_sync
 
 MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
@@ -236,3 +238,9 @@ def env_without_proxy() -> dict[str, str]:
     for key in ("http_proxy", "https_proxy", "all_proxy", "HTTP_PROXY", "HTTPS_PROXY", "ALL_PROXY"):
         env.pop(key, None)
     return env
+
+
+def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> dict[str, LoopFactory]:
+    """The sink's own tests on asyncio's loop and on uvloop (tests/loops.py): paho's socket hooks meet
+    the loop there."""
+    return both(item, {"test_sink.py", "test_freshness.py"})

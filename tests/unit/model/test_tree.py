@@ -251,3 +251,17 @@ def test_status_variables_track_the_connection(tree: VariableTree) -> None:
     st.connected()
     assert st.reconnects == 1 and st.last_error == "connection refused"
     assert m.nodes["Status/State"].sample.value == "connected"
+
+
+def test_the_machine_counts_what_it_publishes_to_the_hub(tree: VariableTree) -> None:
+    m = tree.machines["m1"]
+    node = m.nodes["Name"]
+    every = tree.hub.subscribe("every", every_change=True)
+    before = m.changes
+    m.ingest(node, "a.nc", TS)
+    m.ingest(node, "a.nc", TS)  # no change: not published, not counted
+    m.ingest(node, "b.nc", TS)
+    m.invalidate("BadNotConnected", "gone")  # every mapped variable turns bad, and the status says why
+    published = every.take()
+    assert m.changes - before == len(published)
+    assert sum(1 for n, _ in published if n is node) == 3
