@@ -35,3 +35,72 @@ def keep_written_values() -> None:
 
     MonitoredItemValues.set_current_datavalue = set_current_datavalue  # type: ignore[method-assign]
     setattr(MonitoredItemValues, _MARK, True)
+
+
+_SLIM_MARK = "_cnc_gateway_slim"
+
+
+class _NoCallbacks(dict[int, Any]):
+    """The one empty `datachange_callbacks` every attribute starts with; never filled (see below)."""
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError("the shared empty callbacks mapping is read-only")
+
+    __setitem__ = _refuse  # type: ignore[assignment]
+    setdefault = _refuse  # type: ignore[assignment]
+    update = _refuse  # type: ignore[assignment]
+
+
+NO_CALLBACKS: dict[int, Any] = _NoCallbacks()
+
+
+class SlimAttributeValue:
+    """asyncua's AttributeValue with slots, and no dict of its own until a client monitors it.
+
+    asyncua keeps one AttributeValue per attribute per node (twelve to fifteen a node),
+    each with an instance `__dict__` and an empty `datachange_callbacks` dict: about
+    220 bytes apiece, some 50 MB for the standard namespace and 10,000 variables,
+    the largest single item of the gateway's memory. Slotted, with every attribute
+    sharing one empty read-only mapping until `add_datachange_callback` (the only
+    place asyncua adds a callback) gives it a dict of its own, it is 64 bytes.
+    Everything asyncua reads or assigns (`value`, `value_callback`, `value_setter`,
+    `datachange_callbacks`) is there, under the same names.
+    """
+
+    __slots__ = ("datachange_callbacks", "value", "value_callback", "value_setter")
+
+    def __init__(self, value: Any) -> None:
+        self.value = value
+        self.value_callback: Any = None
+        self.value_setter: Any = None
+        self.datachange_callbacks: dict[int, Any] = NO_CALLBACKS
+
+    def __str__(self) -> str:
+        return f"AttributeValue({self.value})" if not self.value_callback else f"AttributeValue({self.value_callback})"
+
+    __repr__ = __str__
+
+
+def slim_attribute_values() -> None:
+    """Make asyncua build SlimAttributeValues from now on (once per process; before `Server.init`).
+
+    Process-wide, like `keep_written_values`: asyncua creates every AttributeValue in
+    one module (`asyncua.server.address_space`), by the name looked up at call time.
+    """
+    from asyncua.server import address_space
+
+    space = address_space.AddressSpace
+    if getattr(space, _SLIM_MARK, False):
+        return
+    add_callback = space.add_datachange_callback
+
+    def add_datachange_callback(self: Any, nodeid: Any, attr: Any, callback: Any) -> Any:
+        node = self._nodes.get(nodeid)
+        held = node.attributes.get(attr) if node is not None else None
+        if held is not None and held.datachange_callbacks is NO_CALLBACKS:
+            held.datachange_callbacks = {}
+        return add_callback(self, nodeid, attr, callback)
+
+    space.add_datachange_callback = add_datachange_callback  # type: ignore[method-assign]
+    address_space.AttributeValue = SlimAttributeValue  # type: ignore[misc,assignment]
+    setattr(space, _SLIM_MARK, True)

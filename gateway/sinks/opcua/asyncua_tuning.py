@@ -12,7 +12,7 @@ from asyncua import ua
 
 #: Attributes whose values are the same on thousands of nodes and are replaced, never changed in place,
 #: when anything sets them (AddressSpace.set_attribute_value assigns a new DataValue).
-_SHAREABLE = frozenset(
+SHAREABLE = frozenset(
     {
         ua.AttributeIds.NodeClass,
         ua.AttributeIds.Description,
@@ -59,7 +59,7 @@ class SharedAttributes:
         canonical, dropped = self._canonical, 0
         for node in targets:
             for attribute, held in node.attributes.items():
-                if attribute not in _SHAREABLE or held.value_callback is not None or held.value is None:
+                if attribute not in SHAREABLE or held.value_callback is not None or held.value is None:
                     continue
                 value = held.value
                 key = _key(attribute, value)

@@ -46,10 +46,11 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
-from gateway.shims.asyncua_server import keep_written_values
+from gateway.shims.asyncua_server import keep_written_values, slim_attribute_values
 from gateway.shims.ua import new_node_id, new_status_code
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
+from gateway.sinks.opcua.bulk import NodeWriter
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -261,6 +262,9 @@ class OpcUaSink:
     """Mirrors the variable tree as an OPC UA server (implements gateway.sinks.base.Sink)."""
 
     name = "opcua"
+    #: Our nodes go straight into asyncua's address space (bulk.py); False: through asyncua's AddNodes,
+    #: as before (tests/integration/opcua/test_address_space_identity.py builds both and compares).
+    direct_nodes = True
 
     def __init__(
         self,
@@ -285,6 +289,7 @@ class OpcUaSink:
         self._methods: dict[ua.NodeId, tuple[Machine, Method]] = {}
         self._server: Server | None = None
         self._shared: SharedAttributes | None = None
+        self._writer: NodeWriter | None = None
         self._plan: AddressSpacePlan | None = None
         self._sub: Subscription[VariableNode] | None = None
         self._vars: dict[VariableNode, _Variable] = {}
@@ -317,11 +322,12 @@ class OpcUaSink:
 
     async def add_nodes(self, items: Sequence[ua.AddNodesItem]) -> list[ua.NodeId]:
         """Add nodes in batches through the internal session; raises SinkError if any is refused."""
+        writer = self._writer
         isession = self.server.iserver.isession
         added: list[ua.NodeId] = []
         for start in range(0, len(items), ADD_BATCH):
             chunk = list(items[start : start + ADD_BATCH])
-            results = await isession.add_nodes(chunk)
+            results = writer.add_nodes(chunk) if writer is not None else await isession.add_nodes(chunk)
             for item, result in zip(chunk, results, strict=True):
                 if not result.StatusCode.is_good():
                     raise SinkError(
@@ -329,7 +335,7 @@ class OpcUaSink:
                         f"{result.StatusCode.name}"
                     )
                 added.append(result.AddedNodeId)
-            if self._shared is not None:
+            if writer is None and self._shared is not None:
                 self._shared.share(added[-len(chunk) :])
             await asyncio.sleep(0)
         return added
@@ -420,6 +426,7 @@ class OpcUaSink:
         self._vars, self._by_id, self._owned = {}, {}, set()
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
         keep_written_values()  # no deep copy of every value per subscribed item (shims/asyncua_server.py)
+        slim_attribute_values()  # slotted attribute records, no empty dict apiece (before init: ns0 too)
         server = Server()
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
@@ -428,6 +435,7 @@ class OpcUaSink:
         self._shared = SharedAttributes(server)
         # The standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py).
         self._shared.share()
+        self._writer = NodeWriter(server.iserver) if self.direct_nodes else None
         await server.set_application_uri(self.application_uri)
         await server.set_build_info(
             server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()
