@@ -76,7 +76,7 @@ class SlimAttributeValue:
         self.datachange_callbacks: dict[int, Any] = NO_CALLBACKS
 
     def __str__(self) -> str:
-        return f"AttributeValue({self.value})" if not self.value_callback else f"AttributeValue({self.value_callback})"
+        return f"AttributeValue({self.value_callback or self.value})"
 
     __repr__ = __str__
 

@@ -3,8 +3,9 @@
 asyncua's `NodeManagementService._add_node` (what AddNodes and the internal
 session's `add_nodes` run) costs about a millisecond per variable on these
 machines and keeps a fresh copy of everything per node: fifteen DataValues, a
-Variant and a StatusCode each, and a ReferenceDescription per reference. Over 10,000 variables that is the largest
-part of the sink's start-up and of its memory. `NodeWriter.add_nodes` produces
+Variant and a StatusCode each, and a ReferenceDescription per reference.
+Over 10,000 variables that is the largest part of the sink's start-up and of
+its memory. `NodeWriter.add_nodes` produces
 the same NodeData (attributes, references on the node and on its parent, in
 the same order) from the same AddNodesItems, except that:
 
@@ -208,7 +209,7 @@ class NodeWriter:
     def _made_by_asyncua(
         self, target: ua.NodeId, reftype: ua.NodeId, *, forward: bool, parent: NodeData | None = None
     ) -> ua.ReferenceDescription | None:
-        """The ReferenceDescription asyncua would add to a new node for this reference (None: it adds none)."""
+        """The ReferenceDescription asyncua would add to a new node for this reference (None: none)."""
         addref = ua.AddReferencesItem()
         addref.ReferenceTypeId = reftype
         addref.TargetNodeId = target

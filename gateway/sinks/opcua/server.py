@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Self
 from urllib.parse import urlsplit
@@ -44,7 +45,7 @@ from gateway.errors import SinkError
 from gateway.model.context import WriteContext
 from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
-from gateway.model.sample import utcnow
+from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.shims.asyncua_server import keep_written_values, slim_attribute_values
 from gateway.shims.ua import new_node_id, new_status_code
@@ -197,14 +198,18 @@ def session_user_name(user: Any) -> str | None:
 
 
 class _Variable:
-    """What the sink caches per tree variable."""
+    """What the sink caches per tree variable: its node, id and type, the record asyncua keeps its Value in
+    (`held`), and, while no client monitors it, the sample last pushed and when (read through `held`)."""
 
-    __slots__ = ("kind", "node", "nodeid")
+    __slots__ = ("held", "kind", "node", "nodeid", "pushed_at", "sample")
 
-    def __init__(self, node: VariableNode, nodeid: ua.NodeId, kind: ValueKind) -> None:
+    def __init__(self, node: VariableNode, nodeid: ua.NodeId, kind: ValueKind, held: Any) -> None:
         self.node = node
         self.nodeid = nodeid
         self.kind = kind
+        self.held = held
+        self.sample: Sample | None = None
+        self.pushed_at: datetime | None = None
 
 
 class _GatewayAttributeService(AttributeService):
@@ -544,9 +549,11 @@ class OpcUaSink:
         await self._push([(node, node.sample) for node in self._vars])
 
     def _register(self, plan: AddressSpacePlan) -> None:
+        records = self.server.iserver.aspace._nodes
         for node, nodeid in plan.variables.items():
             if node not in self._vars:
-                var = _Variable(node, nodeid, value_kind(node.type))
+                held = records[nodeid].attributes[ua.AttributeIds.Value]
+                var = _Variable(node, nodeid, value_kind(node.type), held)
                 self._vars[node] = var
                 self._by_id[nodeid] = var
         self._owned |= plan.owned
@@ -569,9 +576,17 @@ class OpcUaSink:
     # --- values ------------------------------------------------------------------------------
 
     async def _push(self, batch: list[Change[VariableNode]]) -> None:
+        """Bring the address space up to `batch`.
+
+        A variable no client monitors (asyncua keeps no data-change callback on its
+        Value) only records the sample and the time: asyncua then answers a Read, or
+        the first value of a monitored item created later, through `_read_value`,
+        which builds the DataValue on demand. So the DataValue, its checks and
+        asyncua's write path are paid only where a subscriber will see the change.
+        """
         write = self.server.write_attribute_value
         variables = self._vars
-        mismatched = self._mismatched
+        read_value = self._read_value
         now = utcnow()
         count = 0
         for node, sample in batch:
@@ -580,32 +595,53 @@ class OpcUaSink:
                 var = await self._place(node)
                 if var is None:
                     continue
-            try:
-                dv = var.kind.datavalue(sample, now)
-            except ValueMismatch as exc:
-                if node not in mismatched:
-                    mismatched.add(node)
-                    log.warning(
-                        "%s holds %r, which OPC UA cannot carry as %s: %s",
-                        node.full_path,
-                        sample.value,
-                        node.type,
-                        exc,
-                    )
-                dv = var.kind.mismatch(sample, now)
-            else:
-                if mismatched:
-                    mismatched.discard(node)
-            try:
-                await write(var.nodeid, dv)
-            except Exception:  # not expected; one variable must not stop the others
-                if node not in self._failing:
-                    self._failing.add(node)
-                    log.exception("cannot update %s in the OPC UA address space", node.full_path)
             count += 1
             if count % YIELD_EVERY == 0:
                 await asyncio.sleep(0)
                 now = utcnow()
+            held = var.held
+            if not held.datachange_callbacks and held.value_setter is None:
+                var.sample, var.pushed_at = sample, now
+                if held.value_callback is not read_value:
+                    held.value = None  # what asyncua's own set_attribute_value_callback does
+                    held.value_callback = read_value
+                continue
+            var.sample = var.pushed_at = None
+            dv = self._datavalue(var, sample, now)
+            try:
+                await write(var.nodeid, dv)  # asyncua's path: the monitored items compare and queue it
+            except Exception:  # not expected; one variable must not stop the others
+                if node not in self._failing:
+                    self._failing.add(node)
+                    log.exception("cannot update %s in the OPC UA address space", node.full_path)
+
+    def _datavalue(self, var: _Variable, sample: Sample, now: datetime) -> ua.DataValue:
+        """The DataValue clients see for a sample (BadTypeMismatch, logged once, if it does not fit)."""
+        node = var.node
+        try:
+            dv = var.kind.datavalue(sample, now)
+        except ValueMismatch as exc:
+            if node not in self._mismatched:
+                self._mismatched.add(node)
+                log.warning(
+                    "%s holds %r, which OPC UA cannot carry as %s: %s",
+                    node.full_path,
+                    sample.value,
+                    node.type,
+                    exc,
+                )
+            return var.kind.mismatch(sample, now)
+        if self._mismatched:
+            self._mismatched.discard(node)
+        return dv
+
+    def _read_value(self, nodeid: ua.NodeId, attribute: Any) -> ua.DataValue:
+        """asyncua's value callback for a variable nobody monitors: the last sample pushed, as a DataValue."""
+        var = self._by_id[nodeid]
+        sample, pushed_at = var.sample, var.pushed_at
+        if sample is None or pushed_at is None:  # a monitored item was just created: not expected here
+            sample, pushed_at = var.node.sample, utcnow()
+        return self._datavalue(var, sample, pushed_at)
 
     # --- methods -----------------------------------------------------------------------------
 

@@ -17,7 +17,6 @@ import asyncio
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -67,7 +66,7 @@ variables:
   - {path: Mode, source: "ns=3;s=m", type: SByte}
 """
 
-ALL_ATTRIBUTES = [a for a in ua.AttributeIds]
+ALL_ATTRIBUTES = list(ua.AttributeIds)
 TS = datetime(2026, 11, 25, 12, 0, tzinfo=UTC)
 
 
@@ -180,10 +179,10 @@ async def test_a_client_browsing_and_reading_everything_sees_the_same(pair: Pair
 
 
 async def test_the_servers_records_are_the_same_node_by_node(pair: Pair) -> None:
-    old = pair.old.server.iserver.aspace
+    old = pair.old.server.iserver.aspace  # AddressSpace: keys(), [], no iteration of its own
     new = pair.new.server.iserver.aspace
-    ours = {n for n in old.keys() if n.NamespaceIndex == pair.old.namespace_index}
-    assert ours == {n for n in new.keys() if n.NamespaceIndex == pair.new.namespace_index}
+    ours = {n for n in old.keys() if n.NamespaceIndex == pair.old.namespace_index}  # noqa: SIM118
+    assert ours == {n for n in new.keys() if n.NamespaceIndex == pair.new.namespace_index}  # noqa: SIM118
     assert len(ours) > 40
     samples = {pair.new.node_id(node) for node in pair.tree.nodes()}
     for nodeid in ours:
@@ -196,7 +195,7 @@ async def test_the_servers_records_are_the_same_node_by_node(pair: Pair) -> None
             ), (nodeid, attribute)
         assert [_ref(r) for r in a.references] == [_ref(r) for r in b.references], nodeid
         assert (a.call is None) == (b.call is None), nodeid
-    for nodeid in old.keys():  # the standard namespace's side of our references (Objects, types)
+    for nodeid in old.keys():  # noqa: SIM118 - the standard namespace's side of our references
         if nodeid.NamespaceIndex == 0:
             assert [_ref(r) for r in old[nodeid].references] == [_ref(r) for r in new[nodeid].references]
 

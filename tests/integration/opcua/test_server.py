@@ -59,6 +59,8 @@ variables:
   - {path: Axes/X/Position, source: "ns=3;s=x", type: Float, unit: mm}
   - {path: Ram/Force, source: "ns=3;s=f", type: Double, unit: kN}
   - {path: Ram/Setpoint, source: "ns=3;s=fs", type: Double, unit: kN, access: readwrite}
+  - {path: Ram/Stroke, source: "ns=3;s=st", type: Double}
+  - {path: Ram/Count, source: "ns=3;s=c", type: UInt32}
 """
 
 TS = datetime(2026, 11, 21, 12, 0, tzinfo=UTC)
@@ -356,6 +358,86 @@ async def test_a_value_that_does_not_fit_is_bad_type_mismatch_and_the_loop_goes_
         lambda: (d := env.changes.latest(nodeid)) and d.StatusCode.is_good() and d, message="recovered"
     )
     assert dv.Value.Value == 42 and dv.Value.VariantType == ua.VariantType.UInt32
+
+
+class WriteCounter:
+    """Counts asyncua write_attribute_value calls per node id: the sink's update path for monitored nodes."""
+
+    def __init__(self, sink: OpcUaSink) -> None:
+        self.server = sink.server
+        self.original = sink.server.write_attribute_value
+        self.calls: dict[ua.NodeId, int] = defaultdict(int)
+
+    async def __call__(self, nodeid: ua.NodeId, *args: Any, **kwargs: Any) -> Any:
+        self.calls[nodeid] += 1
+        return await self.original(nodeid, *args, **kwargs)
+
+    def __enter__(self) -> WriteCounter:
+        self.server.write_attribute_value = self  # type: ignore[method-assign]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.server.write_attribute_value = self.original  # type: ignore[method-assign]
+
+
+async def test_a_variable_nobody_monitors_is_not_written_to_asyncua_and_reads_its_latest_value(
+    env: Env,
+) -> None:
+    node = env.press.nodes["Ram/Stroke"]
+    nodeid = env.sink.node_id(node)
+    stroke = await env.var("press", "Ram/Stroke")
+    with WriteCounter(env.sink) as writes:
+        for i in range(1, 4):
+            env.press.ingest(node, float(i), TS + timedelta(seconds=i))
+        assert await wait_until(lambda: _read_value(stroke), message="latest stroke") == 3.0
+        dv = await stroke.read_data_value()
+        assert dv.SourceTimestamp == TS + timedelta(seconds=3)
+        assert dv.ServerTimestamp is not None
+        assert dv.Value.VariantType == ua.VariantType.Double
+        env.press.ingest(node, None, TS + timedelta(seconds=4), "BadNotConnected", "unplugged")
+        dv = await wait_until(
+            lambda: _read_bad(stroke, "BadNotConnected"), message="a bad status, read without a subscriber"
+        )
+        assert dv.Value.Value is None and dv.SourceTimestamp == TS + timedelta(seconds=4)
+    assert writes.calls[nodeid] == 0  # no DataValue written, no asyncua write path: nobody would see it
+    held = env.sink.server.iserver.aspace._nodes[nodeid].attributes[ua.AttributeIds.Value]
+    assert held.value is None and held.value_callback is not None  # asyncua asks the sink on a Read
+
+
+async def test_a_client_that_subscribes_later_gets_the_current_value_at_once(env: Env) -> None:
+    node = env.press.nodes["Ram/Count"]
+    nodeid = env.sink.node_id(node)
+    count = await env.var("press", "Ram/Count")
+    env.press.ingest(node, "not a number", TS)  # a misbehaving driver, while nobody watches
+    await wait_until(
+        lambda: _read_bad(count, "BadTypeMismatch"), message="mismatch, read without a subscriber"
+    )
+    env.press.ingest(node, 7, TS + timedelta(seconds=1))
+    assert await wait_until(lambda: _read_value(count), message="count 7") == 7
+    changes = Changes()
+    sub = await env.client.create_subscription(20, changes)
+    try:
+        with WriteCounter(env.sink) as writes:
+            handle = await sub.subscribe_data_change(count)
+            first = await wait_until(lambda: changes.latest(nodeid), message="the first notification")
+            assert first.Value.Value == 7 and first.SourceTimestamp == TS + timedelta(
+                seconds=1
+            )  # no change needed
+            env.press.ingest(node, 8, TS + timedelta(seconds=2))
+            await wait_until(lambda: (d := changes.latest(nodeid)) and d.Value.Value == 8, message="count 8")
+            assert writes.calls[nodeid] == 1  # monitored: asyncua's own update path
+            await sub.unsubscribe(handle)
+            env.press.ingest(node, 9, TS + timedelta(seconds=3))
+            assert await wait_until(lambda: _read_value(count), message="count 9") == 9
+            assert writes.calls[nodeid] == 1  # nobody monitors it again
+        assert [dv.Value.Value for dv in changes.seen[nodeid]] == [7, 8]
+    finally:
+        await sub.delete()
+
+
+async def _read_bad(node: Node, status: str) -> ua.DataValue | None:
+    dv = await node.read_data_value(raise_on_bad_status=False)
+    return dv if dv.StatusCode == code(status) else None
 
 
 async def test_status_variables_follow_the_machine(env: Env) -> None:
