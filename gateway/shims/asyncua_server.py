@@ -17,6 +17,7 @@ leaves the comparison itself (value, status, timestamps) exactly as it was.
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 _MARK = "_cnc_gateway_keeps_reference"
@@ -104,3 +105,49 @@ def slim_attribute_values() -> None:
     space.add_datachange_callback = add_datachange_callback  # type: ignore[method-assign]
     address_space.AttributeValue = SlimAttributeValue  # type: ignore[misc,assignment]
     setattr(space, _SLIM_MARK, True)
+
+
+_FORGET_MARK = "_cnc_gateway_forgets_fill_code"
+_FILL_PACKAGE = "asyncua.server.standard_address_space"
+_filling = 0
+
+
+def forget_standard_namespace_code() -> None:
+    """Drop the code that builds asyncua's standard namespace once it has run (install once per process).
+
+    The standard namespace is built by 25 generated modules of straight-line calls,
+    about 12 MB of code objects that stay imported for the life of the process and
+    never run again. After each `InternalServer.load_standard_address_space`, unless
+    another one is still running, the package is taken out of `sys.modules` and its
+    modules' dicts cleared, which frees the code at once (no cyclic collection
+    needed); the next server to start imports it again from the bytecode cache,
+    in a few hundredths of a second. The nodes it built are plain data and stay.
+    """
+    from asyncua.server.internal_server import InternalServer
+
+    if getattr(InternalServer, _FORGET_MARK, False):
+        return
+    load = InternalServer.load_standard_address_space
+
+    async def load_standard_address_space(self: Any, shelf_file: Any = None) -> None:
+        global _filling
+        _filling += 1
+        try:
+            await load(self, shelf_file)
+        finally:
+            _filling -= 1
+            if _filling == 0:
+                _drop_fill_code()
+
+    InternalServer.load_standard_address_space = load_standard_address_space  # type: ignore[method-assign]
+    setattr(InternalServer, _FORGET_MARK, True)
+
+
+def _drop_fill_code() -> None:
+    names = [name for name in sys.modules if name == _FILL_PACKAGE or name.startswith(_FILL_PACKAGE + ".")]
+    modules = [sys.modules.pop(name) for name in names]
+    parent = sys.modules.get(_FILL_PACKAGE.rpartition(".")[0])
+    if parent is not None and "standard_address_space" in vars(parent):
+        delattr(parent, "standard_address_space")
+    for module in modules:
+        vars(module).clear()  # functions and their module dicts refer to each other: break it now

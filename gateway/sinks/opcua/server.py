@@ -47,7 +47,11 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
-from gateway.shims.asyncua_server import keep_written_values, slim_attribute_values
+from gateway.shims.asyncua_server import (
+    forget_standard_namespace_code,
+    keep_written_values,
+    slim_attribute_values,
+)
 from gateway.shims.ua import new_node_id, new_status_code
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
@@ -432,6 +436,7 @@ class OpcUaSink:
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
         keep_written_values()  # no deep copy of every value per subscribed item (shims/asyncua_server.py)
         slim_attribute_values()  # slotted attribute records, no empty dict apiece (before init: ns0 too)
+        forget_standard_namespace_code()  # the 12 MB of code that builds ns0, once it has run
         server = Server()
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
