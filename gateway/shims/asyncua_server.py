@@ -47,9 +47,9 @@ class _NoCallbacks(dict[int, Any]):
     def _refuse(self, *args: Any, **kwargs: Any) -> None:
         raise TypeError("the shared empty callbacks mapping is read-only")
 
-    __setitem__ = _refuse  # type: ignore[assignment]
-    setdefault = _refuse  # type: ignore[assignment]
-    update = _refuse  # type: ignore[assignment]
+    __setitem__ = _refuse
+    setdefault = _refuse
+    update = _refuse
 
 
 NO_CALLBACKS: dict[int, Any] = _NoCallbacks()
@@ -109,7 +109,10 @@ def slim_attribute_values() -> None:
 
 _FORGET_MARK = "_cnc_gateway_forgets_fill_code"
 _FILL_PACKAGE = "asyncua.server.standard_address_space"
-_filling = 0
+
+
+class _Fills:
+    running = 0  # standard-namespace loads in progress in this process
 
 
 def forget_standard_namespace_code() -> None:
@@ -130,13 +133,12 @@ def forget_standard_namespace_code() -> None:
     load = InternalServer.load_standard_address_space
 
     async def load_standard_address_space(self: Any, shelf_file: Any = None) -> None:
-        global _filling
-        _filling += 1
+        _Fills.running += 1
         try:
             await load(self, shelf_file)
         finally:
-            _filling -= 1
-            if _filling == 0:
+            _Fills.running -= 1
+            if _Fills.running == 0:
                 _drop_fill_code()
 
     InternalServer.load_standard_address_space = load_standard_address_space  # type: ignore[method-assign]

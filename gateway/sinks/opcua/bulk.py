@@ -35,6 +35,7 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import NodeData
 
+from gateway.shims.ua import new_data_value, new_node_id, new_variant
 from gateway.sinks.opcua.asyncua_tuning import SHAREABLE
 
 # asyncua's _add_nodeattributes: (attribute name, VariantType, is_array), in its order.
@@ -68,7 +69,7 @@ _PLAN = tuple(
     (name, vtype, is_array, getattr(ua.NodeAttributesMask, name), getattr(ua.AttributeIds, name))
     for name, vtype, is_array in _ATTRIBUTES
 )
-_HAS_PROPERTY = ua.NodeId(ua.ObjectIds.HasProperty)
+_HAS_PROPERTY = new_node_id(ua.ObjectIds.HasProperty)
 _GOOD = ua.StatusCode()
 
 
@@ -128,10 +129,10 @@ class NodeWriter:
         attributes = node.attributes
         value_of = self._attribute_value
         attributes[ua.AttributeIds.NodeId] = value_of(
-            ua.DataValue(ua.Variant(node.nodeid, ua.VariantType.NodeId))
+            new_data_value(new_variant(node.nodeid, ua.VariantType.NodeId))
         )
         attributes[ua.AttributeIds.BrowseName] = value_of(
-            ua.DataValue(ua.Variant(item.BrowseName, ua.VariantType.QualifiedName))
+            new_data_value(new_variant(item.BrowseName, ua.VariantType.QualifiedName))
         )
         attributes[ua.AttributeIds.NodeClass] = value_of(
             self._shared(ua.AttributeIds.NodeClass, item.NodeClass, ua.VariantType.Int32, False)
@@ -143,17 +144,17 @@ class NodeWriter:
                 continue
             value = getattr(given, name)
             if name == "DataTypeDefinition" and not isinstance(value, ua.DataTypeDefinition):
-                dv = ua.DataValue(ua.Variant(None, ua.VariantType.Null))
+                dv = new_data_value(new_variant(None, ua.VariantType.Null))
             elif name == "Value":  # the only attribute asyncua stamps with the time it was added
-                dv = ua.DataValue(
-                    ua.Variant(value, vtype, is_array=is_array),
+                dv = new_data_value(
+                    new_variant(value, vtype, is_array=is_array),
                     SourceTimestamp=stamp,
                     ServerTimestamp=server_stamp,
                 )
             elif attribute in SHAREABLE:
                 dv = self._shared(attribute, value, vtype, is_array)
             else:
-                dv = ua.DataValue(ua.Variant(value, vtype, is_array=is_array))
+                dv = new_data_value(new_variant(value, vtype, is_array=is_array))
             attributes[attribute] = value_of(dv)
 
     def _shared(
@@ -164,7 +165,7 @@ class NodeWriter:
             dv = self._values.get(key)
             if dv is not None:
                 return dv
-        dv = ua.DataValue(ua.Variant(value, vtype, is_array=is_array))
+        dv = new_data_value(new_variant(value, vtype, is_array=is_array))
         if key is not None:
             self._values[key] = dv
         return dv
@@ -201,7 +202,7 @@ class NodeWriter:
     def _type_reference(self, typedef: ua.NodeId) -> ua.ReferenceDescription:
         desc = self._typedefs.get(typedef)
         if desc is None:
-            made = self._made_by_asyncua(typedef, ua.NodeId(ua.ObjectIds.HasTypeDefinition), forward=True)
+            made = self._made_by_asyncua(typedef, new_node_id(ua.ObjectIds.HasTypeDefinition), forward=True)
             assert made is not None
             desc = self._typedefs[typedef] = made
         return desc
@@ -221,7 +222,7 @@ class NodeWriter:
             addref.TargetNodeClass = held.Value.Value
         else:  # _add_type_definition
             addref.TargetNodeClass = ua.NodeClass.Unspecified
-        scratch = NodeData(ua.NodeId())
+        scratch = NodeData(new_node_id())
         self._service._add_reference_no_check(scratch, addref)
         return scratch.references[0] if scratch.references else None
 
