@@ -82,27 +82,74 @@ class SlimAttributeValue:
     __repr__ = __str__
 
 
+class SharedAttributeValue(SlimAttributeValue):
+    """A record that many nodes hold for one constant attribute (their DataType, ValueRank, ...).
+
+    Built by the OPC UA sink for its own nodes (gateway/sinks/opcua/bulk.py). asyncua
+    changes a record in place in four places (`write_attribute_value`,
+    `set_attribute_value_callback`, `set_attribute_value_setter`,
+    `add_datachange_callback`); `slim_attribute_values` makes each of them first give
+    the node a record of its own, so that what is done to one node is done to it only.
+    """
+
+    __slots__ = ()
+
+
+def _own(space: Any, nodeid: Any, attr: Any) -> None:
+    """Give the node its own record of `attr` if it shares one (copy on write)."""
+    node = space._nodes.get(nodeid)
+    held = node.attributes.get(attr) if node is not None else None
+    if type(held) is SharedAttributeValue:
+        node.attributes[attr] = SlimAttributeValue(held.value)
+
+
 def slim_attribute_values() -> None:
-    """Make asyncua build SlimAttributeValues from now on (once per process; before `Server.init`).
+    """Make asyncua build SlimAttributeValues from now on, and copy SharedAttributeValues on write
+    (once per process; before `Server.init`).
 
     Process-wide, like `keep_written_values`: asyncua creates every AttributeValue in
     one module (`asyncua.server.address_space`), by the name looked up at call time.
+    The wrappers add a call and a type check to asyncua's, nothing more; the one on the
+    hot path, `write_attribute_value`, skips even that for Value records (never shared),
+    and returns asyncua's own coroutine (no extra frame).
     """
+    from asyncua import ua
     from asyncua.server import address_space
 
     space = address_space.AddressSpace
     if getattr(space, _SLIM_MARK, False):
         return
     add_callback = space.add_datachange_callback
+    write = space.write_attribute_value
+    set_callback = space.set_attribute_value_callback
+    set_setter = space.set_attribute_value_setter
+    value_attribute = ua.AttributeIds.Value
 
     def add_datachange_callback(self: Any, nodeid: Any, attr: Any, callback: Any) -> Any:
+        _own(self, nodeid, attr)
         node = self._nodes.get(nodeid)
         held = node.attributes.get(attr) if node is not None else None
         if held is not None and held.datachange_callbacks is NO_CALLBACKS:
             held.datachange_callbacks = {}
         return add_callback(self, nodeid, attr, callback)
 
+    def write_attribute_value(self: Any, nodeid: Any, attr: Any, value: Any) -> Any:
+        if attr != value_attribute:
+            _own(self, nodeid, attr)
+        return write(self, nodeid, attr, value)
+
+    def set_attribute_value_callback(self: Any, nodeid: Any, attr: Any, callback: Any) -> Any:
+        _own(self, nodeid, attr)
+        return set_callback(self, nodeid, attr, callback)
+
+    def set_attribute_value_setter(self: Any, nodeid: Any, attr: Any, setter: Any) -> Any:
+        _own(self, nodeid, attr)
+        return set_setter(self, nodeid, attr, setter)
+
     space.add_datachange_callback = add_datachange_callback  # type: ignore[method-assign]
+    space.write_attribute_value = write_attribute_value  # type: ignore[method-assign]
+    space.set_attribute_value_callback = set_attribute_value_callback  # type: ignore[method-assign]
+    space.set_attribute_value_setter = set_attribute_value_setter  # type: ignore[method-assign]
     address_space.AttributeValue = SlimAttributeValue  # type: ignore[misc,assignment]
     setattr(space, _SLIM_MARK, True)
 

@@ -9,10 +9,12 @@ its memory. `NodeWriter.add_nodes` produces
 the same NodeData (attributes, references on the node and on its parent, in
 the same order) from the same AddNodesItems, except that:
 
-* the DataValues of constant attributes (NodeClass, DataType, ValueRank,
-  AccessLevel, ... the `asyncua_tuning.SHAREABLE` set) are one object per
-  distinct value (asyncua_tuning.py shared them after the fact; here they are
-  never made twice), and the Value of every node of one call carries the same
+* the records of constant attributes (NodeClass, DataType, ValueRank,
+  AccessLevel, ... the `asyncua_tuning.SHAREABLE` set) are one
+  `SharedAttributeValue` per distinct value, DataValue included, held by every
+  node with that value; asyncua gives a node its own copy before it changes
+  one (shims/asyncua_server.py `slim_attribute_values`), so clients still see
+  each node's own. The Value of every node of one call carries the same
   creation time (asyncua stamps each with its own microsecond; the sink writes
   the real sample right after anyway);
 * the reference from a node back to its parent, and to its type definition,
@@ -35,6 +37,7 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import NodeData
 
+from gateway.shims.asyncua_server import SharedAttributeValue
 from gateway.shims.ua import new_data_value, new_node_id, new_variant
 from gateway.sinks.opcua.asyncua_tuning import SHAREABLE
 
@@ -81,7 +84,7 @@ class NodeWriter:
         self._service = iserver.node_mgt_service
         self._user = iserver.isession.user
         self._attribute_value = _attribute_value()
-        self._values: dict[tuple[Any, ...], ua.DataValue] = {}
+        self._records: dict[tuple[Any, ...], SharedAttributeValue] = {}
         self._back: dict[tuple[ua.NodeId, ua.NodeId], ua.ReferenceDescription | None] = {}
         self._typedefs: dict[ua.NodeId, ua.ReferenceDescription] = {}
 
@@ -134,8 +137,8 @@ class NodeWriter:
         attributes[ua.AttributeIds.BrowseName] = value_of(
             new_data_value(new_variant(item.BrowseName, ua.VariantType.QualifiedName))
         )
-        attributes[ua.AttributeIds.NodeClass] = value_of(
-            self._shared(ua.AttributeIds.NodeClass, item.NodeClass, ua.VariantType.Int32, False)
+        attributes[ua.AttributeIds.NodeClass] = self._shared(
+            ua.AttributeIds.NodeClass, item.NodeClass, ua.VariantType.Int32, False
         )
         given = item.NodeAttributes
         specified = given.SpecifiedAttributes
@@ -152,23 +155,26 @@ class NodeWriter:
                     ServerTimestamp=server_stamp,
                 )
             elif attribute in SHAREABLE:
-                dv = self._shared(attribute, value, vtype, is_array)
+                attributes[attribute] = self._shared(attribute, value, vtype, is_array)
+                continue
             else:
                 dv = new_data_value(new_variant(value, vtype, is_array=is_array))
             attributes[attribute] = value_of(dv)
 
     def _shared(
         self, attribute: ua.AttributeIds, value: Any, vtype: ua.VariantType | None, is_array: bool
-    ) -> ua.DataValue:
+    ) -> Any:
+        """The record of a constant attribute: one per distinct value, shared by every node that has it
+        (a SharedAttributeValue, which asyncua copies before changing it for one node), or a node's own
+        where the value is not simple to compare."""
         key = _key(attribute, value, vtype, is_array)
-        if key is not None:
-            dv = self._values.get(key)
-            if dv is not None:
-                return dv
-        dv = new_data_value(new_variant(value, vtype, is_array=is_array))
-        if key is not None:
-            self._values[key] = dv
-        return dv
+        held = self._records.get(key) if key is not None else None
+        if held is None:
+            dv = new_data_value(new_variant(value, vtype, is_array=is_array))
+            if key is None:
+                return self._attribute_value(dv)
+            held = self._records[key] = SharedAttributeValue(dv)
+        return held
 
     def _link(
         self,

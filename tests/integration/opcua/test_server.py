@@ -212,6 +212,38 @@ async def test_equal_constant_attributes_are_one_object_and_stay_apart_when_set(
         x[ua.AttributeIds.MinimumSamplingInterval].value = shared
 
 
+async def test_a_shared_constant_record_is_copied_before_one_node_changes(env: Env) -> None:
+    """The constant attributes of equal variables are one record (bulk.py); a client monitoring one node's
+    AccessLevel, and a change to another's, each touch their own node only (shims/asyncua_server.py)."""
+    nodes = env.sink.server.iserver.aspace._nodes
+    force = nodes[ua.NodeId("press/Ram/Force", 2)].attributes
+    setpoint_id = ua.NodeId("press/Ram/Setpoint", 2)
+    position = nodes[ua.NodeId("press/Axes/X/Position", 2)].attributes
+    assert force[ua.AttributeIds.Historizing] is position[ua.AttributeIds.Historizing]  # one shared record
+    changes = Changes()
+    sub = await env.client.create_subscription(20, changes)
+    try:
+        force_node = await env.var("press", "Ram/Force")
+        await sub.subscribe_data_change(force_node, attr=ua.AttributeIds.Historizing)
+        await wait_until(lambda: changes.latest(force_node.nodeid), message="the first Historizing")
+        assert force[ua.AttributeIds.Historizing] is not position[ua.AttributeIds.Historizing]  # its own now
+        before = nodes[setpoint_id].attributes[ua.AttributeIds.Historizing]
+        await env.sink.server.write_attribute_value(
+            ua.NodeId("press/Axes/X/Position", 2),
+            ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)),
+            ua.AttributeIds.Historizing,
+        )
+        assert nodes[setpoint_id].attributes[ua.AttributeIds.Historizing] is before  # untouched, still shared
+        read = await env.client.read_attributes(
+            [await env.var("press", "Axes/X/Position"), force_node, await env.var("press", "Ram/Setpoint")],
+            ua.AttributeIds.Historizing,
+        )
+        assert [dv.Value.Value for dv in read] == [True, False, False]
+        assert [dv.Value.Value for dv in changes.seen[force_node.nodeid]] == [False]  # not told of the other
+    finally:
+        await sub.delete()
+
+
 async def test_writable_variable_and_unknown_unit(env: Env) -> None:
     target = await env.var("laser", "Axes/X/Target")
     read_write = ua.AccessLevel.CurrentRead.mask | ua.AccessLevel.CurrentWrite.mask
