@@ -23,8 +23,58 @@ from typing import Any
 _MARK = "_cnc_gateway_keeps_reference"
 
 
+class _KeptValues:
+    """asyncua's MonitoredItemValues, slotted, keeping a reference to each written DataValue."""
+
+    __slots__ = ("current_dvalue", "old_dvalue")
+
+    def __init__(self) -> None:
+        self.current_dvalue: Any = None
+        self.old_dvalue: Any = None
+
+    def set_current_datavalue(self, cur_val: Any) -> None:
+        self.old_dvalue = self.current_dvalue
+        self.current_dvalue = cur_val
+
+    def get_current_datavalue(self) -> Any:
+        return self.current_dvalue
+
+    def get_old_datavalue(self) -> Any:
+        return self.old_dvalue
+
+
+class _SlimMonitoredItem:
+    """asyncua's MonitoredItemData with slots: the same fields, about a quarter of its memory
+    (a subscriber of 10,000 variables holds 10,000 of them, and as many values)."""
+
+    __slots__ = (
+        "callback_handle",
+        "client_handle",
+        "filter",
+        "mode",
+        "monitored_item_id",
+        "mvalue",
+        "queue_size",
+        "read_value_id",
+        "where_clause_evaluator",
+    )
+
+    def __init__(self) -> None:
+        self.client_handle: Any = None
+        self.callback_handle: Any = None
+        self.monitored_item_id: Any = None
+        self.mode: Any = None
+        self.read_value_id: Any = None
+        self.filter: Any = None
+        self.mvalue = _KeptValues()
+        self.where_clause_evaluator: Any = None
+        self.queue_size: int = 0
+
+
 def keep_written_values() -> None:
-    """Replace asyncua's deep copy of each monitored value by a reference (once per process)."""
+    """Replace asyncua's deep copy of each monitored value by a reference (once per process), and its
+    records of monitored items by slotted ones (`MonitoredItemData()` is looked up at call time)."""
+    from asyncua.server import monitored_item_service
     from asyncua.server.monitored_item_service import MonitoredItemValues
 
     if getattr(MonitoredItemValues, _MARK, False):
@@ -35,6 +85,7 @@ def keep_written_values() -> None:
         self.current_dvalue = cur_val
 
     MonitoredItemValues.set_current_datavalue = set_current_datavalue  # type: ignore[method-assign]
+    monitored_item_service.MonitoredItemData = _SlimMonitoredItem  # type: ignore[misc,assignment]
     setattr(MonitoredItemValues, _MARK, True)
 
 
