@@ -540,9 +540,11 @@ class OpcUaSink:
 
     async def _build(self) -> None:
         plan = self._require_plan()
-        plan.add_machines(self.tree.machines.values())
-        methods = plan_methods(plan, self.tree.machines.values())
-        await self.add_nodes(plan.take())
+        methods: list[tuple[ua.NodeId, Method]] = []
+        for machine in self.tree.machines.values():  # a machine at a time: its items never all exist at once
+            plan.add_machines([machine])
+            methods += plan_methods(plan, [machine])
+            await self.add_nodes(plan.take())
         self._register(plan)
         owners = {id(m): machine for machine in self.tree.machines.values() for m in machine.methods.values()}
         for nodeid, method in methods:
