@@ -31,6 +31,7 @@ compares both paths node by node and through a client's Browse and Read.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from datetime import UTC, datetime
 from typing import Any
 
@@ -88,10 +89,19 @@ class NodeWriter:
         self._back: dict[tuple[ua.NodeId, ua.NodeId], ua.ReferenceDescription | None] = {}
         self._typedefs: dict[ua.NodeId, ua.ReferenceDescription] = {}
 
-    def add_nodes(self, items: list[ua.AddNodesItem]) -> list[ua.AddNodesResult]:
+    def try_add_nodes(
+        self, items: list[ua.AddNodesItem], user: Any = None, check: bool = True
+    ) -> Iterator[Any]:
+        """`NodeManagementService.try_add_nodes`: what asyncua's builder of the standard namespace calls
+        (with check=False: no time stamps, parents may come later); yields the items not added (yet)."""
+        for item, result in zip(items, self.add_nodes(items, check=check), strict=True):
+            if not result.StatusCode.is_good():
+                yield item
+
+    def add_nodes(self, items: list[ua.AddNodesItem], *, check: bool = True) -> list[ua.AddNodesResult]:
         """One AddNodesResult per item, in order, as `NodeManagementService.add_nodes` answers."""
         aspace = self._aspace
-        stamp = datetime.now(UTC)
+        stamp = datetime.now(UTC) if check else None
         server_stamp = stamp if aspace.force_server_timestamp else None
         known: dict[ua.NodeId, tuple[set[tuple[ua.NodeId, ua.NodeId]], set[str]]] = {}
         results = []
@@ -112,21 +122,21 @@ class NodeWriter:
                 or (seen is not None and item.BrowseName.Name in seen[1])
                 or (not typedef.is_null() and typedef not in aspace)
             ):
-                results.extend(self._service.add_nodes([item], self._user))  # asyncua says why, as always
+                results.append(self._service._add_node(item, self._user, check=check))  # asyncua says why
                 known.pop(parentid, None)
                 continue
             node = NodeData(nodeid)
             self._attributes(node, item, stamp, server_stamp)
             aspace[nodeid] = node
             assert seen is not None
-            self._link(node, item, parent, seen)
+            self._link(node, item, parent, seen, share_back=check)
             if not typedef.is_null():
                 node.references.append(self._type_reference(typedef))
             results.append(ua.AddNodesResult(StatusCode=_GOOD, AddedNodeId=nodeid))
         return results
 
     def _attributes(
-        self, node: NodeData, item: ua.AddNodesItem, stamp: datetime, server_stamp: datetime | None
+        self, node: NodeData, item: ua.AddNodesItem, stamp: datetime | None, server_stamp: datetime | None
     ) -> None:
         """asyncua's _add_node_attributes: NodeId, BrowseName, NodeClass, then every specified one."""
         attributes = node.attributes
@@ -182,6 +192,8 @@ class NodeWriter:
         item: ua.AddNodesItem,
         parent: NodeData,
         seen: tuple[set[tuple[ua.NodeId, ua.NodeId]], set[str]],
+        *,
+        share_back: bool,
     ) -> None:
         """asyncua's _add_ref_from_parent and _add_ref_to_parent."""
         reftype, nodeid = item.ReferenceTypeId, node.nodeid
@@ -198,10 +210,17 @@ class NodeWriter:
             seen[0].add((reftype, nodeid))
             if reftype == _HAS_PROPERTY:
                 seen[1].add(item.BrowseName.Name)
+        # One back reference per parent, made once: our parents are complete when their children come.
+        # The standard namespace's builder adds references later (PostponeReferences): made each time.
         key = (item.ParentNodeId, reftype)
-        if key not in self._back:
-            self._back[key] = self._made_by_asyncua(item.ParentNodeId, reftype, forward=False, parent=parent)
-        back = self._back[key]
+        if not share_back:
+            back = self._made_by_asyncua(item.ParentNodeId, reftype, forward=False, parent=parent)
+        else:
+            if key not in self._back:
+                self._back[key] = self._made_by_asyncua(
+                    item.ParentNodeId, reftype, forward=False, parent=parent
+                )
+            back = self._back[key]
         if back is not None:
             node.references.append(back)
 

@@ -441,11 +441,19 @@ class OpcUaSink:
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
         server.manufacturer_name = "cnc-gateway"
-        await server.init()
+        self._writer = NodeWriter(server.iserver) if self.direct_nodes else None
+        service = server.iserver.node_mgt_service
+        if (
+            self._writer is not None
+        ):  # asyncua's generated code builds the standard namespace, the writer adds it
+            service.try_add_nodes = self._writer.try_add_nodes  # type: ignore[method-assign,assignment]
+        try:
+            await server.init()
+        finally:
+            vars(service).pop("try_add_nodes", None)
         self._shared = SharedAttributes(server)
         # The standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py).
         self._shared.share()
-        self._writer = NodeWriter(server.iserver) if self.direct_nodes else None
         await server.set_application_uri(self.application_uri)
         await server.set_build_info(
             server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()
