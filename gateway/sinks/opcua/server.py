@@ -599,7 +599,10 @@ class OpcUaSink:
         which builds the DataValue on demand. So the DataValue, its checks and
         asyncua's write path are paid only where a subscriber will see the change.
         """
-        write = self.server.write_attribute_value
+        # asyncua's address space itself: Server's and InternalServer's write_attribute_value only pass it on.
+        write = self.server.iserver.aspace.write_attribute_value
+        value_attribute = ua.AttributeIds.Value
+        mismatched = self._mismatched
         variables = self._vars
         read_value = self._read_value
         now = utcnow()
@@ -621,10 +624,19 @@ class OpcUaSink:
                     held.value = None  # what asyncua's own set_attribute_value_callback does
                     held.value_callback = read_value
                 continue
-            var.sample = var.pushed_at = None
-            dv = self._datavalue(var, sample, now)
+            if var.sample is not None:
+                var.sample = var.pushed_at = None
+            if mismatched:
+                dv = self._datavalue(var, sample, now)
+            else:
+                try:
+                    dv = var.kind.datavalue(sample, now)
+                except ValueMismatch:
+                    dv = self._datavalue(var, sample, now)  # says so once
             try:
-                await write(var.nodeid, dv)  # asyncua's path: the monitored items compare and queue it
+                await write(
+                    var.nodeid, value_attribute, dv
+                )  # asyncua's path: monitored items compare and queue
             except Exception:  # not expected; one variable must not stop the others
                 if node not in self._failing:
                     self._failing.add(node)

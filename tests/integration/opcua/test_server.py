@@ -393,11 +393,11 @@ async def test_a_value_that_does_not_fit_is_bad_type_mismatch_and_the_loop_goes_
 
 
 class WriteCounter:
-    """Counts asyncua write_attribute_value calls per node id: the sink's update path for monitored nodes."""
+    """Counts asyncua's address-space writes per node id: the sink's update path for monitored nodes."""
 
     def __init__(self, sink: OpcUaSink) -> None:
-        self.server = sink.server
-        self.original = sink.server.write_attribute_value
+        self.aspace = sink.server.iserver.aspace
+        self.original = self.aspace.write_attribute_value
         self.calls: dict[ua.NodeId, int] = defaultdict(int)
 
     async def __call__(self, nodeid: ua.NodeId, *args: Any, **kwargs: Any) -> Any:
@@ -405,11 +405,11 @@ class WriteCounter:
         return await self.original(nodeid, *args, **kwargs)
 
     def __enter__(self) -> WriteCounter:
-        self.server.write_attribute_value = self  # type: ignore[method-assign]
+        self.aspace.write_attribute_value = self
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.server.write_attribute_value = self.original  # type: ignore[method-assign]
+        del self.aspace.write_attribute_value  # the instance's own: the class's again
 
 
 async def test_a_variable_nobody_monitors_is_not_written_to_asyncua_and_reads_its_latest_value(
