@@ -18,6 +18,7 @@ from __future__ import annotations
 import base64
 import binascii
 import re
+import sys
 import uuid
 from dataclasses import dataclass
 
@@ -67,7 +68,7 @@ def parse_address(text: str) -> OpcUaAddress:
         namespace = int(ns_text)
     uri = match["nsu"]
     if uri is not None:
-        uri = uri.strip()
+        uri = sys.intern(uri.strip())  # one controller's URI on every variable: one string, not thousands
         if not uri:
             raise AddressError(f"{text!r}: nsu= needs a namespace URI")
     kind = match["kind"]

@@ -77,14 +77,20 @@ class VariableNode:
         "sample",
     )
 
-    def __init__(self, machine: Machine, definition: VariableDefinition, *, internal: bool = False) -> None:
+    def __init__(
+        self,
+        machine: Machine,
+        definition: VariableDefinition,
+        *,
+        internal: bool = False,
+        waiting: Sample | None = None,
+    ) -> None:
         self.machine = machine
         self.definition = definition
         self.path = definition.path
         self.internal = internal
-        self.sample: Sample = Sample(
-            definition.type.default(), utcnow(), "BadWaitingForInitialData", "no value yet"
-        )
+        # Until the first value: `waiting`, one frozen Sample that a machine's variables of a type share.
+        self.sample: Sample = waiting or waiting_for_data(definition.type, utcnow())
         self._published: Any = None
         self._gain = definition.gain
         self._offset = definition.offset
@@ -171,10 +177,15 @@ class Machine:
         self._hub = tree.hub
         self._last_change_push = 0.0
         self.changes = 0  # samples published to the hub (/metrics: changes/s); counted here, not by a sink
+        now = utcnow()
+        waiting: dict[TypeSpec, Sample] = {}  # scalars only: an array's empty list is its own
         for variable in definition.variables:
             if variable.path in self.nodes:
                 raise ValueError(f"{self.name}: variable {variable.path!r} defined twice")
-            self.nodes[variable.path] = VariableNode(self, variable)
+            sample = waiting.get(variable.type)
+            if sample is None and not variable.type.array:
+                sample = waiting[variable.type] = waiting_for_data(variable.type, now)
+            self.nodes[variable.path] = VariableNode(self, variable, waiting=sample)
         self.status: MachineStatus[VariableNode] = MachineStatus(self, definition.endpoint)
 
     def __repr__(self) -> str:
@@ -423,6 +434,11 @@ class Machine:
         reading = await writer.write(node, raw)
         if reading is not None:
             self.confirm(node, reading)
+
+
+def waiting_for_data(spec: TypeSpec, now: datetime) -> Sample:
+    """A variable's sample before its first value: the type's neutral value, BadWaitingForInitialData."""
+    return Sample(spec.default(), now, "BadWaitingForInitialData", "no value yet")
 
 
 def _before(a: datetime, b: datetime) -> bool:

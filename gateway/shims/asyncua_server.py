@@ -17,13 +17,64 @@ leaves the comparison itself (value, status, timestamps) exactly as it was.
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 _MARK = "_cnc_gateway_keeps_reference"
 
 
+class _KeptValues:
+    """asyncua's MonitoredItemValues, slotted, keeping a reference to each written DataValue."""
+
+    __slots__ = ("current_dvalue", "old_dvalue")
+
+    def __init__(self) -> None:
+        self.current_dvalue: Any = None
+        self.old_dvalue: Any = None
+
+    def set_current_datavalue(self, cur_val: Any) -> None:
+        self.old_dvalue = self.current_dvalue
+        self.current_dvalue = cur_val
+
+    def get_current_datavalue(self) -> Any:
+        return self.current_dvalue
+
+    def get_old_datavalue(self) -> Any:
+        return self.old_dvalue
+
+
+class _SlimMonitoredItem:
+    """asyncua's MonitoredItemData with slots: the same fields, about a quarter of its memory
+    (a subscriber of 10,000 variables holds 10,000 of them, and as many values)."""
+
+    __slots__ = (
+        "callback_handle",
+        "client_handle",
+        "filter",
+        "mode",
+        "monitored_item_id",
+        "mvalue",
+        "queue_size",
+        "read_value_id",
+        "where_clause_evaluator",
+    )
+
+    def __init__(self) -> None:
+        self.client_handle: Any = None
+        self.callback_handle: Any = None
+        self.monitored_item_id: Any = None
+        self.mode: Any = None
+        self.read_value_id: Any = None
+        self.filter: Any = None
+        self.mvalue = _KeptValues()
+        self.where_clause_evaluator: Any = None
+        self.queue_size: int = 0
+
+
 def keep_written_values() -> None:
-    """Replace asyncua's deep copy of each monitored value by a reference (once per process)."""
+    """Replace asyncua's deep copy of each monitored value by a reference (once per process), and its
+    records of monitored items by slotted ones (`MonitoredItemData()` is looked up at call time)."""
+    from asyncua.server import monitored_item_service
     from asyncua.server.monitored_item_service import MonitoredItemValues
 
     if getattr(MonitoredItemValues, _MARK, False):
@@ -34,4 +85,169 @@ def keep_written_values() -> None:
         self.current_dvalue = cur_val
 
     MonitoredItemValues.set_current_datavalue = set_current_datavalue  # type: ignore[method-assign]
+    monitored_item_service.MonitoredItemData = _SlimMonitoredItem  # type: ignore[misc,assignment]
     setattr(MonitoredItemValues, _MARK, True)
+
+
+_SLIM_MARK = "_cnc_gateway_slim"
+
+
+class _NoCallbacks(dict[int, Any]):
+    """The one empty `datachange_callbacks` every attribute starts with; never filled (see below)."""
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError("the shared empty callbacks mapping is read-only")
+
+    __setitem__ = _refuse
+    setdefault = _refuse
+    update = _refuse
+
+
+NO_CALLBACKS: dict[int, Any] = _NoCallbacks()
+
+
+class SlimAttributeValue:
+    """asyncua's AttributeValue with slots, and no dict of its own until a client monitors it.
+
+    asyncua keeps one AttributeValue per attribute per node (twelve to fifteen a node),
+    each with an instance `__dict__` and an empty `datachange_callbacks` dict: about
+    220 bytes apiece, some 50 MB for the standard namespace and 10,000 variables,
+    the largest single item of the gateway's memory. Slotted, with every attribute
+    sharing one empty read-only mapping until `add_datachange_callback` (the only
+    place asyncua adds a callback) gives it a dict of its own, it is 64 bytes.
+    Everything asyncua reads or assigns (`value`, `value_callback`, `value_setter`,
+    `datachange_callbacks`) is there, under the same names.
+    """
+
+    __slots__ = ("datachange_callbacks", "value", "value_callback", "value_setter")
+
+    def __init__(self, value: Any) -> None:
+        self.value = value
+        self.value_callback: Any = None
+        self.value_setter: Any = None
+        self.datachange_callbacks: dict[int, Any] = NO_CALLBACKS
+
+    def __str__(self) -> str:
+        return f"AttributeValue({self.value_callback or self.value})"
+
+    __repr__ = __str__
+
+
+class SharedAttributeValue(SlimAttributeValue):
+    """A record that many nodes hold for one constant attribute (their DataType, ValueRank, ...).
+
+    Built by the OPC UA sink for its own nodes (gateway/sinks/opcua/bulk.py). asyncua
+    changes a record in place in four places (`write_attribute_value`,
+    `set_attribute_value_callback`, `set_attribute_value_setter`,
+    `add_datachange_callback`); `slim_attribute_values` makes each of them first give
+    the node a record of its own, so that what is done to one node is done to it only.
+    """
+
+    __slots__ = ()
+
+
+def _own(space: Any, nodeid: Any, attr: Any) -> None:
+    """Give the node its own record of `attr` if it shares one (copy on write)."""
+    node = space._nodes.get(nodeid)
+    held = node.attributes.get(attr) if node is not None else None
+    if type(held) is SharedAttributeValue:
+        node.attributes[attr] = SlimAttributeValue(held.value)
+
+
+def slim_attribute_values() -> None:
+    """Make asyncua build SlimAttributeValues from now on, and copy SharedAttributeValues on write
+    (once per process; before `Server.init`).
+
+    Process-wide, like `keep_written_values`: asyncua creates every AttributeValue in
+    one module (`asyncua.server.address_space`), by the name looked up at call time.
+    The wrappers add a call and a type check to asyncua's, nothing more; the one on the
+    hot path, `write_attribute_value`, skips even that for Value records (never shared),
+    and returns asyncua's own coroutine (no extra frame).
+    """
+    from asyncua import ua
+    from asyncua.server import address_space
+
+    space = address_space.AddressSpace
+    if getattr(space, _SLIM_MARK, False):
+        return
+    add_callback = space.add_datachange_callback
+    write = space.write_attribute_value
+    set_callback = space.set_attribute_value_callback
+    set_setter = space.set_attribute_value_setter
+    value_attribute = ua.AttributeIds.Value
+
+    def add_datachange_callback(self: Any, nodeid: Any, attr: Any, callback: Any) -> Any:
+        _own(self, nodeid, attr)
+        node = self._nodes.get(nodeid)
+        held = node.attributes.get(attr) if node is not None else None
+        if held is not None and held.datachange_callbacks is NO_CALLBACKS:
+            held.datachange_callbacks = {}
+        return add_callback(self, nodeid, attr, callback)
+
+    def write_attribute_value(self: Any, nodeid: Any, attr: Any, value: Any) -> Any:
+        if attr != value_attribute:
+            _own(self, nodeid, attr)
+        return write(self, nodeid, attr, value)
+
+    def set_attribute_value_callback(self: Any, nodeid: Any, attr: Any, callback: Any) -> Any:
+        _own(self, nodeid, attr)
+        return set_callback(self, nodeid, attr, callback)
+
+    def set_attribute_value_setter(self: Any, nodeid: Any, attr: Any, setter: Any) -> Any:
+        _own(self, nodeid, attr)
+        return set_setter(self, nodeid, attr, setter)
+
+    space.add_datachange_callback = add_datachange_callback  # type: ignore[method-assign]
+    space.write_attribute_value = write_attribute_value  # type: ignore[method-assign]
+    space.set_attribute_value_callback = set_attribute_value_callback  # type: ignore[method-assign]
+    space.set_attribute_value_setter = set_attribute_value_setter  # type: ignore[method-assign]
+    address_space.AttributeValue = SlimAttributeValue  # type: ignore[misc,assignment]
+    setattr(space, _SLIM_MARK, True)
+
+
+_FORGET_MARK = "_cnc_gateway_forgets_fill_code"
+_FILL_PACKAGE = "asyncua.server.standard_address_space"
+
+
+class _Fills:
+    running = 0  # standard-namespace loads in progress in this process
+
+
+def forget_standard_namespace_code() -> None:
+    """Drop the code that builds asyncua's standard namespace once it has run (install once per process).
+
+    The standard namespace is built by 25 generated modules of straight-line calls,
+    about 12 MB of code objects that stay imported for the life of the process and
+    never run again. After each `InternalServer.load_standard_address_space`, unless
+    another one is still running, the package is taken out of `sys.modules` and its
+    modules' dicts cleared, which frees the code at once (no cyclic collection
+    needed); the next server to start imports it again from the bytecode cache,
+    in a few hundredths of a second. The nodes it built are plain data and stay.
+    """
+    from asyncua.server.internal_server import InternalServer
+
+    if getattr(InternalServer, _FORGET_MARK, False):
+        return
+    load = InternalServer.load_standard_address_space
+
+    async def load_standard_address_space(self: Any, shelf_file: Any = None) -> None:
+        _Fills.running += 1
+        try:
+            await load(self, shelf_file)
+        finally:
+            _Fills.running -= 1
+            if _Fills.running == 0:
+                _drop_fill_code()
+
+    InternalServer.load_standard_address_space = load_standard_address_space  # type: ignore[method-assign]
+    setattr(InternalServer, _FORGET_MARK, True)
+
+
+def _drop_fill_code() -> None:
+    names = [name for name in sys.modules if name == _FILL_PACKAGE or name.startswith(_FILL_PACKAGE + ".")]
+    modules = [sys.modules.pop(name) for name in names]
+    parent = sys.modules.get(_FILL_PACKAGE.rpartition(".")[0])
+    if parent is not None and "standard_address_space" in vars(parent):
+        delattr(parent, "standard_address_space")
+    for module in modules:
+        vars(module).clear()  # functions and their module dicts refer to each other: break it now

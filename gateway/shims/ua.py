@@ -1,4 +1,4 @@
-"""asyncua's NodeId, StatusCode, DataValue and status errors, typed as asyncua takes them.
+"""asyncua's NodeId, StatusCode, DataValue, Variant and status errors, typed as asyncua takes them.
 
 asyncua annotates the fields of its data classes with its own subclasses of int, str and datetime
 (`ua.Int16`, `ua.UInt32`, `ua.String`, `ua.DateTime`, ...) and DataValue's Value as a Variant, yet it
@@ -44,6 +44,16 @@ class _DataValueType(Protocol):
     ) -> ua.DataValue: ...
 
 
+class _VariantType(Protocol):
+    def __call__(
+        self,
+        Value: object = None,
+        VariantType: ua.VariantType | None = None,  # None: asyncua guesses it from the value
+        Dimensions: list[int] | None = None,
+        is_array: bool | None = None,
+    ) -> ua.Variant: ...
+
+
 class _StatusErrorType(Protocol):
     def __call__(self, code: int, /) -> UaStatusCodeError: ...
 
@@ -51,6 +61,7 @@ class _StatusErrorType(Protocol):
 new_node_id = cast(_NodeIdType, ua.NodeId)
 new_status_code = cast(_StatusCodeType, ua.StatusCode)
 new_data_value = cast(_DataValueType, ua.DataValue)
+new_variant = cast(_VariantType, ua.Variant)
 #: UaStatusCodeError(code) gives the subclass asyncua keeps for that code (BadNodeIdUnknown, ...).
 new_status_error = cast(_StatusErrorType, UaStatusCodeError)
 

@@ -1,4 +1,4 @@
-"""asyncua's server made lighter on memory: nodes whose constant attributes are equal share them.
+"""asyncua's server made lighter on memory: nodes whose constant attributes are equal share their records.
 
 (Its other costly habit, a deep copy of every value per subscribed item, is dropped by
 gateway/shims/asyncua_server.py's `keep_written_values`, which the simulator uses too.)
@@ -10,9 +10,11 @@ from typing import Any
 
 from asyncua import ua
 
+from gateway.shims.asyncua_server import SharedAttributeValue, slim_attribute_values
+
 #: Attributes whose values are the same on thousands of nodes and are replaced, never changed in place,
 #: when anything sets them (AddressSpace.set_attribute_value assigns a new DataValue).
-_SHAREABLE = frozenset(
+SHAREABLE = frozenset(
     {
         ua.AttributeIds.NodeClass,
         ua.AttributeIds.Description,
@@ -37,37 +39,46 @@ _SHAREABLE = frozenset(
 
 
 class SharedAttributes:
-    """Makes nodes whose constant attributes are equal hold one DataValue for each, instead of one apiece.
+    """Makes nodes whose constant attributes are equal hold one record for each, instead of one apiece.
 
-    asyncua keeps a DataValue, a Variant and a StatusCode per attribute per node:
-    about 7.7 KB per variable, most of it the same dozen values (ValueRank -1,
-    WriteMask 0, DataType Double, ...) repeated 10,000 times. Attributes are
-    replaced, not changed in place, when set, so one shared DataValue is as good
-    as many equal ones. Run it on nodes as they are added (the standard namespace
-    after `init`, then each batch): what it frees is reused by the next batch, so
-    the process never grows to hold all the copies.
+    asyncua keeps a record (AttributeValue), a DataValue, a Variant and a StatusCode per
+    attribute per node: about 7.7 KB per variable, most of it the same dozen values
+    (ValueRank -1, WriteMask 0, DataType Double, ...) repeated over and over. Equal
+    records become one `SharedAttributeValue`, which asyncua copies for a node before it
+    changes one (`slim_attribute_values`, installed here if it was not yet). Run it on
+    the standard namespace after `init` (the sink's own nodes are built shared, bulk.py,
+    and go through here only when built by asyncua's AddNodes).
     """
 
     def __init__(self, server: Any) -> None:
+        slim_attribute_values()  # sharing records is only safe with copy-on-write
         self._nodes: dict[Any, Any] = server.iserver.aspace._nodes
-        self._canonical: dict[tuple[Any, ...], Any] = {}
+        self._canonical: dict[tuple[Any, ...], SharedAttributeValue] = {}
 
     def share(self, nodeids: Any = None) -> int:
-        """Share the constant attributes of these nodes (all if None); how many DataValues were dropped."""
+        """Share the constant attributes of these nodes (all if None); how many records were dropped."""
         nodes = self._nodes
         targets = list(nodes.values()) if nodeids is None else [nodes[n] for n in nodeids if n in nodes]
         canonical, dropped = self._canonical, 0
         for node in targets:
-            for attribute, held in node.attributes.items():
-                if attribute not in _SHAREABLE or held.value_callback is not None or held.value is None:
+            attributes = node.attributes
+            for attribute, held in attributes.items():
+                if (
+                    attribute not in SHAREABLE
+                    or held.value is None
+                    or held.value_callback is not None
+                    or held.value_setter is not None
+                    or held.datachange_callbacks
+                ):
                     continue
-                value = held.value
-                key = _key(attribute, value)
+                key = _key(attribute, held.value)
                 if key is None:
                     continue
-                shared = canonical.setdefault(key, value)
-                if shared is not value:
-                    held.value = shared
+                shared = canonical.get(key)
+                if shared is None:
+                    shared = canonical[key] = SharedAttributeValue(held.value)
+                if shared is not held:
+                    attributes[attribute] = shared  # an existing key: the dict does not change size
                     dropped += 1
         return dropped
 

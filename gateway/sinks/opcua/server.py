@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Self
 from urllib.parse import urlsplit
@@ -44,12 +45,17 @@ from gateway.errors import SinkError
 from gateway.model.context import WriteContext
 from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
-from gateway.model.sample import utcnow
+from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
-from gateway.shims.asyncua_server import keep_written_values
+from gateway.shims.asyncua_server import (
+    forget_standard_namespace_code,
+    keep_written_values,
+    slim_attribute_values,
+)
 from gateway.shims.ua import new_node_id, new_status_code
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
+from gateway.sinks.opcua.bulk import NodeWriter
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -196,14 +202,18 @@ def session_user_name(user: Any) -> str | None:
 
 
 class _Variable:
-    """What the sink caches per tree variable."""
+    """What the sink caches per tree variable: its node, id and type, the record asyncua keeps its Value in
+    (`held`), and, while no client monitors it, the sample last pushed and when (read through `held`)."""
 
-    __slots__ = ("kind", "node", "nodeid")
+    __slots__ = ("held", "kind", "node", "nodeid", "pushed_at", "sample")
 
-    def __init__(self, node: VariableNode, nodeid: ua.NodeId, kind: ValueKind) -> None:
+    def __init__(self, node: VariableNode, nodeid: ua.NodeId, kind: ValueKind, held: Any) -> None:
         self.node = node
         self.nodeid = nodeid
         self.kind = kind
+        self.held = held
+        self.sample: Sample | None = None
+        self.pushed_at: datetime | None = None
 
 
 class _GatewayAttributeService(AttributeService):
@@ -261,6 +271,9 @@ class OpcUaSink:
     """Mirrors the variable tree as an OPC UA server (implements gateway.sinks.base.Sink)."""
 
     name = "opcua"
+    #: Our nodes go straight into asyncua's address space (bulk.py); False: through asyncua's AddNodes,
+    #: as before (tests/integration/opcua/test_address_space_identity.py builds both and compares).
+    direct_nodes = True
 
     def __init__(
         self,
@@ -285,6 +298,7 @@ class OpcUaSink:
         self._methods: dict[ua.NodeId, tuple[Machine, Method]] = {}
         self._server: Server | None = None
         self._shared: SharedAttributes | None = None
+        self._writer: NodeWriter | None = None
         self._plan: AddressSpacePlan | None = None
         self._sub: Subscription[VariableNode] | None = None
         self._vars: dict[VariableNode, _Variable] = {}
@@ -317,11 +331,12 @@ class OpcUaSink:
 
     async def add_nodes(self, items: Sequence[ua.AddNodesItem]) -> list[ua.NodeId]:
         """Add nodes in batches through the internal session; raises SinkError if any is refused."""
+        writer = self._writer
         isession = self.server.iserver.isession
         added: list[ua.NodeId] = []
         for start in range(0, len(items), ADD_BATCH):
             chunk = list(items[start : start + ADD_BATCH])
-            results = await isession.add_nodes(chunk)
+            results = writer.add_nodes(chunk) if writer is not None else await isession.add_nodes(chunk)
             for item, result in zip(chunk, results, strict=True):
                 if not result.StatusCode.is_good():
                     raise SinkError(
@@ -329,7 +344,7 @@ class OpcUaSink:
                         f"{result.StatusCode.name}"
                     )
                 added.append(result.AddedNodeId)
-            if self._shared is not None:
+            if writer is None and self._shared is not None:
                 self._shared.share(added[-len(chunk) :])
             await asyncio.sleep(0)
         return added
@@ -420,11 +435,22 @@ class OpcUaSink:
         self._vars, self._by_id, self._owned = {}, {}, set()
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
         keep_written_values()  # no deep copy of every value per subscribed item (shims/asyncua_server.py)
+        slim_attribute_values()  # slotted attribute records, no empty dict apiece (before init: ns0 too)
+        forget_standard_namespace_code()  # the 12 MB of code that builds ns0, once it has run
         server = Server()
         server.name = self.config.name
         server.product_uri = "urn:cnc-gateway"
         server.manufacturer_name = "cnc-gateway"
-        await server.init()
+        self._writer = NodeWriter(server.iserver) if self.direct_nodes else None
+        service = server.iserver.node_mgt_service
+        if (
+            self._writer is not None
+        ):  # asyncua's generated code builds the standard namespace, the writer adds it
+            service.try_add_nodes = self._writer.try_add_nodes  # type: ignore[method-assign,assignment]
+        try:
+            await server.init()
+        finally:
+            vars(service).pop("try_add_nodes", None)
         self._shared = SharedAttributes(server)
         # The standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py).
         self._shared.share()
@@ -522,9 +548,11 @@ class OpcUaSink:
 
     async def _build(self) -> None:
         plan = self._require_plan()
-        plan.add_machines(self.tree.machines.values())
-        methods = plan_methods(plan, self.tree.machines.values())
-        await self.add_nodes(plan.take())
+        methods: list[tuple[ua.NodeId, Method]] = []
+        for machine in self.tree.machines.values():  # a machine at a time: its items never all exist at once
+            plan.add_machines([machine])
+            methods += plan_methods(plan, [machine])
+            await self.add_nodes(plan.take())
         self._register(plan)
         owners = {id(m): machine for machine in self.tree.machines.values() for m in machine.methods.values()}
         for nodeid, method in methods:
@@ -536,9 +564,11 @@ class OpcUaSink:
         await self._push([(node, node.sample) for node in self._vars])
 
     def _register(self, plan: AddressSpacePlan) -> None:
+        records = self.server.iserver.aspace._nodes
         for node, nodeid in plan.variables.items():
             if node not in self._vars:
-                var = _Variable(node, nodeid, value_kind(node.type))
+                held = records[nodeid].attributes[ua.AttributeIds.Value]
+                var = _Variable(node, nodeid, value_kind(node.type), held)
                 self._vars[node] = var
                 self._by_id[nodeid] = var
         self._owned |= plan.owned
@@ -561,9 +591,20 @@ class OpcUaSink:
     # --- values ------------------------------------------------------------------------------
 
     async def _push(self, batch: list[Change[VariableNode]]) -> None:
-        write = self.server.write_attribute_value
-        variables = self._vars
+        """Bring the address space up to `batch`.
+
+        A variable no client monitors (asyncua keeps no data-change callback on its
+        Value) only records the sample and the time: asyncua then answers a Read, or
+        the first value of a monitored item created later, through `_read_value`,
+        which builds the DataValue on demand. So the DataValue, its checks and
+        asyncua's write path are paid only where a subscriber will see the change.
+        """
+        # asyncua's address space itself: Server's and InternalServer's write_attribute_value only pass it on.
+        write = self.server.iserver.aspace.write_attribute_value
+        value_attribute = ua.AttributeIds.Value
         mismatched = self._mismatched
+        variables = self._vars
+        read_value = self._read_value
         now = utcnow()
         count = 0
         for node, sample in batch:
@@ -572,32 +613,62 @@ class OpcUaSink:
                 var = await self._place(node)
                 if var is None:
                     continue
-            try:
-                dv = var.kind.datavalue(sample, now)
-            except ValueMismatch as exc:
-                if node not in mismatched:
-                    mismatched.add(node)
-                    log.warning(
-                        "%s holds %r, which OPC UA cannot carry as %s: %s",
-                        node.full_path,
-                        sample.value,
-                        node.type,
-                        exc,
-                    )
-                dv = var.kind.mismatch(sample, now)
-            else:
-                if mismatched:
-                    mismatched.discard(node)
-            try:
-                await write(var.nodeid, dv)
-            except Exception:  # not expected; one variable must not stop the others
-                if node not in self._failing:
-                    self._failing.add(node)
-                    log.exception("cannot update %s in the OPC UA address space", node.full_path)
             count += 1
             if count % YIELD_EVERY == 0:
                 await asyncio.sleep(0)
                 now = utcnow()
+            held = var.held
+            if not held.datachange_callbacks and held.value_setter is None:
+                var.sample, var.pushed_at = sample, now
+                if held.value_callback is not read_value:
+                    held.value = None  # what asyncua's own set_attribute_value_callback does
+                    held.value_callback = read_value
+                continue
+            if var.sample is not None:
+                var.sample = var.pushed_at = None
+            if mismatched:
+                dv = self._datavalue(var, sample, now)
+            else:
+                try:
+                    dv = var.kind.datavalue(sample, now)
+                except ValueMismatch:
+                    dv = self._datavalue(var, sample, now)  # says so once
+            try:
+                await write(
+                    var.nodeid, value_attribute, dv
+                )  # asyncua's path: monitored items compare and queue
+            except Exception:  # not expected; one variable must not stop the others
+                if node not in self._failing:
+                    self._failing.add(node)
+                    log.exception("cannot update %s in the OPC UA address space", node.full_path)
+
+    def _datavalue(self, var: _Variable, sample: Sample, now: datetime) -> ua.DataValue:
+        """The DataValue clients see for a sample (BadTypeMismatch, logged once, if it does not fit)."""
+        node = var.node
+        try:
+            dv = var.kind.datavalue(sample, now)
+        except ValueMismatch as exc:
+            if node not in self._mismatched:
+                self._mismatched.add(node)
+                log.warning(
+                    "%s holds %r, which OPC UA cannot carry as %s: %s",
+                    node.full_path,
+                    sample.value,
+                    node.type,
+                    exc,
+                )
+            return var.kind.mismatch(sample, now)
+        if self._mismatched:
+            self._mismatched.discard(node)
+        return dv
+
+    def _read_value(self, nodeid: ua.NodeId, attribute: Any) -> ua.DataValue:
+        """asyncua's value callback for a variable nobody monitors: the last sample pushed, as a DataValue."""
+        var = self._by_id[nodeid]
+        sample, pushed_at = var.sample, var.pushed_at
+        if sample is None or pushed_at is None:  # a monitored item was just created: not expected here
+            sample, pushed_at = var.node.sample, utcnow()
+        return self._datavalue(var, sample, pushed_at)
 
     # --- methods -----------------------------------------------------------------------------
 

@@ -59,6 +59,8 @@ variables:
   - {path: Axes/X/Position, source: "ns=3;s=x", type: Float, unit: mm}
   - {path: Ram/Force, source: "ns=3;s=f", type: Double, unit: kN}
   - {path: Ram/Setpoint, source: "ns=3;s=fs", type: Double, unit: kN, access: readwrite}
+  - {path: Ram/Stroke, source: "ns=3;s=st", type: Double}
+  - {path: Ram/Count, source: "ns=3;s=c", type: UInt32}
 """
 
 TS = datetime(2026, 11, 21, 12, 0, tzinfo=UTC)
@@ -210,6 +212,38 @@ async def test_equal_constant_attributes_are_one_object_and_stay_apart_when_set(
         x[ua.AttributeIds.MinimumSamplingInterval].value = shared
 
 
+async def test_a_shared_constant_record_is_copied_before_one_node_changes(env: Env) -> None:
+    """The constant attributes of equal variables are one record (bulk.py); a client monitoring one node's
+    AccessLevel, and a change to another's, each touch their own node only (shims/asyncua_server.py)."""
+    nodes = env.sink.server.iserver.aspace._nodes
+    force = nodes[ua.NodeId("press/Ram/Force", 2)].attributes
+    setpoint_id = ua.NodeId("press/Ram/Setpoint", 2)
+    position = nodes[ua.NodeId("press/Axes/X/Position", 2)].attributes
+    assert force[ua.AttributeIds.Historizing] is position[ua.AttributeIds.Historizing]  # one shared record
+    changes = Changes()
+    sub = await env.client.create_subscription(20, changes)
+    try:
+        force_node = await env.var("press", "Ram/Force")
+        await sub.subscribe_data_change(force_node, attr=ua.AttributeIds.Historizing)
+        await wait_until(lambda: changes.latest(force_node.nodeid), message="the first Historizing")
+        assert force[ua.AttributeIds.Historizing] is not position[ua.AttributeIds.Historizing]  # its own now
+        before = nodes[setpoint_id].attributes[ua.AttributeIds.Historizing]
+        await env.sink.server.write_attribute_value(
+            ua.NodeId("press/Axes/X/Position", 2),
+            ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)),
+            ua.AttributeIds.Historizing,
+        )
+        assert nodes[setpoint_id].attributes[ua.AttributeIds.Historizing] is before  # untouched, still shared
+        read = await env.client.read_attributes(
+            [await env.var("press", "Axes/X/Position"), force_node, await env.var("press", "Ram/Setpoint")],
+            ua.AttributeIds.Historizing,
+        )
+        assert [dv.Value.Value for dv in read] == [True, False, False]
+        assert [dv.Value.Value for dv in changes.seen[force_node.nodeid]] == [False]  # not told of the other
+    finally:
+        await sub.delete()
+
+
 async def test_writable_variable_and_unknown_unit(env: Env) -> None:
     target = await env.var("laser", "Axes/X/Target")
     read_write = ua.AccessLevel.CurrentRead.mask | ua.AccessLevel.CurrentWrite.mask
@@ -356,6 +390,86 @@ async def test_a_value_that_does_not_fit_is_bad_type_mismatch_and_the_loop_goes_
         lambda: (d := env.changes.latest(nodeid)) and d.StatusCode.is_good() and d, message="recovered"
     )
     assert dv.Value.Value == 42 and dv.Value.VariantType == ua.VariantType.UInt32
+
+
+class WriteCounter:
+    """Counts asyncua's address-space writes per node id: the sink's update path for monitored nodes."""
+
+    def __init__(self, sink: OpcUaSink) -> None:
+        self.aspace = sink.server.iserver.aspace
+        self.original = self.aspace.write_attribute_value
+        self.calls: dict[ua.NodeId, int] = defaultdict(int)
+
+    async def __call__(self, nodeid: ua.NodeId, *args: Any, **kwargs: Any) -> Any:
+        self.calls[nodeid] += 1
+        return await self.original(nodeid, *args, **kwargs)
+
+    def __enter__(self) -> WriteCounter:
+        self.aspace.write_attribute_value = self
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        del self.aspace.write_attribute_value  # the instance's own: the class's again
+
+
+async def test_a_variable_nobody_monitors_is_not_written_to_asyncua_and_reads_its_latest_value(
+    env: Env,
+) -> None:
+    node = env.press.nodes["Ram/Stroke"]
+    nodeid = env.sink.node_id(node)
+    stroke = await env.var("press", "Ram/Stroke")
+    with WriteCounter(env.sink) as writes:
+        for i in range(1, 4):
+            env.press.ingest(node, float(i), TS + timedelta(seconds=i))
+        assert await wait_until(lambda: _read_value(stroke), message="latest stroke") == 3.0
+        dv = await stroke.read_data_value()
+        assert dv.SourceTimestamp == TS + timedelta(seconds=3)
+        assert dv.ServerTimestamp is not None
+        assert dv.Value.VariantType == ua.VariantType.Double
+        env.press.ingest(node, None, TS + timedelta(seconds=4), "BadNotConnected", "unplugged")
+        dv = await wait_until(
+            lambda: _read_bad(stroke, "BadNotConnected"), message="a bad status, read without a subscriber"
+        )
+        assert dv.Value.Value is None and dv.SourceTimestamp == TS + timedelta(seconds=4)
+    assert writes.calls[nodeid] == 0  # no DataValue written, no asyncua write path: nobody would see it
+    held = env.sink.server.iserver.aspace._nodes[nodeid].attributes[ua.AttributeIds.Value]
+    assert held.value is None and held.value_callback is not None  # asyncua asks the sink on a Read
+
+
+async def test_a_client_that_subscribes_later_gets_the_current_value_at_once(env: Env) -> None:
+    node = env.press.nodes["Ram/Count"]
+    nodeid = env.sink.node_id(node)
+    count = await env.var("press", "Ram/Count")
+    env.press.ingest(node, "not a number", TS)  # a misbehaving driver, while nobody watches
+    await wait_until(
+        lambda: _read_bad(count, "BadTypeMismatch"), message="mismatch, read without a subscriber"
+    )
+    env.press.ingest(node, 7, TS + timedelta(seconds=1))
+    assert await wait_until(lambda: _read_value(count), message="count 7") == 7
+    changes = Changes()
+    sub = await env.client.create_subscription(20, changes)
+    try:
+        with WriteCounter(env.sink) as writes:
+            handle = await sub.subscribe_data_change(count)
+            first = await wait_until(lambda: changes.latest(nodeid), message="the first notification")
+            assert first.Value.Value == 7 and first.SourceTimestamp == TS + timedelta(
+                seconds=1
+            )  # no change needed
+            env.press.ingest(node, 8, TS + timedelta(seconds=2))
+            await wait_until(lambda: (d := changes.latest(nodeid)) and d.Value.Value == 8, message="count 8")
+            assert writes.calls[nodeid] == 1  # monitored: asyncua's own update path
+            await sub.unsubscribe(handle)
+            env.press.ingest(node, 9, TS + timedelta(seconds=3))
+            assert await wait_until(lambda: _read_value(count), message="count 9") == 9
+            assert writes.calls[nodeid] == 1  # nobody monitors it again
+        assert [dv.Value.Value for dv in changes.seen[nodeid]] == [7, 8]
+    finally:
+        await sub.delete()
+
+
+async def _read_bad(node: Node, status: str) -> ua.DataValue | None:
+    dv = await node.read_data_value(raise_on_bad_status=False)
+    return dv if dv.StatusCode == code(status) else None
 
 
 async def test_status_variables_follow_the_machine(env: Env) -> None:

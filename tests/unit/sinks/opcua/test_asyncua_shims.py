@@ -1,0 +1,61 @@
+"""The process-wide asyncua adjustments of gateway/shims/asyncua_server.py, on real asyncua servers."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+from asyncua import Server, ua
+from asyncua.server import address_space
+
+from gateway.shims.asyncua_server import (
+    NO_CALLBACKS,
+    SlimAttributeValue,
+    forget_standard_namespace_code,
+    slim_attribute_values,
+)
+
+pytestmark = pytest.mark.asyncio
+
+FILL = "asyncua.server.standard_address_space"
+
+
+async def test_attribute_records_are_slim_until_someone_monitors_them() -> None:
+    slim_attribute_values()
+    server = Server()
+    await server.init()
+    aspace = server.iserver.aspace
+    server_state = ua.NodeId(ua.ObjectIds.Server_ServerStatus_State)
+    held = aspace._nodes[server_state].attributes[ua.AttributeIds.Value]
+    assert type(held) is SlimAttributeValue and not hasattr(held, "__dict__")
+    assert held.datachange_callbacks is NO_CALLBACKS
+    with pytest.raises(TypeError):
+        NO_CALLBACKS[1] = print  # shared by every record: never filled
+
+    seen: list[object] = []
+
+    async def callback(handle: int, value: ua.DataValue) -> None:
+        seen.append(value.Value.Value)
+
+    status, handle = aspace.add_datachange_callback(server_state, ua.AttributeIds.Value, callback)
+    assert status.is_good()
+    assert held.datachange_callbacks is not NO_CALLBACKS and handle in held.datachange_callbacks
+    await aspace.write_attribute_value(
+        server_state, ua.AttributeIds.Value, ua.DataValue(ua.Variant(1, ua.VariantType.Int32))
+    )
+    assert seen == [1]
+    aspace.delete_datachange_callback(handle)
+    assert not held.datachange_callbacks and not NO_CALLBACKS
+
+
+async def test_the_code_that_builds_the_standard_namespace_goes_and_comes_back() -> None:
+    forget_standard_namespace_code()
+    first = Server()
+    await first.init()
+    assert not [name for name in sys.modules if name.startswith(FILL)]
+    second = Server()  # imports it again, and builds the same namespace
+    await second.init()
+    assert not [name for name in sys.modules if name.startswith(FILL)]
+    ids = set(first.iserver.aspace.keys())
+    assert ids == set(second.iserver.aspace.keys()) and len(ids) > 5000
+    assert address_space.AttributeValue is not None
