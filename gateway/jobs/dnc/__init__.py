@@ -1,1 +1,1 @@
-"""Serial DNC in the gateway: the transfer log, the idle line's listener (punches, remote requests)."""
+"""Serial DNC for jobs: one owner per serial line (send, drip-feed control, idle listening)."""
