@@ -16,6 +16,7 @@ from pydantic import ByteSize, Field, SecretStr, field_validator, model_validato
 
 from gateway.auth.passwords import parse_hash
 from gateway.config.base import Backoff, Strict
+from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -158,6 +159,10 @@ class JobsConfig(Strict):
         description="After delivery, compare the size (SIZE or a listing), or download it back and hash",
     )
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
+    punch: PunchSettings | None = Field(
+        default=None,
+        description="Serial lines: store programs the operator punches, answer remote requests",
+    )
     mqtt_retained_jobs: int = Field(
         default=100, ge=0, le=100_000,
         description="Ended jobs (DELIVERED, REJECTED, FAILED, CANCELLED) whose MQTT jobs/<id> record "
