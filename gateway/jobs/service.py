@@ -30,7 +30,7 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
-from gateway.config.jobs import JobsConfig
+from gateway.config.jobs import ControllerFtp, JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import (
     ConfigError,
@@ -117,7 +117,8 @@ class JobService:
         for name, jobs in self.machines.items():
             machine = tree.machines[name]
             if jobs.auto is not None:
-                self.autostarters[name] = AutoStarter(machine, jobs.auto, jobs.controller.folder)
+                folder = jobs.controller.folder if isinstance(jobs.controller, ControllerFtp) else ""
+                self.autostarters[name] = AutoStarter(machine, jobs.auto, folder)
             self.workers[name] = DeliveryWorker(
                 name,
                 jobs,

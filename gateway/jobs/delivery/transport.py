@@ -45,6 +45,8 @@ class Progress:
     sent: int  # bytes the controller has taken so far
     block: int | None = None  # the block (line) the controller is executing, when the transport knows it
     lead: float | None = None  # seconds of program the controller holds ahead of the block it executes
+    remaining: float | None = None  # seconds of program left to run from that block (drip-feed)
+    held: str = ""  # why nothing goes out now (drip-feed): "DC3", "waiting for DC1", "paused", or ""
 
 
 #: Called by a transport as the program goes out; cheap, never blocks, never raises.

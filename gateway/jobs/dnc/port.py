@@ -1,0 +1,143 @@
+"""The gateway's one adapter for pyserial: open a serial line by device path or URL, read, write, close.
+
+pyserial serves all three places a DNC line can be: a device path (`/dev/ttyUSB0`,
+`COM3`), `rfc2217://host:port` and `socket://host:port`, through `serial_for_url`.
+Its calls block, and it is used from one thread per line (line.py): the RFC 2217
+client runs its own reader thread and its ports have no file descriptor an event
+loop could watch, so an asyncio wrapper (pyserial-asyncio) would serve device
+paths only. A thread per line is cheap beside a line's pace (at most a few
+thousand characters a second) and lets the sender react to a DC3 between two
+small writes without waiting for the event loop.
+
+Every pyserial and OS error becomes a `DeliveryError` here, worded for the
+operator: "device server 10.0.0.9:4001 unreachable (connection refused)",
+"the line dropped (socket disconnected)", "DSR is off".
+"""
+
+from __future__ import annotations
+
+import serial
+
+from gateway.codecs.dnc import LineSettings
+from gateway.config.jobs import ControllerSerial
+from gateway.errors import DeliveryError
+
+_PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
+_LETTER = {"none": "N", "even": "E", "odd": "O"}
+
+
+class LineLost(DeliveryError):
+    """The line went away during a transfer (dropped connection, device gone, DSR off)."""
+
+
+def line_settings(settings: ControllerSerial) -> LineSettings:
+    """The codec's view of a mapping's serial section."""
+    return LineSettings(
+        baud=settings.baud,
+        data_bits=settings.bytesize,
+        parity=_LETTER[settings.parity],  # type: ignore[arg-type]  # N/E/O: the codec's Parity literal
+        stop_bits=settings.stopbits,
+        handshake=settings.handshake,
+        eob=settings.eob,
+        leader=settings.leader,
+        markers=settings.percent,
+        chunk_size=settings.chunk_size,
+        software_parity=settings.soft_parity,
+    )
+
+
+def describe(where: str) -> str:
+    """Where a line is, for messages: `device server 10.0.0.9:4001`, `/dev/ttyUSB0`."""
+    if where.startswith(("socket://", "rfc2217://")):
+        return f"device server {where.split('://', 1)[1].rstrip('/')}"
+    return where
+
+
+class SerialPort:
+    """One open serial line. Blocking; used from one thread at a time."""
+
+    def __init__(self, settings: ControllerSerial) -> None:
+        self.settings = settings
+        self.where = settings.where
+        self._port: serial.SerialBase | None = None
+        self._dsr = settings.dsr and "://" not in settings.where
+
+    @property
+    def is_open(self) -> bool:
+        return self._port is not None
+
+    def open(self) -> None:
+        """Open the line. Raises DeliveryError (not permanent: a device server may come back)."""
+        s = self.settings
+        soft = s.soft_parity
+        url = s.where
+        if url.startswith("socket://"):
+            url = f"{url.rstrip('/')}?timeout={s.connect_timeout:g}"
+        try:
+            port = serial.serial_for_url(
+                url,
+                baudrate=s.baud,
+                bytesize=serial.EIGHTBITS if soft else s.bytesize,
+                parity=serial.PARITY_NONE if soft else _PARITY[s.parity],
+                stopbits=s.stopbits,
+                rtscts=s.handshake == "rtscts",
+                xonxoff=False,  # the sender does XON/XOFF itself: it must see DC1/DC3 and count them
+                timeout=0,
+                write_timeout=None if s.where.startswith("rfc2217://") else s.connect_timeout,
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
+        self._port = port
+
+    def close(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError):
+                pass  # closing a line that is already gone
+
+    def _open_port(self) -> serial.SerialBase:
+        if self._port is None:
+            raise LineLost("the line is not open")
+        return self._port
+
+    def read(self, size: int = 4096) -> bytes:
+        """What the controller sent, without waiting (b"" when nothing). Raises LineLost."""
+        port = self._open_port()
+        try:
+            data: bytes = port.read(size)
+            if self._dsr and not port.dsr:
+                raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
+        except (serial.SerialException, OSError) as exc:
+            raise LineLost(f"the line dropped ({_why(exc)})") from None
+        return data
+
+    def write(self, data: bytes) -> int:
+        """Hand bytes to the port; how many it took. Raises LineLost."""
+        port = self._open_port()
+        try:
+            written = port.write(data)
+        except serial.SerialTimeoutException:
+            raise LineLost("the port took nothing for too long (a device server's connection stalled)") from None
+        except (serial.SerialException, OSError) as exc:
+            raise LineLost(f"the line dropped ({_why(exc)})") from None
+        return len(data) if written is None else int(written)
+
+    def flush(self) -> None:
+        """Wait until the port has passed on what it was given (device paths; a no-op on sockets)."""
+        port = self._open_port()
+        try:
+            port.flush()
+        except (serial.SerialException, OSError) as exc:
+            raise LineLost(f"the line dropped ({_why(exc)})") from None
+
+
+def _why(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror.lower()
+    text = str(exc).strip()
+    # pyserial wraps OS errors as "could not open port …: [Errno 111] Connection refused"
+    if "] " in text:
+        text = text.rsplit("] ", 1)[1]
+    return text.lower() or type(exc).__name__
