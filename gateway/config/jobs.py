@@ -271,6 +271,11 @@ class JobsConfig(Strict):
         "stays retained; older ones are cleared from the broker. 0: cleared as soon as they end",
     )  # fmt: skip
 
+    @model_validator(mode="after")
+    def _punch_needs_a_line(self) -> JobsConfig:
+        if self.punch is not None and not isinstance(self.controller, ControllerSerial):
+            raise ValueError("punch: needs a serial controller (jobs.controller type: serial)")
+        return self
 
     @model_validator(mode="after")
     def _auto_fits(self) -> JobsConfig:

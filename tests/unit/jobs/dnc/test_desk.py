@@ -209,3 +209,18 @@ def test_safe_names_never_leave_the_folder() -> None:
     assert safe_name(None, "_N_PART_MPF") == "N_PART_MPF"
     assert safe_name(None, "/..") == "punch"
     assert safe_name(7, None) == "O0007"
+
+
+def test_programs_received_lists_the_punches(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from gateway.cli.main import main
+
+    desk, _, _ = make_desk(tmp_path)
+    desk.feed(PUNCH)
+    asyncio.run(desk.drain())
+    assert main(["programs", "received", "--state-dir", str(tmp_path)]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert "fanuc-1" in line and "O4711-BRACKET.nc" in line and f"{len(STORED)} B" in line
+    assert main(["programs", "received", "fanuc-1", "--state-dir", str(tmp_path), "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert Path(record["path"]).read_bytes() == STORED
+    assert main(["programs", "received", "../etc", "--state-dir", str(tmp_path)]) == 2
