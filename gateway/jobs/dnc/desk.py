@@ -196,7 +196,12 @@ class PunchDesk:
                 request = parse_request(event.text, number=requests.number, key=requests.key)
                 if request is not None:
                     return self._request(request, requests, event, started)
-            self._punched(event, started)
+            if not event.text.strip(b" \t\r\n\x00"):
+                self._refuse(
+                    framed(event), "punch refused: an empty program (nothing between the % markers)", started
+                )
+            else:
+                self._punched(event, started)
         elif isinstance(event, Unterminated):
             started, self._started = self._started or utcnow(), None
             self._refuse(event.text, f"punch refused: {why or 'no closing %'}", started)
