@@ -36,6 +36,7 @@ class Program:
     size: int  # bytes in `path`
     sha256: str  # hex digest of `path`
     number: str | None = None  # the program name the validator found in it (an O-number), if any
+    user: str = ""  # who submitted it (for a transport's own records: the DNC transfer log)
 
 
 @dataclass(frozen=True, slots=True)

@@ -4,7 +4,7 @@
   state directory with its time, size and SHA-256 (`received.py`), optionally
   validated with the machine's rules and filed as a backup, shown in the
   machine's `Jobs/Dnc/...` variables and as a `dnc/received` event (MQTT), and
-  recorded in the transfer log (direction receive).
+  recorded in the transfer log (direction receive; the line records the answer it sends).
 - **A remote request** (`O9999 (PRG=O4711)`) is answered with the named program
   from the configured folder: at once, returned to the line owner which sends it
   as a load (`send: load`), or submitted as a job (`send: queue`), which the
@@ -323,7 +323,6 @@ class PunchDesk:
                 (utcnow() - started).total_seconds(),
             )
         )
-        sent = answer.program if answer.program is not None else b""
         outcome: Outcome = "ok" if answer.status == "Good" else "refused"
         detail = f"request for {name}: " + (
             answer.reason or ("queued as a job" if answer.program is None else f"answered with {answer.file}")
@@ -340,17 +339,6 @@ class PunchDesk:
         )
         if answer.program is None and answer.status == "Good" and self.submit is not None:
             self._queue_submit(answer, requests, name)
-        elif answer.program is not None and answer.status == "Good":
-            self._log(
-                "send",
-                answer.file,
-                len(sent),
-                hashlib.sha256(sent).hexdigest(),
-                started,
-                "ok",
-                "answer to a remote request, handed to the line (load)",
-                user=requests.user,
-            )
         return answer.program
 
     def answer(self, request: RemoteRequest | BadRequest, requests: RemoteRequests) -> Answer:

@@ -71,8 +71,6 @@ class SerialPort:
         s = self.settings
         soft = s.soft_parity
         url = s.where
-        if url.startswith("socket://"):
-            url = f"{url.rstrip('/')}?timeout={s.connect_timeout:g}"
         try:
             port = serial.serial_for_url(
                 url,

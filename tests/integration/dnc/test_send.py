@@ -1,0 +1,47 @@
+"""The serial delivery transport against the simulator's DNC face, with real pyserial (socket://, a pty)."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+from tests.integration.dnc.rig import (
+    Mode,
+    Progresses,
+    face,
+    load_program,
+    program_file,
+    simulator,
+    transport,
+    drip_program,
+)
+from tests.waiting import wait_until
+
+
+async def test_load_over_socket_stores_the_program_byte_for_byte(tmp_path: Path) -> None:
+    data = load_program()
+    async with simulator(tmp_path) as sim:
+        line = transport(face(sim).socket_url or "", tmp_path)
+        progress = Progresses()
+        where = await line.deliver(program_file(tmp_path, data), progress)
+        assert "loaded" in where
+        await wait_until(lambda: sim.programs.exists("O4711"), message="O4711 in the program store")
+        assert sim.programs.read("O4711").encode() == data
+        assert progress and progress[-1].sent == progress[-1].sent
+        stats = face(sim).stats()
+        assert stats["parity_errors"] == 0 and stats["overflows"] == 0 and not sim.machine.alarms
+
+
+async def test_drip_larger_than_the_buffer_honours_dc3(tmp_path: Path) -> None:
+    data = drip_program(400)
+    async with simulator(tmp_path, mode=Mode.DRIP, buffer_size=256) as sim:
+        line = transport(face(sim).socket_url or "", tmp_path, mode="drip")
+        progress = Progresses()
+        await line.deliver(program_file(tmp_path, data), progress)
+        stats = face(sim).stats()
+        assert len(data) > 20 * 256
+        assert stats["dc3_sent"] > 0 and stats["overflows"] == 0
+        assert stats["after_dc3_max"] <= 16
+        assert any(p.block for p in progress) and any(p.lead for p in progress)
+        await wait_until(lambda: sim.machine.state.name == "IDLE", timeout=30, message="drip ran to M30")
+        assert not sim.machine.alarms
