@@ -204,8 +204,9 @@ def run_transfer(
             held_since = None
             tokens = min(float(SLICE), tokens + (now - last) * rate)
             last = now
-            if tokens < 1.0:
-                time.sleep((1.0 - tokens) / rate)
+            want = min(float(SLICE), float(sender.remaining))
+            if tokens < want:  # sleep for a whole slice: a sleep costs more than a character at 115,200 baud
+                time.sleep((want - tokens) / rate)
                 continue
             chunk = sender.next_chunk(int(tokens))
             written = port.write(chunk)
