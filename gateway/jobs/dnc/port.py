@@ -22,6 +22,8 @@ from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
 
+WAIT = 0.005  # s a read waits for a first byte (wait()); reads while sending never wait
+
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
 _LETTER = {"none": "N", "even": "E", "odd": "O"}
 
@@ -80,7 +82,7 @@ class SerialPort:
                 stopbits=s.stopbits,
                 rtscts=s.handshake == "rtscts",
                 xonxoff=False,  # the sender does XON/XOFF itself: it must see DC1/DC3 and count them
-                timeout=0,
+                timeout=WAIT,
                 write_timeout=None if s.where.startswith("rfc2217://") else s.connect_timeout,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
@@ -100,11 +102,27 @@ class SerialPort:
             raise LineLost("the line is not open")
         return self._port
 
-    def read(self, size: int = 4096) -> bytes:
+    def read(self) -> bytes:
         """What the controller sent, without waiting (b"" when nothing). Raises LineLost."""
         port = self._open_port()
         try:
-            data: bytes = port.read(size)
+            waiting = port.in_waiting
+            data: bytes = port.read(waiting) if waiting else b""
+            if self._dsr and not port.dsr:
+                raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
+        except (serial.SerialException, OSError) as exc:
+            raise LineLost(f"the line dropped ({_why(exc)})") from None
+        return data
+
+    def wait(self) -> bytes:
+        """What the controller sends within a few milliseconds (returns at its first byte). Raises LineLost."""
+        port = self._open_port()
+        try:
+            data: bytes = port.read(1)
+            if data:
+                waiting = port.in_waiting
+                if waiting:
+                    data += port.read(waiting)
             if self._dsr and not port.dsr:
                 raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
         except (serial.SerialException, OSError) as exc:

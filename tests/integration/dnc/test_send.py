@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
+from gateway.jobs.dnc.transfer import SLICE
 from tests.integration.dnc.rig import (
     Mode,
     Progresses,
@@ -33,15 +34,16 @@ async def test_load_over_socket_stores_the_program_byte_for_byte(tmp_path: Path)
 
 
 async def test_drip_larger_than_the_buffer_honours_dc3(tmp_path: Path) -> None:
-    data = drip_program(400)
-    async with simulator(tmp_path, mode=Mode.DRIP, buffer_size=256) as sim:
+    data = drip_program(400, feed=300)
+    async with simulator(tmp_path, mode=Mode.DRIP) as sim:
         line = transport(face(sim).socket_url or "", tmp_path, mode="drip")
         progress = Progresses()
         await line.deliver(program_file(tmp_path, data), progress)
         stats = face(sim).stats()
-        assert len(data) > 20 * 256
-        assert stats["dc3_sent"] > 0 and stats["overflows"] == 0
-        assert stats["after_dc3_max"] <= 16
+        assert len(data) > 5 * 1024  # five times the controller's buffer
+        assert stats["dc3_sent"] > 0 and stats["overflows"] == 0 and stats["rx_chars"] >= len(data)
+        assert line.last is not None and line.last.pauses > 0
+        assert line.last.after_dc3_max <= SLICE  # what the gateway wrote after it had read a DC3
         assert any(p.block for p in progress) and any(p.lead for p in progress)
         await wait_until(lambda: sim.machine.state.name == "IDLE", timeout=30, message="drip ran to M30")
         assert not sim.machine.alarms

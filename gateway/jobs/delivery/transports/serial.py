@@ -95,6 +95,7 @@ class SerialTransport:
             None if state_dir is None else state_dir / "jobs" / "dnc" / f"{machine or 'line'}.json"
         )
         self.current: Drip | None = None
+        self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
         self._lock = asyncio.Lock()
         self._thread = ThreadPoolExecutor(1, thread_name_prefix=f"dnc-{machine or 'line'}")
 
@@ -176,11 +177,12 @@ class SerialTransport:
         if error is not None:
             raise error
         assert outcome is not None
+        self.last = outcome
         mode = "drip-fed" if drip else "loaded"
         return (
             f"{describe(self.where)} ({mode}{f' from line {start}' if start is not None else ''}: "
             f"{outcome.sent} bytes, sha256 {outcome.sha256[:12]}…; program sha256 {program.sha256[:12]}… "
-            f"checked)"
+            f"checked; {outcome.pauses} DC3, at most {outcome.after_dc3_max} characters after one)"
         )
 
     async def _send(
