@@ -110,7 +110,9 @@ class SerialTransport:
         """Stop the line's thread (after the last transfer; the gateway is stopping)."""
         if self.current is not None:
             self.current.control.abort("the gateway is stopping")
-        self._thread.shutdown(wait=False, cancel_futures=True)
+        # After the transfer in hand has seen the abort (within a slice), the port closes, in that thread.
+        self._thread.submit(self.port.close)
+        self._thread.shutdown(wait=False)
 
     # --- control (the Commands methods, the CLI through the queue) --------------------------------
 
