@@ -28,6 +28,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "controller_restarts": (3, 30),
     "mtconnect_restarts": (3, 30),  # per mode: an SHDR adapter, an upstream agent
     "gateway_kills": (5, 50),
+    "dnc_cuts": (3, 30),  # device-server connections cut mid-drip
     "slow_consumers": (10_000, 150_000),  # changes that stream past the stalled consumers
 }
 
