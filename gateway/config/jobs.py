@@ -107,9 +107,7 @@ class ControllerSerial(Strict):
     eob: Literal["lf", "crlf"] = Field(default="lf", description="End of block the controller expects")
     leader: int = Field(default=20, ge=0, le=10_000, description="NULs sent before the first %")
     percent: bool = Field(default=True, description="Frame the program with % markers")
-    chunk_size: int = Field(
-        default=200, ge=1, le=65_536, description="Most bytes handed to the port at once"
-    )
+    chunk_size: int = Field(default=200, ge=1, le=65_536, description="Most bytes handed to the port at once")
     software_parity: bool | None = Field(
         default=None,
         description="Send a 7-bit line's parity bit as bit 7 of 8-bit bytes (a transparent raw TCP port, "
@@ -266,12 +264,11 @@ class JobsConfig(Strict):
         "stays retained; older ones are cleared from the broker. 0: cleared as soon as they end",
     )  # fmt: skip
 
-
     @model_validator(mode="after")
     def _auto_fits(self) -> JobsConfig:
-        if isinstance(self.controller, ControllerSerial) and self.auto is not None:
-            if self.auto.select_value == "path":
-                raise ValueError("auto.select_value: path needs a program folder; a serial line has none")
+        serial = isinstance(self.controller, ControllerSerial)
+        if serial and self.auto is not None and self.auto.select_value == "path":
+            raise ValueError("auto.select_value: path needs a program folder; a serial line has none")
         return self
 
 

@@ -45,9 +45,9 @@ from gateway.errors import (
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
+from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.dnc.transfers import TransferLog
 from gateway.jobs.drip import drip_methods
-from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
 from gateway.jobs.inbox.paths import check_file_name
@@ -492,7 +492,9 @@ class JobService:
     async def retry_job(self, job_id: str, by: str) -> dict[str, Any]:
         return await self._operate(self.queue.retry, job_id, by)
 
-    async def restart_job(self, job_id: str, line: int, by: str, *, machine: str | None = None) -> dict[str, Any]:
+    async def restart_job(
+        self, job_id: str, line: int, by: str, *, machine: str | None = None
+    ) -> dict[str, Any]:
         """A FAILED drip-feed queued again, to start at program line `line` (header, modal state, line on)."""
         self._open()
         seq = _seq(job_id)
@@ -503,7 +505,9 @@ class JobService:
         if machine is not None and job.machine != machine:
             raise InvalidArgument(f"{job.id} is a job of {job.machine}, not {machine}")
         if job.machine not in self.lines:
-            raise InvalidArgument(f"{job.machine} takes programs over FTP: a restart at a line needs a serial line")
+            raise InvalidArgument(
+                f"{job.machine} takes programs over FTP: a restart at a line needs a serial line"
+            )
         if job.state is not JobState.FAILED:
             raise InvalidState(f"{job.id} is {job.state.value}: only a FAILED job restarts at a line")
         program = self.spool.program(job)

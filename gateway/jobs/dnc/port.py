@@ -16,6 +16,9 @@ operator: "device server 10.0.0.9:4001 unreachable (connection refused)",
 
 from __future__ import annotations
 
+import contextlib
+from typing import Protocol, cast
+
 import serial
 
 from gateway.codecs.dnc import LineSettings
@@ -26,6 +29,26 @@ WAIT = 0.005  # s a read waits for a first byte (wait()); reads while sending ne
 
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
 _LETTER = {"none": "N", "even": "E", "odd": "O"}
+
+
+class _Port(Protocol):
+    """What the line uses of a pyserial port. Every port `serial_for_url` makes (posix `Serial`, the
+    socket:// and rfc2217:// classes) has these; the stubs put `in_waiting` and `dsr` on the
+    subclasses only, not on the `SerialBase` it is annotated to return."""
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    @property
+    def dsr(self) -> bool: ...
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes, /) -> int | None: ...
+
+    def flush(self) -> None: ...
+
+    def close(self) -> None: ...
 
 
 class LineLost(DeliveryError):
@@ -61,7 +84,7 @@ class SerialPort:
     def __init__(self, settings: ControllerSerial) -> None:
         self.settings = settings
         self.where = settings.where
-        self._port: serial.SerialBase | None = None
+        self._port: _Port | None = None
         self._dsr = settings.dsr and "://" not in settings.where
 
     @property
@@ -87,17 +110,15 @@ class SerialPort:
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
-        self._port = port
+        self._port = cast(_Port, port)
 
     def close(self) -> None:
         port, self._port = self._port, None
         if port is not None:
-            try:
+            with contextlib.suppress(serial.SerialException, OSError):  # a line that is already gone
                 port.close()
-            except (serial.SerialException, OSError):
-                pass  # closing a line that is already gone
 
-    def _open_port(self) -> serial.SerialBase:
+    def _open_port(self) -> _Port:
         if self._port is None:
             raise LineLost("the line is not open")
         return self._port
@@ -115,7 +136,7 @@ class SerialPort:
         return data
 
     def wait(self) -> bytes:
-        """What the controller sends within a few milliseconds (returns at its first byte). Raises LineLost."""
+        """What the controller sends within a few milliseconds (back at its first byte). Raises LineLost."""
         port = self._open_port()
         try:
             data: bytes = port.read(1)
@@ -135,7 +156,9 @@ class SerialPort:
         try:
             written = port.write(data)
         except serial.SerialTimeoutException:
-            raise LineLost("the port took nothing for too long (a device server's connection stalled)") from None
+            raise LineLost(
+                "the port took nothing for too long (a device server's connection stalled)"
+            ) from None
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
         return len(data) if written is None else int(written)

@@ -28,7 +28,9 @@ from tests.waiting import wait_until
 
 async def drip_until_idle(sim: Simulator) -> None:
     await wait_until(
-        lambda: sim.machine.state.name == "IDLE" and face(sim).stats()["stage"] in ("reading", "idle", "offline"),
+        lambda: (
+            sim.machine.state.name == "IDLE" and face(sim).stats()["stage"] in ("reading", "idle", "offline")
+        ),
         timeout=60,
         message="the drip program to end",
     )
@@ -85,7 +87,9 @@ async def test_pause_holds_the_line_and_resume_finishes_the_program(tmp_path: Pa
         line = transport(face(sim).socket_url or "", tmp_path, mode="drip")
         progress = Progresses()
         task = asyncio.create_task(line.deliver(program_file(tmp_path, data), progress))
-        await wait_until(lambda: line.current is not None and progress and progress[-1].sent > 1000, message="sending")
+        await wait_until(
+            lambda: line.current is not None and progress and progress[-1].sent > 1000, message="sending"
+        )
         line.pause()
         await wait_until(lambda: progress[-1].held == "paused", message="held")
         held_at = progress[-1].sent

@@ -16,8 +16,16 @@ from gateway.jobs.queue.store import JobState
 from gateway.model.context import WriteContext
 from simulator.alarms import DNC_LINE_DROPPED
 from simulator.runner import Simulator
-from tests.integration.dnc.rig import GATEWAY_BUFFER, SIM_BAUD, SPEED, Mode, body_lines, drip_program, face, simulator
-from tests.integration.jobs.conftest import harness  # noqa: F401 - the fixture
+from tests.integration.dnc.rig import (
+    GATEWAY_BUFFER,
+    SIM_BAUD,
+    SPEED,
+    Mode,
+    body_lines,
+    drip_program,
+    face,
+    simulator,
+)
 from tests.waiting import free_port, wait_until
 
 Build = Callable[..., Any]
@@ -75,7 +83,9 @@ async def test_a_drip_job_shows_progress_and_is_logged(harness: Build, tmp_path:
             rows = log.query()
         finally:
             log.close()
-        assert [(r.record.direction, r.record.outcome, r.record.user) for r in rows] == [("send", "ok", "alice")]
+        assert [(r.record.direction, r.record.outcome, r.record.user) for r in rows] == [
+            ("send", "ok", "alice")
+        ]
         assert rows[0].record.program == "part.nc" and rows[0].record.size > len(data)
 
 
@@ -108,8 +118,12 @@ async def test_a_gateway_restart_mid_drip_waits_for_an_operator(harness: Build, 
     async with simulator(tmp_path, mode=Mode.DRIP) as sim:
         async with gateway(harness, sim) as h:
             seq = await submit(h, data)
-            await wait_until(lambda: face(sim).stats()["rx_chars"] > 2000, timeout=30, message="drip under way")
-        await wait_until(lambda: face(sim).stats()["link"] == "", message="the line closed as the gateway stopped")
+            await wait_until(
+                lambda: face(sim).stats()["rx_chars"] > 2000, timeout=30, message="drip under way"
+            )
+        await wait_until(
+            lambda: face(sim).stats()["link"] == "", message="the line closed as the gateway stopped"
+        )
         rx = face(sim).stats()["rx_chars"]
         async with gateway(harness, sim) as h:
             job = await h.wait_state(seq, JobState.FAILED, timeout=30)

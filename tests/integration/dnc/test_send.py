@@ -2,21 +2,20 @@
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 
 from gateway.jobs.dnc.transfer import SLICE
 from tests.integration.dnc.rig import (
     SIM_BAUD,
     Mode,
-    body_lines,
     Progresses,
+    body_lines,
+    drip_program,
     face,
     load_program,
     program_file,
     simulator,
     transport,
-    drip_program,
 )
 from tests.waiting import wait_until
 

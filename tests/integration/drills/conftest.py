@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from tests.integration.jobs.conftest import renames, store  # noqa: F401 - fixtures for the drills
+from tests.integration.jobs.conftest import harness, renames, store  # noqa: F401 - fixtures for the drills
 
 SCALE = os.environ.get("CNC_DRILL_SCALE", "small").strip().lower() or "small"
 if SCALE not in ("small", "soak"):
