@@ -178,6 +178,7 @@ def _controller_type(value: Any) -> str:
     return str(getattr(value, "type", "ftp"))
 
 
+CONTROLLER_TAGS = ("ftp", "serial")
 Controller = Annotated[
     Annotated[ControllerFtp, Tag("ftp")] | Annotated[ControllerSerial, Tag("serial")],
     Discriminator(_controller_type),
