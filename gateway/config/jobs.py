@@ -154,7 +154,7 @@ class ControllerSerial(Strict):
             if not 1 <= int(match.group(3)) <= 65535:
                 raise ValueError(f"port {match.group(3)} in {where!r} is outside 1..65535")
             return where
-        if not _DEVICE.match(where):
+        if not _DEVICE.match(where) or ".." in where.split("/"):
             raise ValueError(f"{where!r} is not a serial device path (/dev/ttyUSB0, COM3) or a URL")
         return where
 

@@ -3,7 +3,10 @@ a dropped line -> FAILED at a line, a gateway restart mid-drip that does not res
 
 from __future__ import annotations
 
+import asyncio
 import re
+import subprocess
+import sys
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -133,3 +136,35 @@ async def test_a_gateway_restart_mid_drip_waits_for_an_operator(harness: Build, 
 
             with pytest.raises(NotFound):
                 await call(h, "DripRestart", "J999999", 5)
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(Path(sys.executable).parent / "cnc-gateway"), *args], capture_output=True, text=True, timeout=60
+    )
+
+
+async def test_the_cli_shows_drip_progress_and_restarts_a_failed_drip(harness: Build, tmp_path: Path) -> None:
+    data = drip_program(400)
+    async with simulator(tmp_path, mode=Mode.DRIP) as sim, gateway(harness, sim) as h:
+        seq = await submit(h, data)
+        await wait_until(lambda: face(sim).stats()["rx_chars"] > 2000, timeout=30, message="drip under way")
+        listing = await asyncio.to_thread(cli, "jobs", "list", "--state-dir", str(h.state))
+        assert listing.returncode == 0, listing.stderr
+        assert re.search(r"SENDING .*\d+% .*line \d+, lead \d+ s, \d+:\d\d left", listing.stdout), (
+            listing.stdout
+        )
+        assert face(sim).drop_link()
+        job = await h.wait_state(seq, JobState.FAILED, timeout=30)
+        match = re.search(r"at line (\d+)", job.reason)
+        assert match, job.reason
+        sim.machine.reset()
+        await wait_until(lambda: not sim.machine.alarms, message="the reset")
+        restart = await asyncio.to_thread(
+            cli, "jobs", "restart", f"J{seq:06d}", "--line", match.group(1), "--state-dir", str(h.state)
+        )
+        assert restart.returncode == 0 and f"restarts at line {match.group(1)}" in restart.stdout, (
+            restart.stderr
+        )
+        job = await h.wait_state(seq, JobState.DELIVERED, timeout=60)
+        assert f"from line {match.group(1)}" in job.reason
