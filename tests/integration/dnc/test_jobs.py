@@ -140,7 +140,11 @@ async def test_a_gateway_restart_mid_drip_waits_for_an_operator(harness: Build, 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [str(Path(sys.executable).parent / "cnc-gateway"), *args], capture_output=True, text=True, timeout=60
+        [str(Path(sys.executable).parent / "cnc-gateway"), *args],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
 
 
