@@ -16,6 +16,7 @@ from pydantic import ByteSize, Discriminator, Field, SecretStr, Tag, field_valid
 
 from gateway.auth.passwords import parse_hash
 from gateway.config.base import Backoff, Strict
+from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -259,11 +260,21 @@ class JobsConfig(Strict):
         description="After delivery, compare the size (SIZE or a listing), or download it back and hash",
     )
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
+    punch: PunchSettings | None = Field(
+        default=None,
+        description="Serial lines: store programs the operator punches, answer remote requests",
+    )
     mqtt_retained_jobs: int = Field(
         default=100, ge=0, le=100_000,
         description="Ended jobs (DELIVERED, REJECTED, FAILED, CANCELLED) whose MQTT jobs/<id> record "
         "stays retained; older ones are cleared from the broker. 0: cleared as soon as they end",
     )  # fmt: skip
+
+    @model_validator(mode="after")
+    def _punch_needs_a_line(self) -> JobsConfig:
+        if self.punch is not None and not isinstance(self.controller, ControllerSerial):
+            raise ValueError("punch: needs a serial controller (jobs.controller type: serial)")
+        return self
 
     @model_validator(mode="after")
     def _auto_fits(self) -> JobsConfig:

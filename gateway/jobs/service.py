@@ -14,7 +14,9 @@ Files under the state directory:
     jobs/spool/<id>.received    an upload between arrival and validation
     jobs/spool/<id>.program     a validated program waiting for delivery (kept for FAILED/CANCELLED: retry)
     rejected/<id>-<name>        a rejected upload, and <id>-<name>.reason saying why
-    backups/<machine>/          programs fetched with Programs.Backup
+    backups/<machine>/          programs fetched with Programs.Backup (and punched ones, with punch.backup)
+    dnc/transfers.sqlite3       the serial transfer log (cnc-gateway dnc log)
+    dnc/received/<machine>/     programs operators punched (jobs.punch), each with a .json record
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
 from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.dnc.desk import PunchDesk
+from gateway.jobs.dnc.received import ReceivedStore
 from gateway.jobs.dnc.transfers import TransferLog
 from gateway.jobs.drip import drip_methods
 from gateway.jobs.inbox.accounts import Accounts
@@ -145,6 +149,24 @@ class JobService:
             )
             for method in methods:
                 machine.add_method(method)
+        # Serial lines: what an idle line hears (jobs.punch); the line owner takes its machine's desk.
+        self.desks: dict[str, PunchDesk] = {
+            name: PunchDesk(
+                tree.machines[name],
+                jobs.punch,
+                store=ReceivedStore(state),
+                rules=jobs.validation,
+                backups=self.backups_dir / name,
+                submit=self._submit_request,
+                blocking=self.threads.work,
+            )
+            for name, jobs in self.machines.items()
+            if jobs.punch is not None
+        }
+        for name, desk in self.desks.items():
+            line = self.lines.get(name)
+            if line is not None:
+                line.listener = desk  # the line listens for it between jobs
         self.inbox: Inbox | None = None
         self._changed = asyncio.Event()
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -164,7 +186,7 @@ class JobService:
             raise SinkError(str(exc)) from None
         self._opened = True
         try:
-            if self.lines:
+            if self.lines or self.desks:
                 try:
                     log_file = await self.threads.queue(TransferLog.in_state_dir, self.config.state_dir)
                 except StoreError as exc:
@@ -172,6 +194,8 @@ class JobService:
                 self.transfer_log = log_file
                 for line in self.lines.values():
                     line.transfer_log = self.transfer_log
+                for desk in self.desks.values():
+                    desk.transfers = self.transfer_log
             await self._publish_all()
             await self._resume()
             self.inbox = self._build_inbox()
@@ -195,6 +219,8 @@ class JobService:
             line.close()
         if self._opened:
             self._opened = False
+            for desk in self.desks.values():
+                await desk.drain()
             await self.threads.queue(self.queue.close)
             if self.transfer_log is not None:
                 await self.threads.queue(self.transfer_log.close)
@@ -240,6 +266,8 @@ class JobService:
             for name, worker in self.workers.items():
                 tg.create_task(worker.run(), name=f"jobs:deliver:{name}")
             tg.create_task(self._watch(), name="jobs:watch")
+            for name, desk in self.desks.items():
+                tg.create_task(desk.run(), name=f"jobs:punch:{name}")
             for name, line in self.lines.items():
                 tg.create_task(line.run(), name=f"jobs:dnc-line:{name}")
 
@@ -276,6 +304,11 @@ class JobService:
         await self.threads.work(staging.write_bytes, data)
         upload = Upload(machine, filename, staging, len(data), hashlib.sha256(data).hexdigest(), user, origin)
         return await self.submit(upload)
+
+    async def _submit_request(self, machine: str, filename: str, data: bytes, user: str, origin: str) -> str:
+        """A remote request answered through the queue (punch.requests.send: queue)."""
+        reply = await self.submit_bytes(machine, filename, data, user=user, origin=origin)
+        return reply.message
 
     async def _take(self, upload: Upload, holder: dict[str, Job]) -> UploadReply:
         self._processing[upload.machine] += 1

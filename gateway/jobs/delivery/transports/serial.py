@@ -332,8 +332,22 @@ class SerialTransport:
         except FramingError as exc:
             log.warning("%s: the answer cannot be sent: %s", self.machine, exc)
             return
+        started = datetime.now(UTC)
+        error: DeliveryError | None = None
+        outcome: Outcome | None = None
+        try:
+            outcome = await self._answer_transfer(wire)
+        except DeliveryError as exc:
+            error = exc
+            raise
+        finally:
+            name = text.lstrip(b"%\r\n \0").split(b"\n", 1)[0].decode("ascii", "replace").strip() or "?"
+            answer = Program(name, Path(os.devnull), len(text), hashlib.sha256(text).hexdigest(), None)
+            await self._log(answer, wire, started, outcome, error, None)
+
+    async def _answer_transfer(self, wire: WireProgram) -> Outcome:
         settings = self.settings
-        await self._call(
+        result: Outcome = await self._call(
             lambda: run_transfer(
                 self.port,
                 wire,
@@ -346,6 +360,7 @@ class SerialTransport:
                 report=lambda _pos: None,
             )
         )
+        return result
 
     # --- the checkpoint ----------------------------------------------------------------------------
 
