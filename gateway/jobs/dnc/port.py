@@ -17,6 +17,8 @@ operator: "device server 10.0.0.9:4001 unreachable (connection refused)",
 from __future__ import annotations
 
 import contextlib
+import select
+import time
 from typing import Protocol, cast
 
 import serial
@@ -25,7 +27,8 @@ from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
 
-WAIT = 0.005  # s a read waits for a first byte (wait()); reads while sending never wait
+WAIT = 0.005  # s wait() waits for a first byte; the port itself never waits (timeout 0)
+POLL = 0.002  # s between looks in wait() where the port has no descriptor to select on (rfc2217://)
 
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
 _LETTER = {"none": "N", "even": "E", "odd": "O"}
@@ -33,11 +36,8 @@ _LETTER = {"none": "N", "even": "E", "odd": "O"}
 
 class _Port(Protocol):
     """What the line uses of a pyserial port. Every port `serial_for_url` makes (posix `Serial`, the
-    socket:// and rfc2217:// classes) has these; the stubs put `in_waiting` and `dsr` on the
+    socket:// and rfc2217:// classes) has these; the stubs put `dsr` on the
     subclasses only, not on the `SerialBase` it is annotated to return."""
-
-    @property
-    def in_waiting(self) -> int: ...
 
     @property
     def dsr(self) -> bool: ...
@@ -105,12 +105,16 @@ class SerialPort:
                 stopbits=s.stopbits,
                 rtscts=s.handshake == "rtscts",
                 xonxoff=False,  # the sender does XON/XOFF itself: it must see DC1/DC3 and count them
-                timeout=WAIT,
+                timeout=0,  # reads return what is there (in_waiting is 0/1 on socket://, not a count)
                 write_timeout=None if s.where.startswith("rfc2217://") else s.connect_timeout,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
         self._port = cast(_Port, port)
+        try:
+            self._fd: int | None = int(port.fileno())  # posix and socket://
+        except (AttributeError, NotImplementedError, OSError, ValueError, serial.SerialException):
+            self._fd = None  # rfc2217:// reads in a thread of its own: wait() polls
 
     def close(self) -> None:
         port, self._port = self._port, None
@@ -127,8 +131,7 @@ class SerialPort:
         """What the controller sent, without waiting (b"" when nothing). Raises LineLost."""
         port = self._open_port()
         try:
-            waiting = port.in_waiting
-            data: bytes = port.read(waiting) if waiting else b""
+            data: bytes = port.read(4096)
             if self._dsr and not port.dsr:
                 raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
         except (serial.SerialException, OSError) as exc:
@@ -139,11 +142,11 @@ class SerialPort:
         """What the controller sends within a few milliseconds (back at its first byte). Raises LineLost."""
         port = self._open_port()
         try:
-            data: bytes = port.read(1)
-            if data:
-                waiting = port.in_waiting
-                if waiting:
-                    data += port.read(waiting)
+            if self._fd is not None:
+                select.select([self._fd], [], [], WAIT)
+            else:
+                time.sleep(POLL)
+            data: bytes = port.read(4096)
             if self._dsr and not port.dsr:
                 raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
         except (serial.SerialException, OSError) as exc:
