@@ -90,6 +90,18 @@ _URL = re.compile(r"^(socket|rfc2217)://([A-Za-z0-9_.\-]+|\[[0-9A-Fa-f:.]+\]):(\
 _DEVICE = re.compile(r"^(/dev/[A-Za-z0-9_.\-/]+|COM[0-9]{1,3}|\\\\\.\\COM[0-9]{1,3})$")
 
 
+class AlarmWhen(Strict):
+    """A mapped variable whose value says the controller is in alarm (a drip-feed then stops, FAILED)."""
+
+    path: str = Field(description="Mapped variable, e.g. Machine/State")
+    equals: bool | int | float | str = Field(description="The value that means alarm, e.g. 3")
+
+    @field_validator("path")
+    @classmethod
+    def _path(cls, path: str) -> str:
+        return check_variable_path(path)
+
+
 class ControllerSerial(Strict):
     """A controller that takes programs over RS-232 (serial DNC), directly or through a device server."""
 
@@ -140,6 +152,11 @@ class ControllerSerial(Strict):
         default=10_000.0, gt=0, description="Rapid rate, mm/min, for the run-time estimate while dripping"
     )
     connect_timeout: float = Field(default=10.0, gt=0, description="Seconds to open the port")
+    alarm_when: AlarmWhen | None = Field(
+        default=None,
+        description="A serial line cannot tell that the controller went into alarm; where the machine's "
+        "state is mapped (from another driver), this stops a transfer when it says alarm",
+    )
     dsr: bool = Field(
         default=False,
         description="A device path only: fail the transfer when DSR drops (the cable has DSR wired)",

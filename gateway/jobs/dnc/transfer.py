@@ -129,6 +129,7 @@ def run_transfer(
     control: Control,
     timing: Timing | None,
     report: Callable[[Position], None],
+    alarm: Callable[[], str | None] | None = None,
 ) -> Outcome:
     """Send `wire` over `port` (blocking). Raises TransferFailed with the position reached."""
     sender = DncSender(wire, line, wait_for_dc1=wait_for_dc1)
@@ -186,6 +187,9 @@ def run_transfer(
             if now - reported >= REPORT_EVERY:
                 reported = now
                 report(where(held))
+                why = alarm() if alarm is not None else None
+                if why is not None:
+                    raise fail(f"the controller is in alarm ({why})")
             if held:
                 if held_since is None:
                     held_since = now

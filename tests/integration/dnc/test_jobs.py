@@ -34,10 +34,13 @@ from tests.waiting import free_port, wait_until
 Build = Callable[..., Any]
 
 
-def serial_mapping(where: str, *, mode: str = "drip", attempts: int = 3) -> str:
+def serial_mapping(
+    where: str, *, mode: str = "drip", attempts: int = 3, opcua: int | None = None, alarm_when: bool = False
+) -> str:
+    alarm = "\n    alarm_when: {path: Machine/State, equals: 3}" if alarm_when else ""
     return f"""
 machine: lathe
-driver: {{endpoint: "opc.tcp://127.0.0.1:{free_port()}"}}
+driver: {{endpoint: "opc.tcp://127.0.0.1:{opcua or free_port()}", reconnect: {{initial: 0.2, max: 1}}}}
 variables:
   - {{path: Machine/State, source: "ns=2;s=::AsGlobalPV:gMachine.State", type: Int16}}
 jobs:
@@ -46,7 +49,7 @@ jobs:
     where: "{where}"
     baud: {int(SIM_BAUD * SPEED)}
     mode: {mode}
-    buffer: {GATEWAY_BUFFER}
+    buffer: {GATEWAY_BUFFER}{alarm}
   validation: {{dialect: laser-sim}}
   retry: {{initial: 0.05, max: 0.2, factor: 2}}
   max_attempts: {attempts}
@@ -138,6 +141,22 @@ async def test_a_gateway_restart_mid_drip_waits_for_an_operator(harness: Build, 
                 await call(h, "DripRestart", "J999999", 5)
 
 
+@asynccontextmanager
+async def mirrored(h: Any) -> AsyncIterator[None]:
+    """The machine's OPC UA source, so that its variables (Machine/State) are in the tree."""
+    from gateway.sources.base import create_source
+
+    [mapping] = h.service.config.machines
+    source = create_source(h.tree.machines[mapping.machine], mapping)
+    async with source:
+        task = asyncio.create_task(source.run(), name="test:source")
+        try:
+            yield
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+
+
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [str(Path(sys.executable).parent / "cnc-gateway"), *args],
@@ -172,3 +191,25 @@ async def test_the_cli_shows_drip_progress_and_restarts_a_failed_drip(harness: B
         )
         job = await h.wait_state(seq, JobState.DELIVERED, timeout=60)
         assert f"from line {match.group(1)}" in job.reason
+
+
+async def test_a_controller_alarm_mid_drip_fails_the_job_with_it(harness: Build, tmp_path: Path) -> None:
+    from simulator.alarms import Alarm, Severity
+
+    data = drip_program(400)
+    async with simulator(tmp_path, mode=Mode.DRIP) as sim:
+        text = serial_mapping(face(sim).socket_url or "", opcua=sim.opcua_port, alarm_when=True)
+        async with harness([text], accounts=[]) as h, mirrored(h):
+            await wait_until(
+                lambda: h.tree.machines["lathe"].nodes["Machine/State"].sample.status == "Good",
+                timeout=30,
+                message="the machine's state mirrored",
+            )
+            seq = await submit(h, data)
+            await wait_until(
+                lambda: face(sim).stats()["rx_chars"] > 2000, timeout=30, message="drip under way"
+            )
+            sim.machine.raise_alarm(Alarm(9001, "Laser head collision", Severity.ERROR))
+            job = await h.wait_state(seq, JobState.FAILED, timeout=30)
+            assert "the controller is in alarm (Machine/State = 3)" in job.reason and "at line" in job.reason
+            assert job.attempts == 1

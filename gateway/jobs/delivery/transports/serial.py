@@ -28,6 +28,7 @@ import json
 import logging
 import os
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -120,6 +121,8 @@ class SerialTransport:
         self.transfer_log = transfer_log
         self.checkpoint_path = None if state_dir is None else progress_path(state_dir, machine or "line")
         self.current: Drip | None = None
+        #: Says why the controller is in alarm, None when it is not (the service reads `alarm_when`).
+        self.alarm: Callable[[], str | None] | None = None
         self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
         self._lock = asyncio.Lock()
         self._thread = ThreadPoolExecutor(1, thread_name_prefix=f"dnc-{machine or 'line'}")
@@ -252,6 +255,7 @@ class SerialTransport:
                     control=drip.control,
                     timing=timing,
                     report=report,
+                    alarm=self.alarm,
                 )
             )
         except TransferFailed as exc:
