@@ -90,6 +90,18 @@ _URL = re.compile(r"^(socket|rfc2217)://([A-Za-z0-9_.\-]+|\[[0-9A-Fa-f:.]+\]):(\
 _DEVICE = re.compile(r"^(/dev/[A-Za-z0-9_.\-/]+|COM[0-9]{1,3}|\\\\\.\\COM[0-9]{1,3})$")
 
 
+class AlarmWhen(Strict):
+    """A mapped variable whose value says the controller is in alarm (a drip-feed then stops, FAILED)."""
+
+    path: str = Field(description="Mapped variable, e.g. Machine/State")
+    equals: bool | int | float | str = Field(description="The value that means alarm, e.g. 3")
+
+    @field_validator("path")
+    @classmethod
+    def _path(cls, path: str) -> str:
+        return check_variable_path(path)
+
+
 class ControllerSerial(Strict):
     """A controller that takes programs over RS-232 (serial DNC), directly or through a device server."""
 
@@ -108,9 +120,7 @@ class ControllerSerial(Strict):
     eob: Literal["lf", "crlf"] = Field(default="lf", description="End of block the controller expects")
     leader: int = Field(default=20, ge=0, le=10_000, description="NULs sent before the first %")
     percent: bool = Field(default=True, description="Frame the program with % markers")
-    chunk_size: int = Field(
-        default=200, ge=1, le=65_536, description="Most bytes handed to the port at once"
-    )
+    chunk_size: int = Field(default=200, ge=1, le=65_536, description="Most bytes handed to the port at once")
     software_parity: bool | None = Field(
         default=None,
         description="Send a 7-bit line's parity bit as bit 7 of 8-bit bytes (a transparent raw TCP port, "
@@ -142,6 +152,11 @@ class ControllerSerial(Strict):
         default=10_000.0, gt=0, description="Rapid rate, mm/min, for the run-time estimate while dripping"
     )
     connect_timeout: float = Field(default=10.0, gt=0, description="Seconds to open the port")
+    alarm_when: AlarmWhen | None = Field(
+        default=None,
+        description="A serial line cannot tell that the controller went into alarm; where the machine's "
+        "state is mapped (from another driver), this stops a transfer when it says alarm",
+    )
     dsr: bool = Field(
         default=False,
         description="A device path only: fail the transfer when DSR drops (the cable has DSR wired)",
@@ -157,7 +172,7 @@ class ControllerSerial(Strict):
             if not 1 <= int(match.group(3)) <= 65535:
                 raise ValueError(f"port {match.group(3)} in {where!r} is outside 1..65535")
             return where
-        if not _DEVICE.match(where):
+        if not _DEVICE.match(where) or ".." in where.split("/"):
             raise ValueError(f"{where!r} is not a serial device path (/dev/ttyUSB0, COM3) or a URL")
         return where
 
@@ -181,6 +196,7 @@ def _controller_type(value: Any) -> str:
     return str(getattr(value, "type", "ftp"))
 
 
+CONTROLLER_TAGS = ("ftp", "serial")
 Controller = Annotated[
     Annotated[ControllerFtp, Tag("ftp")] | Annotated[ControllerSerial, Tag("serial")],
     Discriminator(_controller_type),
@@ -279,9 +295,9 @@ class JobsConfig(Strict):
 
     @model_validator(mode="after")
     def _auto_fits(self) -> JobsConfig:
-        if isinstance(self.controller, ControllerSerial) and self.auto is not None:
-            if self.auto.select_value == "path":
-                raise ValueError("auto.select_value: path needs a program folder; a serial line has none")
+        serial = isinstance(self.controller, ControllerSerial)
+        if serial and self.auto is not None and self.auto.select_value == "path":
+            raise ValueError("auto.select_value: path needs a program folder; a serial line has none")
         return self
 
 

@@ -32,7 +32,7 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
-from gateway.config.jobs import ControllerFtp, JobsConfig
+from gateway.config.jobs import AlarmWhen, ControllerFtp, JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import (
     ConfigError,
@@ -63,7 +63,7 @@ from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
 from gateway.jobs.validation.upload_check import UploadCheck
 from gateway.jobs.validation.verdict import Verdict
-from gateway.model.tree import VariableTree
+from gateway.model.tree import Machine, VariableTree
 
 log = logging.getLogger("gateway.jobs")
 
@@ -142,6 +142,7 @@ class JobService:
             )
             if isinstance(transport, SerialTransport):
                 self.lines[name] = transport
+                transport.alarm = alarm_reader(machine, transport.settings.alarm_when)
                 for method in drip_methods(transport, functools.partial(self.restart_job, machine=name)):
                     machine.add_method(method)
             methods = program_methods(
@@ -685,6 +686,25 @@ class JobService:
             }
 
         self.publisher.summary(machine, **await self.threads.queue(read))
+
+
+def alarm_reader(machine: Machine, when: AlarmWhen | None) -> Callable[[], str | None] | None:
+    """Reads the variable a serial machine's `alarm_when` names (from the line's thread: one attribute
+    read); None without one, or when the variable is not mapped (logged)."""
+    if when is None:
+        return None
+    node = machine.nodes.get(when.path)
+    if node is None:
+        log.warning("%s: alarm_when names %s, which is not mapped: ignored", machine.name, when.path)
+        return None
+
+    def read() -> str | None:
+        sample = node.sample
+        return (
+            f"{when.path} = {sample.value!r}" if sample is not None and sample.value == when.equals else None
+        )
+
+    return read
 
 
 def _seq(job_id: str) -> int:

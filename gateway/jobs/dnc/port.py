@@ -16,14 +16,39 @@ operator: "device server 10.0.0.9:4001 unreachable (connection refused)",
 
 from __future__ import annotations
 
+import contextlib
+import select
+import time
+from typing import Protocol, cast
+
 import serial
 
 from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
 
+WAIT = 0.005  # s wait() waits for a first byte; the port itself never waits (timeout 0)
+POLL = 0.002  # s between looks in wait() where the port has no descriptor to select on (rfc2217://)
+
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
 _LETTER = {"none": "N", "even": "E", "odd": "O"}
+
+
+class _Port(Protocol):
+    """What the line uses of a pyserial port. Every port `serial_for_url` makes (posix `Serial`, the
+    socket:// and rfc2217:// classes) has these; the stubs put `dsr` on the
+    subclasses only, not on the `SerialBase` it is annotated to return."""
+
+    @property
+    def dsr(self) -> bool: ...
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes, /) -> int | None: ...
+
+    def flush(self) -> None: ...
+
+    def close(self) -> None: ...
 
 
 class LineLost(DeliveryError):
@@ -59,7 +84,7 @@ class SerialPort:
     def __init__(self, settings: ControllerSerial) -> None:
         self.settings = settings
         self.where = settings.where
-        self._port: serial.SerialBase | None = None
+        self._port: _Port | None = None
         self._dsr = settings.dsr and "://" not in settings.where
 
     @property
@@ -80,31 +105,48 @@ class SerialPort:
                 stopbits=s.stopbits,
                 rtscts=s.handshake == "rtscts",
                 xonxoff=False,  # the sender does XON/XOFF itself: it must see DC1/DC3 and count them
-                timeout=0,
+                timeout=0,  # reads return what is there (in_waiting is 0/1 on socket://, not a count)
                 write_timeout=None if s.where.startswith("rfc2217://") else s.connect_timeout,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
-        self._port = port
+        self._port = cast(_Port, port)
+        try:
+            self._fd: int | None = int(port.fileno())  # posix and socket://
+        except (AttributeError, NotImplementedError, OSError, ValueError, serial.SerialException):
+            self._fd = None  # rfc2217:// reads in a thread of its own: wait() polls
 
     def close(self) -> None:
         port, self._port = self._port, None
         if port is not None:
-            try:
+            with contextlib.suppress(serial.SerialException, OSError):  # a line that is already gone
                 port.close()
-            except (serial.SerialException, OSError):
-                pass  # closing a line that is already gone
 
-    def _open_port(self) -> serial.SerialBase:
+    def _open_port(self) -> _Port:
         if self._port is None:
             raise LineLost("the line is not open")
         return self._port
 
-    def read(self, size: int = 4096) -> bytes:
+    def read(self) -> bytes:
         """What the controller sent, without waiting (b"" when nothing). Raises LineLost."""
         port = self._open_port()
         try:
-            data: bytes = port.read(size)
+            data: bytes = port.read(4096)
+            if self._dsr and not port.dsr:
+                raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
+        except (serial.SerialException, OSError) as exc:
+            raise LineLost(f"the line dropped ({_why(exc)})") from None
+        return data
+
+    def wait(self) -> bytes:
+        """What the controller sends within a few milliseconds (back at its first byte). Raises LineLost."""
+        port = self._open_port()
+        try:
+            if self._fd is not None:
+                select.select([self._fd], [], [], WAIT)
+            else:
+                time.sleep(POLL)
+            data: bytes = port.read(4096)
             if self._dsr and not port.dsr:
                 raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
         except (serial.SerialException, OSError) as exc:
@@ -117,7 +159,9 @@ class SerialPort:
         try:
             written = port.write(data)
         except serial.SerialTimeoutException:
-            raise LineLost("the port took nothing for too long (a device server's connection stalled)") from None
+            raise LineLost(
+                "the port took nothing for too long (a device server's connection stalled)"
+            ) from None
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
         return len(data) if written is None else int(written)

@@ -22,9 +22,8 @@ from gateway.errors import DeliveryError
 from gateway.jobs.dnc.port import SerialPort
 
 SLICE = 8  # characters the sender may be ahead of the line: what can still go out after a DC3
-PACE = 0.99  # share of the line rate the sender keeps to, so that a device server's buffer stays empty
+PACE = 0.98  # share of the line rate the sender keeps to, so that a device server's buffer stays empty
 JUNK_LIMIT = 64  # characters that are neither DC1 nor DC3 before the transfer gives up (wrong baud/parity)
-IDLE_SLEEP = 0.002  # s between looks at the port while held (DC3, waiting for DC1, paused)
 REPORT_EVERY = 0.25  # s between progress reports
 
 
@@ -130,6 +129,7 @@ def run_transfer(
     control: Control,
     timing: Timing | None,
     report: Callable[[Position], None],
+    alarm: Callable[[], str | None] | None = None,
 ) -> Outcome:
     """Send `wire` over `port` (blocking). Raises TransferFailed with the position reached."""
     sender = DncSender(wire, line, wait_for_dc1=wait_for_dc1)
@@ -141,6 +141,7 @@ def run_transfer(
     reported = 0.0
     digest = hashlib.sha256()
     junk = 0
+    held = "waiting for DC1" if sender.waiting_for_dc1 else ""
 
     def where(held: str) -> Position:
         if timing is not None:
@@ -164,7 +165,7 @@ def run_transfer(
         while not sender.done:
             if control.abort_reason is not None:
                 raise fail(control.abort_reason, permanent=True)
-            data = port.read()
+            data = port.wait() if held else port.read()
             if data:
                 for event in sender.feed(data):
                     if isinstance(event, Junk):
@@ -186,6 +187,9 @@ def run_transfer(
             if now - reported >= REPORT_EVERY:
                 reported = now
                 report(where(held))
+                why = alarm() if alarm is not None else None
+                if why is not None:
+                    raise fail(f"the controller is in alarm ({why})")
             if held:
                 if held_since is None:
                     held_since = now
@@ -199,14 +203,13 @@ def run_transfer(
                     raise fail(f"the controller held the line with DC3 for over {stall_timeout:g} s")
                 tokens = min(tokens, float(SLICE))
                 last = now
-                time.sleep(IDLE_SLEEP)
-                continue
+                continue  # the next look at the port waits for the controller (port.wait)
             held_since = None
             tokens = min(float(SLICE), tokens + (now - last) * rate)
             last = now
-            want = min(float(SLICE), float(sender.remaining))
-            if tokens < want:  # sleep for a whole slice: a sleep costs more than a character at 115,200 baud
-                time.sleep((want - tokens) / rate)
+            if tokens < SLICE and sender.remaining > tokens:
+                # A whole slice at a time: fewer, larger writes, and a thread that sleeps in between.
+                time.sleep((SLICE - tokens) / rate)
                 continue
             chunk = sender.next_chunk(int(tokens))
             written = port.write(chunk)

@@ -66,16 +66,25 @@ class JobVariables:
         self.last_rejected_reason = add("Jobs/LastRejectedReason", "String", "Why it was refused", "")
         self.failed_count = add("Jobs/FailedCount", "UInt32", "FAILED jobs waiting for a retry or cancel", 0)
         self.block = add(
-            "Jobs/Block", "Int32", "Drip-feed: the program line the controller is estimated to run (0: none)", 0
+            "Jobs/Block",
+            "Int32",
+            "Drip-feed: the program line the controller is estimated to run (0: none)",
+            0,
         )
         self.lead = add(
-            "Jobs/LeadSeconds", "Double", "Drip-feed: seconds of cutting estimated in the controller's buffer", 0.0
+            "Jobs/LeadSeconds",
+            "Double",
+            "Drip-feed: seconds of cutting estimated in the controller's buffer",
+            0.0,
         )
         self.remaining = add(
             "Jobs/RemainingSeconds", "Double", "Drip-feed: estimated run time left, in seconds", 0.0
         )
         self.held = add(
-            "Jobs/Held", "String", "Why nothing is being sent now: DC3, waiting for DC1, paused (or empty)", ""
+            "Jobs/Held",
+            "String",
+            "Why nothing is being sent now: DC3, waiting for DC1, paused (or empty)",
+            "",
         )
         self.estimate = add(
             "Jobs/LastEstimatedSeconds",

@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import hashlib
 import json
 import logging
 import os
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -52,17 +54,43 @@ REOPEN_AFTER = 5.0  # s before an idle line that failed is opened again
 
 @dataclass(frozen=True, slots=True)
 class Checkpoint:
-    """A drip-feed in progress, as written to disk: enough to say where it stopped after a restart."""
+    """A transfer in progress, as written to `<state>/jobs/dnc/<machine>.json` about once a second: where
+    a drip-feed stopped after a restart (`holds`), and the progress `cnc-gateway jobs` shows."""
 
-    program: str  # spool path of the job's program
+    program: str  # spool path of the job's program (its stem is the job id)
     sha256: str
+    drip: bool
     offset: int
+    total: int
     resume_line: int | None
+    line: int | None = None
+    lead: float | None = None
+    remaining: float | None = None
+    held: str = ""
 
     def as_json(self) -> str:
-        return json.dumps(
-            {"program": self.program, "sha256": self.sha256, "offset": self.offset, "line": self.resume_line}
-        )
+        return json.dumps(dataclasses.asdict(self))
+
+    @classmethod
+    def parse(cls, text: str) -> Checkpoint:
+        raw = json.loads(text)
+        if not isinstance(raw, dict):
+            raise ValueError("not an object")
+        return cls(**{f.name: raw[f.name] for f in dataclasses.fields(cls) if f.name in raw})
+
+
+def progress_path(state_dir: Path, machine: str) -> Path:
+    return state_dir / "jobs" / "dnc" / f"{machine}.json"
+
+
+def read_progress(state_dir: Path, machine: str) -> Checkpoint | None:
+    """The transfer under way on `machine`'s line (or interrupted by a restart), None if none."""
+    try:
+        return Checkpoint.parse(progress_path(state_dir, machine).read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 @dataclass(slots=True)
@@ -91,10 +119,11 @@ class SerialTransport:
         self.port = SerialPort(settings)
         self.listener: IdleListener | None = None
         self.transfer_log = transfer_log
-        self.checkpoint_path = (
-            None if state_dir is None else state_dir / "jobs" / "dnc" / f"{machine or 'line'}.json"
-        )
+        self.checkpoint_path = None if state_dir is None else progress_path(state_dir, machine or "line")
         self.current: Drip | None = None
+        #: Says why the controller is in alarm, None when it is not (the service reads `alarm_when`).
+        self.alarm: Callable[[], str | None] | None = None
+        self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
         self._lock = asyncio.Lock()
         self._thread = ThreadPoolExecutor(1, thread_name_prefix=f"dnc-{machine or 'line'}")
 
@@ -109,7 +138,9 @@ class SerialTransport:
         """Stop the line's thread (after the last transfer; the gateway is stopping)."""
         if self.current is not None:
             self.current.control.abort("the gateway is stopping")
-        self._thread.shutdown(wait=False, cancel_futures=True)
+        # After the transfer in hand has seen the abort (within a slice), the port closes, in that thread.
+        self._thread.submit(self.port.close)
+        self._thread.shutdown(wait=False)
 
     # --- control (the Commands methods, the CLI through the queue) --------------------------------
 
@@ -139,7 +170,7 @@ class SerialTransport:
         """A serial line cannot look into the controller. A drip-feed interrupted by a restart is not sent
         again: the job fails, saying where it stopped, and waits for an operator's restart at a line."""
         point = self._read_checkpoint()
-        if point is not None and point.program == str(program.path):
+        if point is not None and point.drip and point.program == str(program.path):
             self._clear_checkpoint()
             at = f" near line {point.resume_line}" if point.resume_line is not None else ""
             raise DeliveryError(
@@ -175,11 +206,12 @@ class SerialTransport:
         if error is not None:
             raise error
         assert outcome is not None
+        self.last = outcome
         mode = "drip-fed" if drip else "loaded"
         return (
             f"{describe(self.where)} ({mode}{f' from line {start}' if start is not None else ''}: "
             f"{outcome.sent} bytes, sha256 {outcome.sha256[:12]}…; program sha256 {program.sha256[:12]}… "
-            f"checked)"
+            f"checked; {outcome.pauses} DC3, at most {outcome.after_dc3_max} characters after one)"
         )
 
     async def _send(
@@ -199,9 +231,9 @@ class SerialTransport:
             nonlocal last_checkpoint
             drip.position = pos
             now = time.monotonic()
-            if timing is not None and now - last_checkpoint >= CHECKPOINT_EVERY:
+            if now - last_checkpoint >= CHECKPOINT_EVERY:
                 last_checkpoint = now
-                self._write_checkpoint(program, pos.sent, timing.resume_line(pos.sent))
+                self._write_checkpoint(program, pos, None if timing is None else timing.resume_line(pos.sent))
             loop.call_soon_threadsafe(
                 progress, Progress(pos.sent, pos.line, pos.lead, pos.remaining, pos.held)
             )
@@ -223,9 +255,11 @@ class SerialTransport:
                     control=drip.control,
                     timing=timing,
                     report=report,
+                    alarm=self.alarm,
                 )
             )
         except TransferFailed as exc:
+            self._clear_checkpoint()  # the job's reason says where it stopped
             if exc.offset > wire.body_start or not exc.permanent:
                 await self._call(self.port.close)  # a line in doubt is opened afresh next time
             raise
@@ -334,11 +368,22 @@ class SerialTransport:
 
     # --- the checkpoint ----------------------------------------------------------------------------
 
-    def _write_checkpoint(self, program: Program, offset: int, line: int | None) -> None:
+    def _write_checkpoint(self, program: Program, pos: Position, resume: int | None) -> None:
         path = self.checkpoint_path
         if path is None:
             return
-        point = Checkpoint(str(program.path), program.sha256, offset, line)
+        point = Checkpoint(
+            str(program.path),
+            program.sha256,
+            self.settings.mode == "drip",
+            pos.sent,
+            pos.total,
+            resume,
+            pos.line,
+            None if pos.lead is None else round(pos.lead, 1),
+            None if pos.remaining is None else round(pos.remaining, 1),
+            pos.held,
+        )
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(".tmp")
@@ -352,8 +397,7 @@ class SerialTransport:
         if path is None:
             return None
         try:
-            raw = json.loads(path.read_text())
-            return Checkpoint(str(raw["program"]), str(raw["sha256"]), int(raw["offset"]), raw.get("line"))
+            return Checkpoint.parse(path.read_text())
         except FileNotFoundError:
             return None
         except (OSError, ValueError, KeyError, TypeError) as exc:
