@@ -385,7 +385,9 @@ class PunchDesk:
             verdict = validate_program(data, path.name, self.request_rules)
             if not verdict.accepted:
                 first = verdict.rejections[0].reason
-                log.warning("%s: remote request for %s refused by validation: %s", self.name, path.name, first)
+                log.warning(
+                    "%s: remote request for %s refused by validation: %s", self.name, path.name, first
+                )
                 reason = f"REJECTED {request.name}"
                 return Answer(
                     request.name,
