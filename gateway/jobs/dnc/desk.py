@@ -32,6 +32,7 @@ import asyncio
 import hashlib
 import logging
 import os
+import time
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -70,6 +71,7 @@ Blocking = Callable[[Callable[[], T]], Awaitable[T]]
 Submit = Callable[[str, str, bytes, str, str], Awaitable[str]]
 MAX_PENDING = 200  # stored punches waiting for the thread; beyond, refused and counted
 ORIGIN = "dnc"
+JUNK_LOG_EVERY = 60.0  # s between log lines about junk on an idle line
 
 
 async def _in_thread(fn: Callable[[], T]) -> T:
@@ -128,6 +130,7 @@ class PunchDesk:
         self.received = 0
         self.refused = 0
         self.junk_bytes = 0
+        self._junk_logged = -JUNK_LOG_EVERY
         self.requests = 0
         self._started: datetime | None = None
         self._timer: asyncio.TimerHandle | None = None
@@ -213,6 +216,17 @@ class PunchDesk:
         elif isinstance(event, Junk):
             self.junk_bytes += event.count
             self.machine.set_internal(self.v_junk, self.junk_bytes % 2**32)
+            now = time.monotonic()
+            if now - self._junk_logged >= JUNK_LOG_EVERY:  # a line at the wrong baud rate talks all day
+                self._junk_logged = now
+                log.warning(
+                    "%s: %d bytes outside any program on the idle line (%d so far; e.g. %r): %s",
+                    self.name,
+                    event.count,
+                    self.junk_bytes,
+                    event.sample,
+                    event.reason,
+                )
         return None
 
     def _punched(self, event: ProgramReceived, started: datetime) -> None:
