@@ -62,9 +62,13 @@ async def main(workdir: Path) -> None:
         try:
             port.write(wire)
             port.flush()
+            written = time.monotonic() - started
+            # Closing a socket:// port drops what the device server has not read yet: keep it open
+            # until the line has carried it all (and a little longer).
+            time.sleep(max(0.0, len(wire) / line.bytes_per_second - written) + 2.0)
         finally:
             port.close()
-        return time.monotonic() - started
+        return written
 
     async def raw(request: dict[str, Any]) -> dict[str, Any]:
         seconds = await asyncio.to_thread(

@@ -279,7 +279,7 @@ async def _settled(sim: Agent, done: Any, *, timeout: float) -> dict[str, Any]:
         if done(face):
             return face
         if loop.time() > deadline:
-            return face
+            raise TimeoutError(f"the simulated controller did not finish within {timeout:g} s: {face}")
         await asyncio.sleep(0.2)
 
 

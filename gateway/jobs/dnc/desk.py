@@ -175,7 +175,8 @@ class PunchDesk:
             self.receiver = ProgramReceiver(
                 max_size=self.settings.max_size, strip_parity=self.receiver.strip_parity
             )
-        self._arm()
+        if data.translate(_SEVEN_BITS).translate(None, _NOT_PROGRESS) or not self.receiver.receiving:
+            self._arm()  # flow control and tape feed alone are silence: a controller in READ sends DC1s
         return answer
 
     def line_lost(self, reason: str) -> None:
@@ -514,6 +515,10 @@ class PunchDesk:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+
+
+_SEVEN_BITS = bytes(v & 0x7F for v in range(256))
+_NOT_PROGRESS = bytes([0x00, 0x11, 0x12, 0x13, 0x14, 0x7F])  # NUL, DC1-DC4, DEL
 
 
 def framed(event: ProgramReceived) -> bytes:
