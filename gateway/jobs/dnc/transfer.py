@@ -21,7 +21,10 @@ from gateway.codecs.dnc import DncSender, Junk, LineSettings, Pause, WireProgram
 from gateway.errors import DeliveryError
 from gateway.jobs.dnc.port import SerialPort
 
-SLICE = 8  # characters the sender may be ahead of the line: what can still go out after a DC3
+SLICE = 8  # characters written at a time, at least (the sender sleeps until a slice is due)
+AHEAD = 16  # characters a load may be ahead of the line: what can still go out after a DC3
+DRIP_AHEAD = SLICE  # a drip-feed, which meets a DC3 every buffer's worth, keeps closer (the line rate
+# is not what limits it: the machine's cutting is)
 PACE = 0.98  # share of the line rate the sender keeps to, so that a device server's buffer stays empty
 JUNK_LIMIT = 64  # characters that are neither DC1 nor DC3 before the transfer gives up (wrong baud/parity)
 REPORT_EVERY = 0.25  # s between progress reports
@@ -135,7 +138,8 @@ def run_transfer(
     sender = DncSender(wire, line, wait_for_dc1=wait_for_dc1)
     rate = line.bytes_per_second * PACE
     started = time.monotonic()
-    tokens = float(SLICE)
+    ahead = float(DRIP_AHEAD if timing is not None else AHEAD)
+    tokens = ahead
     last = started
     held_since: float | None = None
     reported = 0.0
@@ -201,11 +205,12 @@ def run_transfer(
                     )
                 if held == "DC3" and now - held_since > stall_timeout:
                     raise fail(f"the controller held the line with DC3 for over {stall_timeout:g} s")
-                tokens = min(tokens, float(SLICE))
+                tokens = min(tokens, ahead)
                 last = now
                 continue  # the next look at the port waits for the controller (port.wait)
             held_since = None
-            tokens = min(float(SLICE), tokens + (now - last) * rate)
+            # A sleep that overran (a loaded machine) leaves up to AHEAD characters due, not more.
+            tokens = min(ahead, tokens + (now - last) * rate)
             last = now
             if tokens < SLICE and sender.remaining > tokens:
                 # A whole slice at a time: fewer, larger writes, and a thread that sleeps in between.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gateway.jobs.dnc.transfer import SLICE
+from gateway.jobs.dnc.transfer import AHEAD
 from tests.integration.dnc.rig import (
     SIM_BAUD,
     Mode,
@@ -44,7 +44,7 @@ async def test_drip_larger_than_the_buffer_honours_dc3(tmp_path: Path) -> None:
         assert len(data) > 5 * 1024  # five times the controller's buffer
         assert stats["dc3_sent"] > 0 and stats["overflows"] == 0 and stats["rx_chars"] >= len(data)
         assert line.last is not None and line.last.pauses > 0
-        assert line.last.after_dc3_max <= SLICE  # what the gateway wrote after it had read a DC3
+        assert line.last.after_dc3_max <= AHEAD  # what the gateway wrote after it had read a DC3
         assert any(p.block for p in progress) and any(p.lead for p in progress)
         await wait_until(lambda: sim.machine.state.name == "IDLE", timeout=30, message="drip ran to M30")
         assert not sim.machine.alarms
