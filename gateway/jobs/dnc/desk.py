@@ -7,7 +7,8 @@
   recorded in the transfer log (direction receive; the line records the answer it sends).
 - **A remote request** (`O9999 (PRG=O4711)`) is answered with the named program
   from the configured folder: at once, returned to the line owner which sends it
-  as a load (`send: load`), or submitted as a job (`send: queue`), which the
+  as a load once the machine's validation rules accept it (`send: load`), or
+  submitted as a job (`send: queue`), which the
   machine's transport delivers load or drip like any job. A name that is unknown
   or would leave the folder is answered with a short program whose comment says
   why (the operator reads it on the controller's screen). Every request is
@@ -31,6 +32,7 @@ import asyncio
 import hashlib
 import logging
 import os
+import time
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -69,6 +71,7 @@ Blocking = Callable[[Callable[[], T]], Awaitable[T]]
 Submit = Callable[[str, str, bytes, str, str], Awaitable[str]]
 MAX_PENDING = 200  # stored punches waiting for the thread; beyond, refused and counted
 ORIGIN = "dnc"
+JUNK_LOG_EVERY = 60.0  # s between log lines about junk on an idle line
 
 
 async def _in_thread(fn: Callable[[], T]) -> T:
@@ -119,6 +122,7 @@ class PunchDesk:
         self.store = store
         self.transfers = transfers
         self.rules = rules if settings.validate_programs else None
+        self.request_rules = rules  # what answers a request is what validation accepts, always
         self.backups = backups if settings.backup else None
         self.submit = submit
         self.blocking = blocking
@@ -126,6 +130,7 @@ class PunchDesk:
         self.received = 0
         self.refused = 0
         self.junk_bytes = 0
+        self._junk_logged = -JUNK_LOG_EVERY
         self.requests = 0
         self._started: datetime | None = None
         self._timer: asyncio.TimerHandle | None = None
@@ -170,7 +175,8 @@ class PunchDesk:
             self.receiver = ProgramReceiver(
                 max_size=self.settings.max_size, strip_parity=self.receiver.strip_parity
             )
-        self._arm()
+        if data.translate(_SEVEN_BITS).translate(None, _NOT_PROGRESS) or not self.receiver.receiving:
+            self._arm()  # flow control and tape feed alone are silence: a controller in READ sends DC1s
         return answer
 
     def line_lost(self, reason: str) -> None:
@@ -211,6 +217,17 @@ class PunchDesk:
         elif isinstance(event, Junk):
             self.junk_bytes += event.count
             self.machine.set_internal(self.v_junk, self.junk_bytes % 2**32)
+            now = time.monotonic()
+            if now - self._junk_logged >= JUNK_LOG_EVERY:  # a line at the wrong baud rate talks all day
+                self._junk_logged = now
+                log.warning(
+                    "%s: %d bytes outside any program on the idle line (%d so far; e.g. %r): %s",
+                    self.name,
+                    event.count,
+                    self.junk_bytes,
+                    event.sample,
+                    event.reason,
+                )
         return None
 
     def _punched(self, event: ProgramReceived, started: datetime) -> None:
@@ -379,6 +396,21 @@ class PunchDesk:
             return Answer(
                 request.name, "BadNotReadable", reason, answer_program(reason, number=requests.number)
             )
+        if self.request_rules is not None:  # compiled reader: about 20 ms for 1 MB, so done here
+            verdict = validate_program(data, path.name, self.request_rules)
+            if not verdict.accepted:
+                first = verdict.rejections[0].reason
+                log.warning(
+                    "%s: remote request for %s refused by validation: %s", self.name, path.name, first
+                )
+                reason = f"REJECTED {request.name}"
+                return Answer(
+                    request.name,
+                    "BadInvalidArgument",
+                    f"{reason}: {first}",
+                    answer_program(f"{reason} {first}", number=requests.number),
+                )
+            data = verdict.program
         return Answer(request.name, "Good", "", data, path.name)
 
     def _queue_submit(self, answer: Answer, requests: RemoteRequests, name: str) -> None:
@@ -483,6 +515,10 @@ class PunchDesk:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+
+
+_SEVEN_BITS = bytes(v & 0x7F for v in range(256))
+_NOT_PROGRESS = bytes([0x00, 0x11, 0x12, 0x13, 0x14, 0x7F])  # NUL, DC1-DC4, DEL
 
 
 def framed(event: ProgramReceived) -> bytes:

@@ -224,3 +224,13 @@ def test_programs_received_lists_the_punches(tmp_path: Path, capsys: pytest.Capt
     record = json.loads(capsys.readouterr().out)
     assert Path(record["path"]).read_bytes() == STORED
     assert main(["programs", "received", "../etc", "--state-dir", str(tmp_path)]) == 2
+
+
+def test_a_requested_program_that_validation_refuses_is_not_sent(tmp_path: Path) -> None:
+    folder = programs_folder(tmp_path)
+    (folder / "BAD.nc").write_bytes(b"%\nO1235\nG0 X1\n%\n")  # no end code
+    desk, tree, audited = make_desk(tmp_path, settings=PunchSettings(requests=RemoteRequests(folder=folder)))
+    answer = desk.feed(b"%\nO9999 (PRG=BAD)\nM30\n%\n")
+    assert answer is not None and answer.startswith(b"%\nO9999 (REJECTED BAD")
+    assert [e.status for e in audited] == ["BadInvalidArgument"]
+    assert str(value(tree, "Jobs/Dnc/LastRequest")).startswith("BAD: REJECTED BAD")
