@@ -27,7 +27,7 @@ from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
 
-WAIT = 0.005  # s wait() waits for a first byte; the port itself never waits (timeout 0)
+WAIT = 0.05  # s wait() waits at most for a first byte (back at once when one comes); the port never waits
 POLL = 0.002  # s between looks in wait() where the port has no descriptor to select on (rfc2217://)
 
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
