@@ -27,7 +27,7 @@ from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
 
-WAIT = 0.005  # s wait() waits for a first byte; the port itself never waits (timeout 0)
+WAIT = 0.05  # s wait() waits at most for a first byte (back at once when one comes); the port never waits
 POLL = 0.002  # s between looks in wait() where the port has no descriptor to select on (rfc2217://)
 
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
@@ -107,7 +107,16 @@ class SerialPort:
                 xonxoff=False,  # the sender does XON/XOFF itself: it must see DC1/DC3 and count them
                 timeout=0,  # reads return what is there (in_waiting is 0/1 on socket://, not a count)
                 write_timeout=None if s.where.startswith("rfc2217://") else s.connect_timeout,
+                do_not_open=True,
             )
+            if url.startswith("socket://"):
+                # pyserial empties a socket's input as it opens it: what a device server passes on at
+                # once (the controller's DC1, the start of a punch) would be lost. A serial device
+                # keeps its flush (stale characters from before are the OS buffer's, not the controller's).
+                port.reset_input_buffer = _keep_input  # type: ignore[method-assign]
+            port.open()
+            if url.startswith("socket://"):
+                del port.reset_input_buffer  # the class's again
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
         self._port = cast(_Port, port)
@@ -173,6 +182,10 @@ class SerialPort:
             port.flush()
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
+
+
+def _keep_input() -> None:
+    """Stands in for pyserial's reset_input_buffer while a socket:// port opens."""
 
 
 def _why(exc: BaseException) -> str:

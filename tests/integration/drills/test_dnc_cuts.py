@@ -17,6 +17,8 @@ import re
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from gateway.jobs.queue.store import JobState
 from simulator.alarms import DNC_LINE_DROPPED
 from tests.integration.dnc.rig import Mode, body_lines, drip_program, face, simulator
@@ -24,9 +26,12 @@ from tests.integration.dnc.test_jobs import call, gateway, submit
 from tests.integration.drills.conftest import Report, count
 from tests.waiting import wait_until
 
+CUTS = count("dnc_cuts")
 
+
+@pytest.mark.timeout(90 + 20 * CUTS)
 async def test_device_server_cuts_mid_drip(harness: Any, tmp_path: Path, drill_report: Report) -> None:
-    cuts = count("dnc_cuts")
+    cuts = CUTS
     rng = random.Random(14)
     resumed_at: list[int] = []
     async with simulator(tmp_path, mode=Mode.DRIP) as sim, gateway(harness, sim) as h:
