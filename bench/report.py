@@ -79,6 +79,7 @@ class Results:
     targets_15: list[Target] = field(default_factory=list)  # issue 15's: Sparkplug B beside the JSON sink
     targets_17: list[Target] = field(default_factory=list)  # issue 17's: MTConnect
     targets_16: list[Target] = field(default_factory=list)  # issue 16's: the web console
+    targets_14: list[Target] = field(default_factory=list)  # issue 14's: serial DNC
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -122,6 +123,7 @@ class Results:
             "targets_15": [t.as_dict() for t in self.targets_15],
             "targets_17": [t.as_dict() for t in self.targets_17],
             "targets_16": [t.as_dict() for t in self.targets_16],
+            "targets_14": [t.as_dict() for t in self.targets_14],
             "details": self.details,
             "errors": self.errors,
         }
@@ -184,6 +186,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 17)", _targets(results.targets_17)]
     if results.targets_16:
         out += ["", "Targets (issue 16)", _targets(results.targets_16)]
+    if results.targets_14:
+        out += ["", "Targets (issue 14)", _targets(results.targets_14)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

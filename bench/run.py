@@ -24,7 +24,7 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, jobs, mirror, mtconnect, naive, peer, scale, sparkplug, web
+from bench.scenarios import baselines, dnc, jobs, mirror, mtconnect, naive, peer, scale, sparkplug, web
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -39,6 +39,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "sparkplug": sparkplug.run,
     "mtconnect": mtconnect.run,
     "web": web.run,
+    "dnc": dnc.run,
 }
 
 

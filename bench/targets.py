@@ -131,6 +131,58 @@ def judge(ctx: Context) -> None:
     r.targets_15 = judge_15(ctx)
     r.targets_17 = judge_17(ctx)
     r.targets_16 = judge_16(ctx)
+    r.targets_14 = judge_14(ctx)
+
+
+def judge_14(ctx: Context) -> list[Target]:
+    """Serial DNC (bench/scenarios/dnc.py): the controller's view of the gateway's serial transport."""
+    d: dict[str, Any] = ctx.results.details.get("dnc", {})
+    if not d:
+        return []
+    targets: list[Target] = []
+    load = d.get("load", {})
+    if load:
+        gw, raw = load.get("gateway", {}), load.get("raw", {})
+        share = gw.get("share")
+        targets.append(Target(
+            f"load mode, {load['size'] / 1e6:.2f} MB at 115,200 baud: share of the line rate", 90, 97, "%",
+            value=share * 100 if share is not None else None,
+            source=f"{gw.get('chars', 0):,} chars at the controller; raw pyserial write "
+                   f"{(raw.get('share') or 0) * 100:.0f} %",
+        ))  # fmt: skip
+    over = d.get("overrun", {})
+    if over:
+        sent = over["sent_after_dc3"]
+        where = f"{over['size'] / 1e6:.2f} MB drip, {sent['n']:,} DC3s"
+        targets.append(Target(
+            "characters sent after DC3, p99 (115,200 baud)", 10, 2, "chars", higher_is_better=False,
+            value=sent["p99"], source=where,
+        ))  # fmt: skip
+        targets.append(Target(
+            "characters sent after DC3, max (115,200 baud)", 16, 4, "chars", higher_is_better=False,
+            value=sent["max"], source=where,
+        ))  # fmt: skip
+    fleet = d.get("fleet", {})
+    if fleet:
+        where = f"{fleet['machines']} machines × {fleet['baud']:,} baud, {fleet['seconds']:.0f} s"
+        targets.append(Target(
+            "fleet drip: starvation events while link capacity suffices", 0, 0, "", higher_is_better=False,
+            value=fleet["starvations"], source=f"{where}; {fleet['starved_seconds']:.2f} s starved",
+        ))  # fmt: skip
+        targets.append(Target(
+            "fleet drip: gateway CPU, share of one core", 50, 15, "%", higher_is_better=False,
+            value=fleet["cpu_share"] * 100, source=f"{where}; the serial transports' process",
+        ))  # fmt: skip
+    restart = d.get("restart", {})
+    if restart:
+        delays = restart.get("delays") or []
+        targets.append(Target(
+            "drip restart at block N: command to first byte (worst of the repeats)", 2, 0.5, "s",
+            higher_is_better=False, value=max(delays) if delays else None,
+            source=f"{len(delays)} restarts, {restart['program_bytes'] / 1e6:.1f} MB program, "
+            f"line {restart['line']:,}",
+        ))  # fmt: skip
+    return targets
 
 
 def judge_15(ctx: Context) -> list[Target]:

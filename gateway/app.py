@@ -205,11 +205,11 @@ class Gateway:
         mappings = config.mappings
         install_commands(self.tree, mappings)  # the commands as Commands/ methods, before the sinks see them
         self.alarms = build_alarms(config, self.tree)
+        # Before the sinks are built: the job service adds Jobs/ variables and methods (Programs, and a
+        # serial machine's Commands/Drip*, which the MQTT sink's command requests list when built).
+        self.jobs = build_jobs(config, self.tree)
         self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms)
         self.sources: list[Source] = [create_source(m, mappings[n]) for n, m in self.tree.machines.items()]
-        self.jobs = build_jobs(
-            config, self.tree
-        )  # before the sinks start: it adds Jobs/ variables and methods
         web = build_web(config, self, self.jobs, self.alarms, self.audit, self.sinks)
         if web is not None:  # after the job service: the console submits through it
             self.sinks.append(web)

@@ -198,6 +198,10 @@ class AuditStoreError(StoreError):
     """The audit table cannot be opened or written (a missing one, opened with create=False, too)."""
 
 
+class TransferLogError(StoreError):
+    """The DNC transfer log cannot be opened or written (gateway/jobs/dnc/transfers.py)."""
+
+
 # --- jobs --------------------------------------------------------------------------------------
 
 

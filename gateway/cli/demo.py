@@ -26,11 +26,13 @@ from typing import Any
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
 from gateway.cli.check import report_config_error
+from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at
+from gateway.cli.demo_dnc import simulator as dnc_simulator
 from gateway.cli.demo_driver import keep_program_running
 from gateway.config.access import AccessConfig, UserConfig
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.http import HttpConfig
-from gateway.config.jobs import FtpAccount, InboxConfig
+from gateway.config.jobs import ControllerSerial, FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt, MqttConfig
@@ -99,6 +101,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=None,
         help="wait for this primary host's STATE before the births (default: publish at once)",
     )
+    p.add_argument(
+        "--sim-dnc-port", type=_port_or_off, default=4001,
+        help="the serial machine's device server (its simulator's DNC face, socket://; default 4001; "
+        "'off': no serial machine)",
+    )  # fmt: skip
+    p.add_argument(
+        "--sim-dnc-opcua-port", type=int, default=4843, help="the serial machine simulator's OPC UA port"
+    )
+    p.add_argument(
+        "--sim-dnc-ftp-port", type=int, default=2123, help="the serial machine simulator's FTP port"
+    )
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
 
@@ -122,14 +135,14 @@ def _sim_shdr_default() -> int | None:
         return 7878
 
 
-def find_mapping(given: Path | None) -> Path:
+def find_mapping(given: Path | None, name: str = "laser-sim.yaml") -> Path:
     if given is not None:
         return given
     for base in (Path.cwd(), Path(__file__).resolve().parents[2]):
-        candidate = base / "mappings" / "laser-sim.yaml"
+        candidate = base / "mappings" / name
         if candidate.exists():
             return candidate
-    return Path("mappings/laser-sim.yaml")
+    return Path("mappings") / name
 
 
 def port_in_use(host: str, port: int) -> bool:
@@ -140,8 +153,11 @@ def port_in_use(host: str, port: int) -> bool:
 
 def handle(args: argparse.Namespace) -> int:
     configure(args.log_level)
+    files = [find_mapping(args.mapping)]
+    if args.sim_dnc_port is not None:
+        files.append(find_mapping(None, "laser-dnc.yaml"))
     try:
-        base = load([find_mapping(args.mapping)])
+        base = load(files)
     except ConfigError as exc:
         report_config_error(exc)
         return 2
@@ -154,17 +170,22 @@ def handle(args: argparse.Namespace) -> int:
         mapping = mapping.model_copy(update={"mqtt": MachineMqtt(writable=True, commands=True)})
     mapping = demo_jobs(mapping, args)
     mapping = demo_copydata(mapping, args)
+    machines = [mapping]
+    if args.sim_dnc_port is not None:
+        machines.append(
+            point_at(base.machines[1], opcua_port=args.sim_dnc_opcua_port, dnc_port=args.sim_dnc_port)
+        )
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://0.0.0.0:{args.opcua_port}/cnc-gateway"),
         state_dir=str(args.state_dir),
-        inbox=demo_inbox(mapping, args),
+        inbox=demo_inbox(mapping, args, [m.machine for m in machines]),
         mqtt=None if args.no_mqtt else MqttConfig(host=args.mqtt_host, port=args.mqtt_port),
         sparkplug=demo_sparkplug(args),
         mtconnect=None if args.mtconnect_port is None else AgentConfig(port=args.mtconnect_port),
         http=HttpConfig(host=args.http_host, port=args.http_port) if args.http_port else None,
         **demo_access(),
     )
-    config = Config(gateway, (mapping,), Path.cwd(), base.files)
+    config = Config(gateway, tuple(machines), Path.cwd(), base.files)
     try:
         asyncio.run(run_until_signalled(demo(config, args)))
     except SinkError as exc:
@@ -214,11 +235,14 @@ def demo_jobs(mapping: MachineMapping, args: argparse.Namespace) -> MachineMappi
     return mapping.model_copy(update={"jobs": mapping.jobs.model_copy(update={"controller": controller})})
 
 
-def demo_inbox(mapping: MachineMapping, args: argparse.Namespace) -> InboxConfig:
-    """The FTP inbox, one account for the demo machine; its password from the environment or the default."""
+def demo_inbox(
+    mapping: MachineMapping, args: argparse.Namespace, machines: list[str] | None = None
+) -> InboxConfig:
+    """The FTP inbox, one account for the demo's machines; its password from the environment or the
+    default."""
     password = os.environ.get(DEMO_INBOX_PASSWORD_ENV) or DEMO_INBOX_PASSWORD
     account = FtpAccount(
-        user=DEMO_INBOX_USER, password_hash=hash_password(password), machines=[mapping.machine]
+        user=DEMO_INBOX_USER, password_hash=hash_password(password), machines=machines or [mapping.machine]
     )
     return InboxConfig(host=args.inbox_host, port=args.inbox_port, accounts=[account])
 
@@ -230,8 +254,13 @@ async def demo(config: Config, args: argparse.Namespace) -> None:
         broker = await _ensure_broker(config, stack)
         # The simulator first, so the gateway finds its controller at once.
         switch = None if external else await stack.enter_async_context(SimulatorSwitch(config, args, toggle))
+        dnc = None
+        if len(config.machines) > 1 and not port_in_use("127.0.0.1", args.sim_dnc_opcua_port):
+            dnc = await stack.enter_async_context(
+                dnc_simulator(args, config.state_dir / "simulator-dnc-store")
+            )
         gw = await stack.enter_async_context(Gateway(config))
-        await _run_demo(gw, config, args, switch, toggle, broker)
+        await _run_demo(gw, config, args, switch, toggle, broker, dnc)
 
 
 async def _ensure_broker(config: Config, stack: contextlib.AsyncExitStack) -> str:
@@ -259,6 +288,7 @@ async def _run_demo(
     switch: SimulatorSwitch | None,
     toggle: asyncio.Event,
     broker: str,
+    dnc: Any = None,
 ) -> None:
     mapping = config.machines[0]
     machine = gw.tree.machines[mapping.machine]
@@ -267,12 +297,16 @@ async def _run_demo(
     tasks: list[tuple[str, Callable[[], Coroutine[object, object, None]]]] = [
         ("demo:driver", lambda: keep_program_running(machine, busy))
     ]
+    if jobs is not None and len(config.machines) > 1:
+        serial = gw.tree.machines[config.machines[1].machine]
+        state = serial.nodes["Machine/State"]
+        tasks.append(("demo:drip", lambda: keep_dripping(jobs, serial.name, lambda: state.sample.value == 0)))
     if switch is None:
         log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
     else:
         tasks.append(("demo:simulator", switch.run))
         _install_toggle(toggle)
-    print_banner(gw, mapping, args, switch is None, broker)
+    print_banner(gw, mapping, args, switch is None, broker, config.machines[1:])
     await gw.run(*tasks)
 
 
@@ -344,7 +378,12 @@ def _install_toggle(toggle: asyncio.Event) -> None:
 
 
 def print_banner(
-    gw: Gateway, mapping: MachineMapping, args: argparse.Namespace, external: bool, broker: str = "off"
+    gw: Gateway,
+    mapping: MachineMapping,
+    args: argparse.Namespace,
+    external: bool,
+    broker: str = "off",
+    serial: tuple[MachineMapping, ...] = (),
 ) -> None:
     opcua = gw.sink("opcua")
     endpoint = getattr(opcua, "endpoint", f"opc.tcp://127.0.0.1:{args.opcua_port}/cnc-gateway")
@@ -397,6 +436,7 @@ def print_banner(
                 "the program starts when the machine is idle"
             ),
         ]
+    lines += dnc_banner(serial, mqtt)
     lines += web_banner(gw)
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     lines += mtconnect_banner(gw, args, external)
@@ -406,6 +446,27 @@ def print_banner(
         )
     lines += ["  stop             Ctrl-C", ""]
     print("\n".join(lines), flush=True)
+
+
+def dnc_banner(serial: tuple[MachineMapping, ...], mqtt: MqttConfig | None) -> list[str]:
+    """The serial machine: where its line is, and where to watch its drip-feed."""
+    lines = []
+    for m in serial:
+        if m.jobs is None or not isinstance(m.jobs.controller, ControllerSerial):
+            continue
+        c = m.jobs.controller
+        line = f"{c.baud} baud {c.bytesize}{c.parity[0].upper()}{c.stopbits}, {c.handshake}, {c.mode}"
+        jobs = f"OPC UA Objects/Machines/{m.machine}/Jobs/Block, LeadSeconds, RemainingSeconds"
+        lines += [
+            f"  serial machine   {m.machine}: {c.where} ({line}); drip-feeds {DRIP_NAME} every so often",
+            f"  drip progress    cnc-gateway jobs list; {jobs}",
+        ]
+        if mqtt is not None:
+            lines.append(
+                f"  drip control     mosquitto_pub -t {mqtt.prefix}/{m.machine}/commands/DripPause -m '{{}}' "
+                '(DripResume, DripAbort; DripRestart {"Job": …, "Line": …})'
+            )
+    return lines
 
 
 def sparkplug_banner(gw: Gateway, mapping: MachineMapping) -> list[str]:

@@ -1,9 +1,12 @@
-"""`cnc-gateway jobs list|show|retry|cancel|priority|submit`: the job queue from the command line.
+"""`cnc-gateway jobs list|show|retry|restart|cancel|priority|submit`: the job queue from the command line.
 
-list/show/retry/cancel/priority open the queue file in the state directory
-directly, so they work whether the gateway runs or not; a running gateway
-notices their changes within about a second. `submit` uploads through the
-FTP inbox, like nesting software does, and prints the gateway's verdict.
+list/show/retry/restart/cancel/priority open the queue file in the state
+directory directly, so they work whether the gateway runs or not; a running
+gateway notices their changes within about a second. `submit` uploads through
+the FTP inbox, like nesting software does, and prints the gateway's verdict;
+with `--follow` it then shows the job's delivery as a progress bar (a serial
+line's progress file, `<state>/jobs/dnc/<machine>.json`: bytes, the line running,
+the lead in the controller's buffer and the run time left) until it ends.
 """
 
 from __future__ import annotations
@@ -51,6 +54,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     q.add_argument("job", nargs="+")
     q.set_defaults(handler=handle_retry)
 
+    q = jobs.add_parser(
+        "restart",
+        help="send a FAILED drip-feed again from a line: its header, modal state, then that line on",
+    )
+    common(q)
+    q.add_argument("job")
+    q.add_argument("--line", type=int, required=True, help="the program line (the job's reason names it)")
+    q.set_defaults(handler=handle_restart)
+
     q = jobs.add_parser("cancel", help="take waiting jobs out of the queue")
     common(q)
     q.add_argument("job", nargs="+")
@@ -77,6 +89,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     q.add_argument("--insecure", action="store_true", help="with --tls: do not check the certificate")
     q.add_argument("--timeout", type=float, default=30.0)
+    q.add_argument(
+        "--follow", action="store_true", help="then follow the job until it ends: state and delivery progress"
+    )
     q.set_defaults(handler=handle_submit)
 
 
@@ -124,11 +139,11 @@ def handle_list(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([j.as_dict() for j in jobs], indent=2))
         return 0
-    print_table(jobs, sys.stdout)
+    print_table(jobs, sys.stdout, state_dir(args))
     return 0
 
 
-def print_table(jobs: list[Job], out: TextIO) -> None:
+def print_table(jobs: list[Job], out: TextIO, state: Path | None = None) -> None:
     if not jobs:
         print("no jobs", file=out)
         return
@@ -143,7 +158,7 @@ def print_table(jobs: list[Job], out: TextIO) -> None:
                 _size(j.size),
                 j.received_at.astimezone().strftime("%Y-%m-%d %H:%M:%S"),
                 str(j.attempts),
-                _short(j.reason, 60),
+                _short(_sending(j, state) or j.reason, 60),
             )
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
@@ -203,6 +218,9 @@ def handle_show(args: argparse.Namespace) -> int:
                     ),
                 )
             )
+    sending = _sending(job, state_dir(args))
+    if sending:
+        fields.append(("progress", sending))
     if job.delivered_at:
         fields.append(
             (
@@ -245,6 +263,59 @@ def handle_retry(args: argparse.Namespace) -> int:
 
 def handle_cancel(args: argparse.Namespace) -> int:
     return _each(args, "cancel")
+
+
+def handle_restart(args: argparse.Namespace) -> int:
+    from gateway.jobs.delivery.transports.serial import request_restart
+    from gateway.jobs.service import Spool
+
+    if args.line < 1:
+        print("error: --line must be a program line (1 or more)", file=sys.stderr)
+        return 2
+    spool = Spool(state_dir(args) / "jobs" / "spool")
+    with open_queue(args) as queue:
+        try:
+            job = queue.get(_seq(args.job))
+            if job.state is not JobState.FAILED:
+                raise JobError(f"{job.id} is {job.state.value}: only a FAILED job restarts at a line")
+            program = spool.program(job)
+            if not program.is_file():
+                raise JobError(f"{job.id}'s program is no longer in the spool")
+            request_restart(program, args.line)
+            job = queue.retry(job.seq, by=f"{getpass.getuser()} (cli, restart at line {args.line})")
+        except JobError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+    print(f"{job.id} {job.state.value}: restarts at line {args.line}")
+    return 0
+
+
+def _sending(job: Job, state: Path | None) -> str:
+    """A SENDING job's progress on a serial line (its progress file), '' when there is none."""
+    if state is None or job.state is not JobState.SENDING:
+        return ""
+    from gateway.jobs.delivery.transports.serial import read_progress
+
+    point = read_progress(state, job.machine)
+    if point is None or Path(point.program).stem != job.id:
+        return ""
+    return progress_text(point.offset, point.total, point.line, point.lead, point.remaining, point.held)
+
+
+def progress_text(
+    sent: int, total: int, line: int | None, lead: float | None, remaining: float | None, held: str
+) -> str:
+    """`45% 2.5/5.6 kB, line 120, lead 12 s, 3:20 left, held: DC3`."""
+    parts = [f"{100 * sent / total if total else 100:.0f}% {_size(sent)}/{_size(total)}"]
+    if line:
+        parts.append(f"line {line}")
+    if lead is not None:
+        parts.append(f"lead {lead:.0f} s")
+    if remaining is not None:
+        parts.append(f"{int(remaining) // 60}:{int(remaining) % 60:02d} left")
+    if held:
+        parts.append(f"held: {held}")
+    return ", ".join(parts)
 
 
 def handle_priority(args: argparse.Namespace) -> int:
@@ -299,7 +370,46 @@ def handle_submit(args: argparse.Namespace) -> int:
         return 2
     progress.done()
     print(reply)
-    return 0 if ok else 1
+    if not ok:
+        return 1
+    if args.follow:
+        return follow(args, reply, sys.stderr)
+    return 0
+
+
+def follow(args: argparse.Namespace, reply: str, out: TextIO, *, poll: float = 0.5) -> int:
+    """Show the job named in the inbox's reply until it ends: 0 when DELIVERED, 1 otherwise."""
+    import re
+
+    match = re.search(r"\bJ\d{6}\b", reply)
+    if match is None:
+        print("error: the reply names no job to follow", file=sys.stderr)
+        return 1
+    seq = _seq(match.group(0))
+    state = state_dir(args)
+    bar = Progress(1, out, threshold=0)
+    last = ""
+    while True:
+        with open_queue(args) as queue:
+            job = queue.get(seq)
+        if job.state in (JobState.DELIVERED, JobState.REJECTED, JobState.FAILED, JobState.CANCELLED):
+            bar.done()
+            print(f"{job.id} {job.state.value}: {job.reason}")
+            return 0 if job.state is JobState.DELIVERED else 1
+        from gateway.jobs.delivery.transports.serial import read_progress
+
+        point = read_progress(state, job.machine) if job.state is JobState.SENDING else None
+        if point is not None and Path(point.program).stem == job.id and bar.enabled:
+            bar.total = point.total
+            text = progress_text(
+                point.offset, point.total, point.line, point.lead, point.remaining, point.held
+            )
+            bar.show(point.offset, text)
+        elif job.state.value != last:
+            bar.done()
+            print(f"{job.id} {job.state.value}: {job.reason}", file=out)
+        last = job.state.value
+        time.sleep(poll)
 
 
 class Progress:
@@ -333,10 +443,19 @@ class Progress:
             f"{sent / 1e6:.1f}/{self.total / 1e6:.1f} MB  {rate / 1e6:.1f} MB/s"
         )
 
+    def show(self, sent: int, text: str, width: int = 30) -> None:
+        """A bar with the caller's words after it (a serial delivery's line, lead and time left)."""
+        share = min(1.0, sent / self.total) if self.total else 1.0
+        filled = int(share * width)
+        self.out.write(f"\r[{'#' * filled}{' ' * (width - filled)}] {text}\x1b[K")
+        self.out.flush()
+        self._shown = True
+
     def done(self) -> None:
         if self._shown:
             self.out.write("\n")
             self.out.flush()
+            self._shown = False
 
 
 def _size(n: int) -> str:

@@ -13,6 +13,7 @@ from gateway.cli import (
     check,
     demo,
     discover,
+    dnc,
     frames,
     jobs,
     passwords,
@@ -35,6 +36,7 @@ COMMANDS = (
     frames,
     audit,
     alarms,
+    dnc,
     sparkplug,
     tokens,
 )

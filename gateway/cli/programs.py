@@ -1,5 +1,8 @@
 """`cnc-gateway programs list|get|put|delete MACHINE …`: the controller's program store (FTP).
 
+`programs received [MACHINE]` lists the programs operators punched on serial
+machines, which the gateway stored under its state directory (`dnc/received/`).
+
 The machine's mapping file says where the store is (`jobs.controller`). `put`
 checks the program with the machine's validation rules first (`--no-validate`
 skips that, for restoring a backup that a newer rule would refuse); to queue a
@@ -31,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 from gateway.audit.store import AuditStore, audit_path
 from gateway.cli.check import report_config_error
-from gateway.cli.state_dir import resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import load
 from gateway.errors import AuditStoreError, ConfigError, DeliveryError
@@ -90,6 +93,41 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     q.add_argument("name")
     audited(q)
     q.set_defaults(handler=handle_delete)
+
+    q = actions.add_parser(
+        "received", help="programs operators punched on serial machines (stored by the gateway), oldest first"
+    )
+    q.add_argument("machine", nargs="?", default=None, help="one machine's (default: every machine's)")
+    add_state_dir_options(q)
+    q.add_argument("--json", action="store_true", help="one JSON object per line")
+    q.set_defaults(handler=handle_received)
+
+
+def handle_received(args: argparse.Namespace) -> int:
+    """Punched programs: when, which machine, the stored file, size, SHA-256 and the verdict."""
+    import json
+
+    from gateway.errors import PathRefused
+    from gateway.jobs.dnc.received import ReceivedStore
+    from gateway.jobs.dnc.transfers import transfers_path
+
+    state = resolve_state_dir(args, "received programs", transfers_path)
+    store = ReceivedStore(state)
+    try:
+        programs = store.list(args.machine)
+    except PathRefused as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for p in programs:
+        if args.json:
+            print(json.dumps({**p.as_dict(), "path": str(store.path(p))}, ensure_ascii=False))
+        else:
+            local = p.received.astimezone().strftime("%Y-%m-%d %H:%M:%S")
+            verdict = f"  {p.verdict}" if p.verdict else ""
+            print(f"{local}  {p.machine}  {p.file}  {p.size} B  sha256 {p.sha256[:16]}{verdict}")
+    if not programs and not args.json:
+        print("no received programs", file=sys.stderr)
+    return 0
 
 
 def jobs_config(args: argparse.Namespace) -> JobsConfig:

@@ -10,12 +10,13 @@ software drops programs into: where it listens, who may log in, and its limits.
 from __future__ import annotations
 
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import ByteSize, Field, SecretStr, field_validator, model_validator
+from pydantic import ByteSize, Discriminator, Field, SecretStr, Tag, field_validator, model_validator
 
 from gateway.auth.passwords import parse_hash
 from gateway.config.base import Backoff, Strict
+from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -37,6 +38,7 @@ Size = Annotated[ByteSize, Field(description="Bytes, or a size with a unit: 64Mi
 class ControllerFtp(Strict):
     """The controller's FTP program store."""
 
+    type: Literal["ftp"] = Field(default="ftp", description="ftp (the default) or serial")
     host: str = Field(min_length=1, description="Controller address")
     port: Port = 21
     user: str = Field(default="anonymous", min_length=1)
@@ -82,6 +84,123 @@ class ControllerFtp(Strict):
         if "/" in suffix or "\\" in suffix or not suffix.isprintable():
             raise ValueError("temp_suffix must be a plain, printable file name suffix such as .tmp")
         return suffix
+
+
+_URL = re.compile(r"^(socket|rfc2217)://([A-Za-z0-9_.\-]+|\[[0-9A-Fa-f:.]+\]):(\d{1,5})/?$")
+_DEVICE = re.compile(r"^(/dev/[A-Za-z0-9_.\-/]+|COM[0-9]{1,3}|\\\\\.\\COM[0-9]{1,3})$")
+
+
+class AlarmWhen(Strict):
+    """A mapped variable whose value says the controller is in alarm (a drip-feed then stops, FAILED)."""
+
+    path: str = Field(description="Mapped variable, e.g. Machine/State")
+    equals: bool | int | float | str = Field(description="The value that means alarm, e.g. 3")
+
+    @field_validator("path")
+    @classmethod
+    def _path(cls, path: str) -> str:
+        return check_variable_path(path)
+
+
+class ControllerSerial(Strict):
+    """A controller that takes programs over RS-232 (serial DNC), directly or through a device server."""
+
+    type: Literal["serial"] = Field(description="serial: RS-232 DNC (load or drip-feed)")
+    where: str = Field(
+        description="A device path (/dev/ttyUSB0, COM3), rfc2217://host:port (a device server with "
+        "RFC 2217) or socket://host:port (a raw TCP device server)"
+    )
+    baud: int = Field(default=9600, ge=50, le=4_000_000, description="Line speed, bits per second")
+    bytesize: Literal[7, 8] = Field(default=7, description="Data bits (Fanuc: 7)")
+    parity: Literal["none", "even", "odd"] = Field(default="even", description="Parity bit")
+    stopbits: Literal[1, 2] = Field(default=2, description="Stop bits")
+    handshake: Literal["xonxoff", "rtscts", "none"] = Field(
+        default="xonxoff", description="Flow control: the controller's DC1/DC3 (xonxoff), RTS/CTS, or none"
+    )
+    eob: Literal["lf", "crlf"] = Field(default="lf", description="End of block the controller expects")
+    leader: int = Field(default=20, ge=0, le=10_000, description="NULs sent before the first %")
+    percent: bool = Field(default=True, description="Frame the program with % markers")
+    chunk_size: int = Field(default=200, ge=1, le=65_536, description="Most bytes handed to the port at once")
+    software_parity: bool | None = Field(
+        default=None,
+        description="Send a 7-bit line's parity bit as bit 7 of 8-bit bytes (a transparent raw TCP port, "
+        "a pseudo-terminal); default: on for socket:// with 7 data bits and parity, off otherwise",
+    )
+    mode: Literal["load", "drip"] = Field(
+        default="load",
+        description="load: the whole program into the controller's memory; drip: it runs as it arrives",
+    )
+    start: Literal["dc1", "now"] = Field(
+        default="dc1", description="Start sending on the controller's first DC1 (its READ), or at once"
+    )
+    dc1_timeout: float = Field(
+        default=60.0, gt=0, description="Seconds to wait for the controller's DC1 before the job fails"
+    )
+    stall_timeout: float = Field(
+        default=600.0,
+        gt=0,
+        description="Seconds the controller may hold the line with DC3 before the job fails "
+        "(a machine in feed hold)",
+    )
+    lead_time: float = Field(
+        default=30.0, gt=0, description="Drip: seconds of cutting the controller's buffer should hold ahead"
+    )
+    buffer: int = Field(
+        default=256, ge=8, le=16 * 1024 * 1024, description="The controller's receive buffer, bytes"
+    )
+    rapid: float = Field(
+        default=10_000.0, gt=0, description="Rapid rate, mm/min, for the run-time estimate while dripping"
+    )
+    connect_timeout: float = Field(default=10.0, gt=0, description="Seconds to open the port")
+    alarm_when: AlarmWhen | None = Field(
+        default=None,
+        description="A serial line cannot tell that the controller went into alarm; where the machine's "
+        "state is mapped (from another driver), this stops a transfer when it says alarm",
+    )
+    dsr: bool = Field(
+        default=False,
+        description="A device path only: fail the transfer when DSR drops (the cable has DSR wired)",
+    )
+
+    @field_validator("where")
+    @classmethod
+    def _where(cls, where: str) -> str:
+        if "://" in where:
+            match = _URL.match(where)
+            if match is None:
+                raise ValueError(f"{where!r} is not like socket://host:port or rfc2217://host:port")
+            if not 1 <= int(match.group(3)) <= 65535:
+                raise ValueError(f"port {match.group(3)} in {where!r} is outside 1..65535")
+            return where
+        if not _DEVICE.match(where) or ".." in where.split("/"):
+            raise ValueError(f"{where!r} is not a serial device path (/dev/ttyUSB0, COM3) or a URL")
+        return where
+
+    @model_validator(mode="after")
+    def _line(self) -> ControllerSerial:
+        if self.software_parity and (self.bytesize != 7 or self.parity == "none"):
+            raise ValueError("software_parity needs bytesize 7 and parity even or odd")
+        return self
+
+    @property
+    def soft_parity(self) -> bool:
+        if self.software_parity is not None:
+            return self.software_parity
+        return self.where.startswith("socket://") and self.bytesize == 7 and self.parity != "none"
+
+
+def _controller_type(value: Any) -> str:
+    """Which controller model a `controller:` section is; files from before serial DNC have no `type`."""
+    if isinstance(value, dict):
+        return str(value.get("type", "ftp"))
+    return str(getattr(value, "type", "ftp"))
+
+
+CONTROLLER_TAGS = ("ftp", "serial")
+Controller = Annotated[
+    Annotated[ControllerFtp, Tag("ftp")] | Annotated[ControllerSerial, Tag("serial")],
+    Discriminator(_controller_type),
+]
 
 
 class Retry(Backoff):
@@ -142,7 +261,7 @@ class AutoStart(Strict):
 class JobsConfig(Strict):
     """The machine's job queue: its program store, checks, duplicates, retries and auto-start."""
 
-    controller: ControllerFtp
+    controller: Controller
     validation: ValidationRules = Field(default_factory=ValidationRules)
     duplicates: Literal["skip", "replace"] = Field(
         default="skip",
@@ -158,11 +277,28 @@ class JobsConfig(Strict):
         description="After delivery, compare the size (SIZE or a listing), or download it back and hash",
     )
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
+    punch: PunchSettings | None = Field(
+        default=None,
+        description="Serial lines: store programs the operator punches, answer remote requests",
+    )
     mqtt_retained_jobs: int = Field(
         default=100, ge=0, le=100_000,
         description="Ended jobs (DELIVERED, REJECTED, FAILED, CANCELLED) whose MQTT jobs/<id> record "
         "stays retained; older ones are cleared from the broker. 0: cleared as soon as they end",
     )  # fmt: skip
+
+    @model_validator(mode="after")
+    def _punch_needs_a_line(self) -> JobsConfig:
+        if self.punch is not None and not isinstance(self.controller, ControllerSerial):
+            raise ValueError("punch: needs a serial controller (jobs.controller type: serial)")
+        return self
+
+    @model_validator(mode="after")
+    def _auto_fits(self) -> JobsConfig:
+        serial = isinstance(self.controller, ControllerSerial)
+        if serial and self.auto is not None and self.auto.select_value == "path":
+            raise ValueError("auto.select_value: path needs a program folder; a serial line has none")
+        return self
 
 
 def check_variable_path(path: str) -> str:

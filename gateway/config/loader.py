@@ -24,6 +24,7 @@ from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.alarms import SOURCE_TAGS
 from gateway.config.gateway import GatewayConfig
+from gateway.config.jobs import CONTROLLER_TAGS
 from gateway.config.mapping import DRIVER_TAGS, MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
@@ -201,7 +202,11 @@ def issues_from(exc: ValidationError, located: Located) -> list[ConfigIssue]:
 
 def _untagged(loc: Loc) -> Loc:
     """Without the member names pydantic puts after a tagged union (`driver.opcua.endpoint`)."""
-    for at, tags in ((("driver",), DRIVER_TAGS), (("alarms", "source"), SOURCE_TAGS)):
+    for at, tags in (
+        (("driver",), DRIVER_TAGS),
+        (("alarms", "source"), SOURCE_TAGS),
+        (("jobs", "controller"), CONTROLLER_TAGS),
+    ):
         n = len(at)
         if len(loc) > n and loc[:n] == at and loc[n] in tags:
             return (*at, *loc[n + 1 :])

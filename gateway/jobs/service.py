@@ -14,7 +14,9 @@ Files under the state directory:
     jobs/spool/<id>.received    an upload between arrival and validation
     jobs/spool/<id>.program     a validated program waiting for delivery (kept for FAILED/CANCELLED: retry)
     rejected/<id>-<name>        a rejected upload, and <id>-<name>.reason saying why
-    backups/<machine>/          programs fetched with Programs.Backup
+    backups/<machine>/          programs fetched with Programs.Backup (and punched ones, with punch.backup)
+    dnc/transfers.sqlite3       the serial transfer log (cnc-gateway dnc log)
+    dnc/received/<machine>/     programs operators punched (jobs.punch), each with a .json record
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
-from gateway.config.jobs import JobsConfig
+from gateway.config.jobs import AlarmWhen, ControllerFtp, JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import (
     ConfigError,
@@ -40,10 +42,16 @@ from gateway.errors import (
     NotFound,
     PathRefused,
     SinkError,
+    StoreError,
 )
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
+from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
 from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.dnc.desk import PunchDesk
+from gateway.jobs.dnc.received import ReceivedStore
+from gateway.jobs.dnc.transfers import TransferLog
+from gateway.jobs.drip import drip_methods
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
 from gateway.jobs.inbox.paths import check_file_name
@@ -55,7 +63,7 @@ from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
 from gateway.jobs.validation.upload_check import UploadCheck
 from gateway.jobs.validation.verdict import Verdict
-from gateway.model.tree import VariableTree
+from gateway.model.tree import Machine, VariableTree
 
 log = logging.getLogger("gateway.jobs")
 
@@ -114,10 +122,14 @@ class JobService:
         self.publisher = JobPublisher(tree, self.machines)
         self.autostarters: dict[str, AutoStarter] = {}
         self.workers: dict[str, DeliveryWorker] = {}
+        self.lines: dict[str, SerialTransport] = {}  # the serial DNC lines, by machine
+        self.transfer_log: TransferLog | None = None  # opened with the queue when there are serial lines
         for name, jobs in self.machines.items():
             machine = tree.machines[name]
             if jobs.auto is not None:
-                self.autostarters[name] = AutoStarter(machine, jobs.auto, jobs.controller.folder)
+                folder = jobs.controller.folder if isinstance(jobs.controller, ControllerFtp) else ""
+                self.autostarters[name] = AutoStarter(machine, jobs.auto, folder)
+            transport = transport_for(jobs, machine=name, state_dir=state)
             self.workers[name] = DeliveryWorker(
                 name,
                 jobs,
@@ -125,14 +137,37 @@ class JobService:
                 self.spool,
                 self.publisher,
                 self._q,
-                transport_for(jobs),
+                transport,
                 autostart=self.autostarters.get(name),
             )
+            if isinstance(transport, SerialTransport):
+                self.lines[name] = transport
+                transport.alarm = alarm_reader(machine, transport.settings.alarm_when)
+                for method in drip_methods(transport, functools.partial(self.restart_job, machine=name)):
+                    machine.add_method(method)
             methods = program_methods(
                 name, store=program_store_for(jobs), submit=self.submit_bytes, backups=self.backups_dir / name
             )
             for method in methods:
                 machine.add_method(method)
+        # Serial lines: what an idle line hears (jobs.punch); the line owner takes its machine's desk.
+        self.desks: dict[str, PunchDesk] = {
+            name: PunchDesk(
+                tree.machines[name],
+                jobs.punch,
+                store=ReceivedStore(state),
+                rules=jobs.validation,
+                backups=self.backups_dir / name,
+                submit=self._submit_request,
+                blocking=self.threads.work,
+            )
+            for name, jobs in self.machines.items()
+            if jobs.punch is not None
+        }
+        for name, desk in self.desks.items():
+            line = self.lines.get(name)
+            if line is not None:
+                line.listener = desk  # the line listens for it between jobs
         self.inbox: Inbox | None = None
         self._changed = asyncio.Event()
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -152,6 +187,16 @@ class JobService:
             raise SinkError(str(exc)) from None
         self._opened = True
         try:
+            if self.lines or self.desks:
+                try:
+                    log_file = await self.threads.queue(TransferLog.in_state_dir, self.config.state_dir)
+                except StoreError as exc:
+                    raise SinkError(str(exc)) from None
+                self.transfer_log = log_file
+                for line in self.lines.values():
+                    line.transfer_log = self.transfer_log
+                for desk in self.desks.values():
+                    desk.transfers = self.transfer_log
             await self._publish_all()
             await self._resume()
             self.inbox = self._build_inbox()
@@ -171,9 +216,16 @@ class JobService:
             task.cancel()
         if tasks:
             await asyncio.wait(tasks)
+        for line in self.lines.values():
+            line.close()
         if self._opened:
             self._opened = False
+            for desk in self.desks.values():
+                await desk.drain()
             await self.threads.queue(self.queue.close)
+            if self.transfer_log is not None:
+                await self.threads.queue(self.transfer_log.close)
+                self.transfer_log = None
         await self.threads.shutdown()
 
     def _build_inbox(self) -> Inbox | None:
@@ -215,6 +267,10 @@ class JobService:
             for name, worker in self.workers.items():
                 tg.create_task(worker.run(), name=f"jobs:deliver:{name}")
             tg.create_task(self._watch(), name="jobs:watch")
+            for name, desk in self.desks.items():
+                tg.create_task(desk.run(), name=f"jobs:punch:{name}")
+            for name, line in self.lines.items():
+                tg.create_task(line.run(), name=f"jobs:dnc-line:{name}")
 
     # --- arrivals ----------------------------------------------------------------------------------
 
@@ -249,6 +305,11 @@ class JobService:
         await self.threads.work(staging.write_bytes, data)
         upload = Upload(machine, filename, staging, len(data), hashlib.sha256(data).hexdigest(), user, origin)
         return await self.submit(upload)
+
+    async def _submit_request(self, machine: str, filename: str, data: bytes, user: str, origin: str) -> str:
+        """A remote request answered through the queue (punch.requests.send: queue)."""
+        reply = await self.submit_bytes(machine, filename, data, user=user, origin=origin)
+        return reply.message
 
     async def _take(self, upload: Upload, holder: dict[str, Job]) -> UploadReply:
         self._processing[upload.machine] += 1
@@ -465,6 +526,30 @@ class JobService:
     async def retry_job(self, job_id: str, by: str) -> dict[str, Any]:
         return await self._operate(self.queue.retry, job_id, by)
 
+    async def restart_job(
+        self, job_id: str, line: int, by: str, *, machine: str | None = None
+    ) -> dict[str, Any]:
+        """A FAILED drip-feed queued again, to start at program line `line` (header, modal state, line on)."""
+        self._open()
+        seq = _seq(job_id)
+        try:
+            job = await self.threads.queue(self.queue.get, seq)
+        except JobError as exc:
+            raise NotFound(str(exc)) from None
+        if machine is not None and job.machine != machine:
+            raise InvalidArgument(f"{job.id} is a job of {job.machine}, not {machine}")
+        if job.machine not in self.lines:
+            raise InvalidArgument(
+                f"{job.machine} takes programs over FTP: a restart at a line needs a serial line"
+            )
+        if job.state is not JobState.FAILED:
+            raise InvalidState(f"{job.id} is {job.state.value}: only a FAILED job restarts at a line")
+        program = self.spool.program(job)
+        if not program.is_file():
+            raise InvalidState(f"{job.id}'s program is no longer in the spool")
+        await self.threads.work(request_restart, program, line)
+        return await self._operate(self.queue.retry, job_id, f"{by} (restart at line {line})")
+
     async def cancel_job(self, job_id: str, by: str) -> dict[str, Any]:
         return await self._operate(self.queue.cancel, job_id, by)
 
@@ -601,6 +686,25 @@ class JobService:
             }
 
         self.publisher.summary(machine, **await self.threads.queue(read))
+
+
+def alarm_reader(machine: Machine, when: AlarmWhen | None) -> Callable[[], str | None] | None:
+    """Reads the variable a serial machine's `alarm_when` names (from the line's thread: one attribute
+    read); None without one, or when the variable is not mapped (logged)."""
+    if when is None:
+        return None
+    node = machine.nodes.get(when.path)
+    if node is None:
+        log.warning("%s: alarm_when names %s, which is not mapped: ignored", machine.name, when.path)
+        return None
+
+    def read() -> str | None:
+        sample = node.sample
+        return (
+            f"{when.path} = {sample.value!r}" if sample is not None and sample.value == when.equals else None
+        )
+
+    return read
 
 
 def _seq(job_id: str) -> int:

@@ -71,6 +71,8 @@ from simulator.machine import Machine, MachineState
 DNC_ALARMS = frozenset({NO_PROGRAM_SPACE, DNC_COMMUNICATION, DNC_LINE_DROPPED, DNC_BUFFER_OVERFLOW})
 #: Per-episode counts of characters after DC3 kept for statistics (p99 and the like).
 EPISODES_KEPT = 10_000
+#: Drip-fed lines kept in `executed` (tests compare them with the program, byte for byte).
+EXECUTED_KEPT = 200_000
 DC1_REPEAT = 0.5  # s (real time) between DC1s while a read waits for its first character
 _FEED = bytes([0x00, 0x7F])  # NUL and DEL: leader and tape feed, never buffered
 _O_NUMBER = re.compile(rb"^\s*O\s*0*(\d{1,8})", re.IGNORECASE)
@@ -178,6 +180,8 @@ class DncController:
         self.on_change = on_change or (lambda: None)
         self.stats = DncStats()
         self.episodes: deque[int] = deque(maxlen=EPISODES_KEPT)
+        #: Every line a drip feed handed to the interpreter, in order, as it came (without its line end).
+        self.executed: deque[bytes] = deque(maxlen=EXECUTED_KEPT)
         self.stage = Stage.OFFLINE
         self.link: str = ""
         self._coupling: Coupling | None = None
@@ -609,6 +613,7 @@ class DncController:
             self.on_change()  # the buffer drained: perhaps DC1
             if raw.lstrip(b" \t").startswith(b"%"):
                 return self._end_of_stream()
+            self.executed.append(raw)
             acts, ended = planner.feed(raw.decode("ascii", "replace"))
             if ended:
                 self._planner = None

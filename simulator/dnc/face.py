@@ -192,6 +192,14 @@ class DncFace:
     def punch(self, name: str) -> None:
         self.controller.punch(name)
 
+    def drop_link(self) -> bool:
+        """Cut the connected link (a device server losing its network, a cable pulled); False if none."""
+        link = self._link
+        if link is None:
+            return False
+        link.close()
+        return True
+
     def request(self, name: str) -> None:
         self.controller.request(name)
 

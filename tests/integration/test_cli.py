@@ -218,7 +218,15 @@ def demo_extra_args() -> list[str]:
     demo = parser._subparsers._group_actions[0].choices["demo"]  # type: ignore[union-attr]
     options = {opt for action in demo._actions for opt in action.option_strings}
     extra: list[str] = []
-    for flag in ("--mqtt-port", "--inbox-port", "--copydata-port", "--mtconnect-port"):
+    for flag in (
+        "--mqtt-port",
+        "--inbox-port",
+        "--copydata-port",
+        "--mtconnect-port",
+        "--sim-dnc-port",
+        "--sim-dnc-opcua-port",
+        "--sim-dnc-ftp-port",
+    ):
         if flag in options:
             extra += [flag, str(free_port())]
     return extra

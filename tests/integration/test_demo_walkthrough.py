@@ -95,7 +95,16 @@ def broker(tmp_path: Path) -> Iterator[Mosquitto]:
 async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[str]:
     """`cnc-gateway demo` on free ports, publishing to the test broker; yields its OPC UA endpoint."""
     gw_port = free_port()
-    flags = ("--sim-opcua-port", "--sim-ftp-port", "--inbox-port", "--copydata-port", "--mtconnect-port")
+    flags = (
+        "--sim-opcua-port",
+        "--sim-ftp-port",
+        "--inbox-port",
+        "--copydata-port",
+        "--mtconnect-port",
+        "--sim-dnc-port",
+        "--sim-dnc-opcua-port",
+        "--sim-dnc-ftp-port",
+    )
     ports = {flag: free_port() for flag in flags}
     env = {k: v for k, v in os.environ.items() if k != "CNC_DEMO_PASSWORD"}  # the README's passwords
     log = tmp_path / "demo.log"

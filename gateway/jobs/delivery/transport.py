@@ -36,6 +36,7 @@ class Program:
     size: int  # bytes in `path`
     sha256: str  # hex digest of `path`
     number: str | None = None  # the program name the validator found in it (an O-number), if any
+    user: str = ""  # who submitted it (for a transport's own records: the DNC transfer log)
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,6 +46,8 @@ class Progress:
     sent: int  # bytes the controller has taken so far
     block: int | None = None  # the block (line) the controller is executing, when the transport knows it
     lead: float | None = None  # seconds of program the controller holds ahead of the block it executes
+    remaining: float | None = None  # seconds of program left to run from that block (drip-feed)
+    held: str = ""  # why nothing goes out now (drip-feed): "DC3", "waiting for DC1", "paused", or ""
 
 
 #: Called by a transport as the program goes out; cheap, never blocks, never raises.

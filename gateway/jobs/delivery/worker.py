@@ -37,6 +37,17 @@ log = logging.getLogger("gateway.jobs.delivery")
 IDLE_POLL = 5.0  # s: a worker with nothing to do looks again at least this often
 
 
+def progress_record(progress: Progress) -> dict[str, Any]:
+    """A transport's progress as the job's record shows it (`jobs/<id>` on MQTT, `cnc-gateway jobs`)."""
+    record: dict[str, Any] = {"sent": progress.sent}
+    if progress.block is not None or progress.lead is not None:  # a drip-feed says more
+        record["block"] = progress.block
+        record["lead"] = None if progress.lead is None else round(progress.lead, 1)
+        record["remaining"] = None if progress.remaining is None else round(progress.remaining, 1)
+        record["held"] = progress.held
+    return record
+
+
 class Spool(Protocol):
     def program(self, job: Job) -> Path: ...
 
@@ -113,7 +124,7 @@ class DeliveryWorker:
         self.publisher.progress(job, 0, total)
 
         def report(progress: Progress) -> None:
-            self.publisher.progress(job, progress.sent, total)
+            self.publisher.progress(job, progress.sent, total, progress_record(progress))
 
         try:
             if not program.path.is_file():
@@ -137,7 +148,7 @@ class DeliveryWorker:
     def program(self, job: Job) -> Program:
         """What the transport needs of a queued job."""
         size, digest = job.program_size or 0, job.program_sha256 or ""
-        return Program(job.filename, self.spool.program(job), size, digest, job.program_name)
+        return Program(job.filename, self.spool.program(job), size, digest, job.program_name, job.user)
 
     async def _failed(self, job: Job, exc: DeliveryError) -> None:
         attempts, limit = job.attempts, self.config.max_attempts
@@ -177,6 +188,10 @@ class DeliveryWorker:
                     return
                 break
             except DeliveryError as exc:
+                if exc.permanent:  # the transport says it must not be sent again on its own
+                    await self._q(self.queue.send_failed, job.seq, f"failed: {exc.reason}", retry_at=None)
+                    log.warning("%s: %s FAILED after a restart: %s", self.machine, job.id, exc.reason)
+                    return
                 delay = self.config.retry.delay(attempt)
                 log.warning(
                     "%s: cannot check %s on the controller (%s); again in %g s",

@@ -65,6 +65,27 @@ class JobVariables:
         )
         self.last_rejected_reason = add("Jobs/LastRejectedReason", "String", "Why it was refused", "")
         self.failed_count = add("Jobs/FailedCount", "UInt32", "FAILED jobs waiting for a retry or cancel", 0)
+        self.block = add(
+            "Jobs/Block",
+            "Int32",
+            "Drip-feed: the program line the controller is estimated to run (0: none)",
+            0,
+        )
+        self.lead = add(
+            "Jobs/LeadSeconds",
+            "Double",
+            "Drip-feed: seconds of cutting estimated in the controller's buffer",
+            0.0,
+        )
+        self.remaining = add(
+            "Jobs/RemainingSeconds", "Double", "Drip-feed: estimated run time left, in seconds", 0.0
+        )
+        self.held = add(
+            "Jobs/Held",
+            "String",
+            "Why nothing is being sent now: DC3, waiting for DC1, paused (or empty)",
+            "",
+        )
         self.estimate = add(
             "Jobs/LastEstimatedSeconds",
             "Double",
@@ -104,6 +125,10 @@ class JobPublisher:
         v.set(v.current, describe(current))
         if current is None:
             v.set(v.progress, 0.0)
+            v.set(v.block, 0)
+            v.set(v.lead, 0.0)
+            v.set(v.remaining, 0.0)
+            v.set(v.held, "")
         if delivered is not None:
             v.set(v.last_delivered, describe(delivered))
             v.set(v.last_delivered_at, delivered.delivered_at or delivered.updated_at)
@@ -116,12 +141,14 @@ class JobPublisher:
             v.set(v.last_rejected, describe(rejected))
             v.set(v.last_rejected_reason, rejected.reason)
 
-    def job(self, job: Job, progress: float | None = None) -> None:
-        """The job's retained record."""
+    def job(self, job: Job, progress: float | None = None, detail: Mapping[str, Any] | None = None) -> None:
+        """The job's retained record (with a drip-feed's block, lead and time left while it is sent)."""
         record = job.as_dict()
         if progress is None:
             progress = 100.0 if job.state is JobState.DELIVERED else 0.0
         record["progress"] = round(progress, 1)
+        if detail is not None:
+            record.update(detail)
         self.tree.events.publish(Event(job.machine, f"jobs/{job.id}", record, retain=True))
         self._retire(job)
 
@@ -155,9 +182,9 @@ class JobPublisher:
             payload["user"] = job.user
         self.tree.events.publish(Event(t.machine, "jobs/events", payload, ts=t.ts))
 
-    def progress(self, job: Job, sent: int, total: int) -> None:
+    def progress(self, job: Job, sent: int, total: int, detail: Mapping[str, Any] | None = None) -> None:
         """Bytes sent so far, at most every PROGRESS_EVERY seconds per job (and always the last)."""
-        percent = 100.0 * sent / total if total else 100.0
+        percent = min(100.0, 100.0 * sent / total) if total else 100.0
         now = time.monotonic()
         if sent < total and now - self._progress_at.get(job.seq, 0.0) < PROGRESS_EVERY:
             return
@@ -165,7 +192,12 @@ class JobPublisher:
         v = self.vars.get(job.machine)
         if v is not None:
             v.set(v.progress, round(percent, 1))
-        self.job(job, percent)
+            if detail is not None:
+                v.set(v.block, detail.get("block") or 0)
+                v.set(v.lead, detail.get("lead") or 0.0)
+                v.set(v.remaining, detail.get("remaining") or 0.0)
+                v.set(v.held, detail.get("held") or "")
+        self.job(job, percent, detail)
 
     def forget(self, job: Job) -> None:
         self._progress_at.pop(job.seq, None)

@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from tests.integration.jobs.conftest import renames, store  # noqa: F401 - fixtures for the drills
+from tests.integration.jobs.conftest import harness, renames, store  # noqa: F401 - fixtures for the drills
 
 SCALE = os.environ.get("CNC_DRILL_SCALE", "small").strip().lower() or "small"
 if SCALE not in ("small", "soak"):
@@ -28,6 +28,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "controller_restarts": (3, 30),
     "mtconnect_restarts": (3, 30),  # per mode: an SHDR adapter, an upstream agent
     "gateway_kills": (5, 50),
+    "dnc_cuts": (3, 30),  # device-server connections cut mid-drip
     "slow_consumers": (10_000, 150_000),  # changes that stream past the stalled consumers
 }
 

@@ -1,23 +1,36 @@
 """The delivery transports, one module each, and the choice of one per machine from its mapping file.
 
 A machine's `jobs.controller` section says how its controller takes programs; its
-type picks the transport. Only FTP exists today (`ControllerFtp`, transports/ftp.py).
+type picks the transport: the controller's FTP store (`ControllerFtp`,
+transports/ftp.py) or a serial DNC line (`ControllerSerial`, transports/serial.py).
 A new transport adds its settings model to gateway/config/jobs.py and one branch
 to each function here (docs/architecture.md, "Adding a delivery transport").
 """
 
 from __future__ import annotations
 
-from gateway.config.jobs import ControllerFtp, JobsConfig
+from pathlib import Path
+
+from gateway.config.jobs import ControllerFtp, ControllerSerial, JobsConfig
 from gateway.jobs.delivery.transport import DeliveryTransport, OpenStore
 from gateway.jobs.delivery.transports.ftp import FtpTransport
+from gateway.jobs.delivery.transports.serial import SerialTransport
+from gateway.jobs.dnc.transfers import TransferLog
 
 
-def transport_for(jobs: JobsConfig) -> DeliveryTransport:
+def transport_for(
+    jobs: JobsConfig,
+    *,
+    machine: str = "",
+    state_dir: Path | None = None,
+    transfer_log: TransferLog | None = None,
+) -> DeliveryTransport:
     """How programs reach this machine's controller."""
     controller = jobs.controller
     if isinstance(controller, ControllerFtp):
         return FtpTransport(controller, verify=jobs.verify)
+    if isinstance(controller, ControllerSerial):
+        return SerialTransport(controller, machine=machine, state_dir=state_dir, transfer_log=transfer_log)
     # A settings model without its branch here: a bug, not a configuration error.
     raise TypeError(f"no delivery transport for {type(controller).__name__}")
 

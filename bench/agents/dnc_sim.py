@@ -1,0 +1,197 @@
+"""Simulated serial DNC controllers for the DNC benchmark: N of the simulator's DNC faces (simulator/dnc),
+each a raw TCP device server with its own machine, stepped like the simulator's runner steps its one.
+
+Commands: `setup` (count, baud, mode, speed, buffer, high, low, load_rate): start N faces, answer their URLs;
+`mark`: forget first/last receive times; `stats`: per face the controller's counters, the characters
+after each DC3, the first and last receive time (CLOCK_MONOTONIC, which every process shares), the
+machine's starvations and the seconds it spent starved; `teardown`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from bench.agents.protocol import percentiles, serve, setup_logging
+from gateway.codecs.dnc import DC3, LineSettings
+from simulator.dnc.controller import DncSpec, Mode
+from simulator.dnc.face import DncFace
+from simulator.dnc.links import Link
+from simulator.machine import Machine
+from simulator.store import MemoryStore
+
+TICK = 0.01  # s between machine steps, as the simulator's runner
+
+
+@dataclass
+class Timed:
+    first: float | None = None  # the device server's first and last receive (TCP)
+    last: float | None = None
+    chars: int = 0
+    rx_first: float | None = None  # the controller's: when its character count first and last moved
+    rx_last: float | None = None
+    rx_seen: int = 0
+
+
+class TimedFace(DncFace):
+    """A DNC face that notes when data first and last came in (the controller's view of a transfer), and
+    per DC3 of the controller: how many characters the device server already held (sent before the DC3,
+    still on their way), and how many reached the device server after it, until the DC1 (sent after it:
+    what the sender's reaction time costs)."""
+
+    timed: Timed
+    in_flight: list[int]
+    sent_after: list[int]
+    _after: int | None
+
+    def watch_dc3(self) -> None:
+        self.in_flight, self.sent_after, self._after = [], [], None
+        controller = self.controller
+        send_flow = controller._send_flow
+
+        def watched(char: int) -> None:
+            if char == DC3:
+                self.in_flight.append(len(controller.wire))
+                if self._after is not None:
+                    self.sent_after.append(self._after)
+                self._after = 0
+            elif self._after is not None:
+                self.sent_after.append(self._after)
+                self._after = None
+            send_flow(char)
+
+        controller._send_flow = watched  # type: ignore[method-assign]
+
+    def link_data(self, link: Link, data: bytes) -> None:
+        now = time.monotonic()
+        t = self.timed
+        if t.first is None:
+            t.first = now
+        t.last = now
+        t.chars += len(data)
+        if self._after is not None:
+            self._after += len(data)
+        super().link_data(link, data)
+
+
+@dataclass
+class Fleet:
+    faces: list[TimedFace] = field(default_factory=list)
+    starved: list[float] = field(default_factory=list)
+    stack: contextlib.AsyncExitStack | None = None
+    ticker: asyncio.Task[None] | None = None
+    speed: float = 1.0
+
+
+async def main() -> None:
+    fleet = Fleet()
+
+    async def tick() -> None:
+        last = time.monotonic()
+        while True:
+            await asyncio.sleep(TICK)
+            now = time.monotonic()
+            dt = now - last
+            last = now
+            for i, face in enumerate(fleet.faces):
+                t = face.timed
+                rx = face.controller.stats.rx_chars
+                if rx != t.rx_seen:
+                    t.rx_seen = rx
+                    t.rx_last = now
+                    if t.rx_first is None:
+                        t.rx_first = now
+                machine = face.machine
+                if machine.waiting_for_data:
+                    fleet.starved[i] += dt
+                machine.step(dt * fleet.speed)
+
+    async def setup(request: dict[str, Any]) -> dict[str, Any]:
+        await teardown({})
+        count = int(request["count"])
+        speed = float(request.get("speed", 1.0))
+        line = LineSettings(baud=int(request["baud"]))
+        spec = DncSpec(
+            line=line,
+            mode=Mode(request.get("mode", "load")),
+            buffer_size=int(request.get("buffer", 256)),
+            high_water=request.get("high"),
+            low_water=request.get("low"),
+            load_rate=request.get("load_rate"),
+            max_program=int(request.get("max_program", 16 * 1024 * 1024)),
+        )
+        stack = contextlib.AsyncExitStack()
+        await stack.__aenter__()
+        fleet.stack, fleet.speed = stack, speed
+        fleet.faces, fleet.starved = [], []
+        for _ in range(count):
+            face = TimedFace(spec, Machine(MemoryStore()), MemoryStore(), tcp_port=0, speed=speed)
+            face.timed = Timed()
+            face.watch_dc3()
+            face.controller.episodes = deque()  # every DC3 episode, not the last 10,000
+            await stack.enter_async_context(face)
+            fleet.faces.append(face)
+            fleet.starved.append(0.0)
+        fleet.ticker = asyncio.create_task(tick(), name="dnc-sim:tick")
+        return {"urls": [f.socket_url for f in fleet.faces]}
+
+    def mark(_request: dict[str, Any]) -> dict[str, Any]:
+        for i, face in enumerate(fleet.faces):
+            face.timed = Timed(rx_seen=face.controller.stats.rx_chars)
+            fleet.starved[i] = 0.0
+            face.machine.starvations = 0
+            face.controller.episodes.clear()
+            face.in_flight.clear()
+            face.sent_after.clear()
+        return {}
+
+    def stats(_request: dict[str, Any]) -> dict[str, Any]:
+        out = []
+        for i, face in enumerate(fleet.faces):
+            s = face.stats()
+            episodes = s.pop("after_dc3_episodes")
+            out.append(
+                {
+                    **s,
+                    "after_dc3": percentiles([float(e) for e in episodes]),
+                    "episodes": len(episodes),
+                    "in_flight_at_dc3": percentiles([float(n) for n in face.in_flight]),
+                    "sent_after_dc3": percentiles([float(n) for n in face.sent_after]),
+                    "first": face.timed.first,
+                    "last": face.timed.last,
+                    "chars": face.timed.chars,
+                    "rx_first": face.timed.rx_first,
+                    "rx_last": face.timed.rx_last,
+                    "starved_seconds": fleet.starved[i],
+                    "machine": face.machine.state.name,
+                }
+            )
+        return {"faces": out}
+
+    async def teardown(_request: dict[str, Any]) -> dict[str, Any]:
+        if fleet.ticker is not None:
+            fleet.ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await fleet.ticker
+            fleet.ticker = None
+        if fleet.stack is not None:
+            await fleet.stack.aclose()
+            fleet.stack = None
+        fleet.faces = []
+        return {}
+
+    try:
+        await serve({"setup": setup, "mark": mark, "stats": stats, "teardown": teardown})
+    finally:
+        await teardown({})
+
+
+if __name__ == "__main__":
+    argparse.ArgumentParser().parse_args()
+    setup_logging()
+    asyncio.run(main())

@@ -1,0 +1,455 @@
+"""Serial DNC delivery: load a program into the controller's memory, or drip-feed it while it runs.
+
+One `SerialTransport` per machine owns its line (`jobs.controller` with
+`type: serial`): the port (gateway/jobs/dnc/port.py, pyserial), one thread that
+does every blocking call on it (so a DC3 is acted on between two small writes,
+transfer.py), and the operator's hold on a drip-feed (pause, resume, abort).
+Between jobs it listens to the line for an `IdleListener` (the punch desk) when
+one is attached, and keeps the port open for it; without one the port is open
+only while a program goes out.
+
+A drip-feed that stopped part way (a dropped line, an alarm, an abort, a gateway
+restart) is never sent again on its own: its job is FAILED with the line to
+resume at, and a `restart(job, line)` sends the program's header, the modal
+state and the program from that line (gateway/codecs/dnc/restart.py). So that a
+gateway restarted in the middle of a drip knows, the line writes a checkpoint
+(`<state>/jobs/dnc/<machine>.json`) while it drips; `holds()` finds it and fails
+the job for the operator instead of sending it again. Every transfer goes into
+the DNC transfer log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import hashlib
+import json
+import logging
+import os
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, TypeVar
+
+from gateway.codecs.dnc import FramingError, WireProgram, block_times, frame_program, restart_lines
+from gateway.config.jobs import ControllerSerial
+from gateway.errors import DeliveryError, InvalidState, StoreError
+from gateway.jobs.delivery.transport import Program, Progress, ReportProgress
+from gateway.jobs.dnc.idle import IdleListener
+from gateway.jobs.dnc.port import SerialPort, describe, line_settings
+from gateway.jobs.dnc.transfer import Control, Outcome, Position, Timing, TransferFailed, run_transfer
+from gateway.jobs.dnc.transfers import TransferLog, TransferRecord
+
+log = logging.getLogger("gateway.jobs.dnc")
+
+T = TypeVar("T")
+CHECKPOINT_EVERY = 1.0  # s between checkpoint writes while dripping
+LISTEN_EVERY = 0.05  # s between looks at an idle line
+REOPEN_AFTER = 5.0  # s before an idle line that failed is opened again
+
+
+@dataclass(frozen=True, slots=True)
+class Checkpoint:
+    """A transfer in progress, as written to `<state>/jobs/dnc/<machine>.json` about once a second: where
+    a drip-feed stopped after a restart (`holds`), and the progress `cnc-gateway jobs` shows."""
+
+    program: str  # spool path of the job's program (its stem is the job id)
+    sha256: str
+    drip: bool
+    offset: int
+    total: int
+    resume_line: int | None
+    line: int | None = None
+    lead: float | None = None
+    remaining: float | None = None
+    held: str = ""
+
+    def as_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self))
+
+    @classmethod
+    def parse(cls, text: str) -> Checkpoint:
+        raw = json.loads(text)
+        if not isinstance(raw, dict):
+            raise ValueError("not an object")
+        return cls(**{f.name: raw[f.name] for f in dataclasses.fields(cls) if f.name in raw})
+
+
+def progress_path(state_dir: Path, machine: str) -> Path:
+    return state_dir / "jobs" / "dnc" / f"{machine}.json"
+
+
+def read_progress(state_dir: Path, machine: str) -> Checkpoint | None:
+    """The transfer under way on `machine`'s line (or interrupted by a restart), None if none."""
+    try:
+        return Checkpoint.parse(progress_path(state_dir, machine).read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+@dataclass(slots=True)
+class Drip:
+    """The transfer under way, as the commands and the job's record see it."""
+
+    program: Program
+    control: Control
+    position: Position | None = None
+
+
+class SerialTransport:
+    """A DeliveryTransport over one serial line (see the module docstring)."""
+
+    def __init__(
+        self,
+        settings: ControllerSerial,
+        *,
+        machine: str = "",
+        state_dir: Path | None = None,
+        transfer_log: TransferLog | None = None,
+    ) -> None:
+        self.settings = settings
+        self.machine = machine
+        self.line = line_settings(settings)
+        self.port = SerialPort(settings)
+        self.listener: IdleListener | None = None
+        self.transfer_log = transfer_log
+        self.checkpoint_path = None if state_dir is None else progress_path(state_dir, machine or "line")
+        self.current: Drip | None = None
+        #: Says why the controller is in alarm, None when it is not (the service reads `alarm_when`).
+        self.alarm: Callable[[], str | None] | None = None
+        self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
+        self._lock = asyncio.Lock()
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix=f"dnc-{machine or 'line'}")
+
+    @property
+    def where(self) -> str:
+        return self.settings.where
+
+    async def _call(self, fn: Any, *args: Any) -> Any:
+        return await asyncio.get_running_loop().run_in_executor(self._thread, fn, *args)
+
+    def close(self) -> None:
+        """Stop the line's thread (after the last transfer; the gateway is stopping)."""
+        if self.current is not None:
+            self.current.control.abort("the gateway is stopping")
+        # After the transfer in hand has seen the abort (within a slice), the port closes, in that thread.
+        self._thread.submit(self.port.close)
+        self._thread.shutdown(wait=False)
+
+    # --- control (the Commands methods, the CLI through the queue) --------------------------------
+
+    def pause(self) -> str:
+        drip = self._drip()
+        drip.control.pause()
+        return f"{drip.program.name} paused"
+
+    def resume(self) -> str:
+        drip = self._drip()
+        drip.control.resume()
+        return f"{drip.program.name} resumed"
+
+    def abort(self, by: str) -> str:
+        drip = self._drip()
+        drip.control.abort(f"aborted by {by or 'an operator'}")
+        return f"{drip.program.name} aborted"
+
+    def _drip(self) -> Drip:
+        if self.current is None:
+            raise InvalidState("nothing is being sent on this line")
+        return self.current
+
+    # --- DeliveryTransport -------------------------------------------------------------------------
+
+    async def holds(self, program: Program) -> bool:
+        """A serial line cannot look into the controller. A drip-feed interrupted by a restart is not sent
+        again: the job fails, saying where it stopped, and waits for an operator's restart at a line."""
+        point = self._read_checkpoint()
+        if point is not None and point.drip and point.program == str(program.path):
+            self._clear_checkpoint()
+            at = f" near line {point.resume_line}" if point.resume_line is not None else ""
+            raise DeliveryError(
+                f"a drip-feed interrupted by a gateway restart{at} after {point.offset} bytes: "
+                "not sent again on its own; restart it at a line",
+                permanent=True,
+            )
+        return False
+
+    async def deliver(self, program: Program, progress: ReportProgress) -> str:
+        data = await asyncio.to_thread(_read_checked, program)
+        start = await asyncio.to_thread(take_restart, program.path)
+        try:
+            lines = restart_lines(data, start) if start is not None else data
+            wire = frame_program(lines, self.line)
+        except FramingError as exc:
+            raise DeliveryError(f"cannot send over a serial line: {exc}", permanent=True) from None
+        drip = self.settings.mode == "drip"
+        timing = None
+        if drip:
+            times = block_times(data.decode("latin-1"), rapid=self.settings.rapid)
+            timing = Timing(wire, times, self.settings.buffer)
+        what = f"{program.name} from line {start}" if start is not None else program.name
+        started = datetime.now(UTC)
+        async with self._lock:
+            outcome: Outcome | None = None
+            error: DeliveryError | None = None
+            try:
+                outcome = await self._send(program, wire, timing, progress, what)
+            except DeliveryError as exc:
+                error = exc
+            await self._log(program, wire, started, outcome, error, start)
+        if error is not None:
+            raise error
+        assert outcome is not None
+        self.last = outcome
+        mode = "drip-fed" if drip else "loaded"
+        return (
+            f"{describe(self.where)} ({mode}{f' from line {start}' if start is not None else ''}: "
+            f"{outcome.sent} bytes, sha256 {outcome.sha256[:12]}…; program sha256 {program.sha256[:12]}… "
+            f"checked; {outcome.pauses} DC3, at most {outcome.after_dc3_max} characters after one)"
+        )
+
+    async def _send(
+        self,
+        program: Program,
+        wire: WireProgram,
+        timing: Timing | None,
+        progress: ReportProgress,
+        what: str,
+    ) -> Outcome:
+        loop = asyncio.get_running_loop()
+        drip = Drip(program, Control())
+        self.current = drip
+        last_checkpoint = 0.0
+
+        def report(pos: Position) -> None:  # in the line's thread
+            nonlocal last_checkpoint
+            drip.position = pos
+            now = time.monotonic()
+            if now - last_checkpoint >= CHECKPOINT_EVERY:
+                last_checkpoint = now
+                self._write_checkpoint(program, pos, None if timing is None else timing.resume_line(pos.sent))
+            loop.call_soon_threadsafe(
+                progress, Progress(pos.sent, pos.line, pos.lead, pos.remaining, pos.held)
+            )
+
+        settings = self.settings
+        opened_here = not self.port.is_open
+        try:
+            if opened_here:
+                await self._call(self.port.open)
+            log.info("%s: sending %s over %s (%s mode)", self.machine, what, self.where, settings.mode)
+            outcome: Outcome = await self._call(
+                lambda: run_transfer(
+                    self.port,
+                    wire,
+                    self.line,
+                    wait_for_dc1=settings.start == "dc1",
+                    dc1_timeout=settings.dc1_timeout,
+                    stall_timeout=settings.stall_timeout,
+                    control=drip.control,
+                    timing=timing,
+                    report=report,
+                    alarm=self.alarm,
+                )
+            )
+        except TransferFailed as exc:
+            self._clear_checkpoint()  # the job's reason says where it stopped
+            if exc.offset > wire.body_start or not exc.permanent:
+                await self._call(self.port.close)  # a line in doubt is opened afresh next time
+            raise
+        except asyncio.CancelledError:
+            drip.control.abort("the gateway is stopping")
+            raise
+        finally:
+            self.current = None
+        self._clear_checkpoint()
+        if opened_here and self.listener is None:
+            await self._call(self.port.close)
+        return outcome
+
+    async def _log(
+        self,
+        program: Program,
+        wire: WireProgram,
+        started: datetime,
+        outcome: Outcome | None,
+        error: DeliveryError | None,
+        start: int | None,
+    ) -> None:
+        if self.transfer_log is None:
+            return
+        detail = f"{self.settings.mode}" + (f" from line {start}" if start is not None else "")
+        if error is not None:
+            detail = f"{detail}: {error.reason}"
+        aborted = error is not None and "aborted by" in error.reason
+        record = TransferRecord(
+            machine=self.machine,
+            direction="send",
+            program=program.name,
+            size=outcome.sent if outcome is not None else len(wire),
+            sha256=outcome.sha256 if outcome is not None else hashlib.sha256(wire.data).hexdigest(),
+            started=started,
+            ended=datetime.now(UTC),
+            outcome="ok" if error is None else "aborted" if aborted else "failed",
+            user=program.user or None,
+            detail=detail,
+        )
+        try:
+            await asyncio.to_thread(self.transfer_log.record, record)
+        except StoreError as exc:
+            log.error("%s: transfer not logged: %s", self.machine, exc)
+
+    # --- listening between jobs ----------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Until cancelled: while no job sends, read the line for the idle listener, send its answers."""
+        if self.listener is None:
+            return
+        listener = self.listener
+        while True:
+            async with self._lock:
+                answer: bytes | None = None
+                try:
+                    if not self.port.is_open:
+                        await self._call(self.port.open)
+                    data: bytes = await self._call(self.port.read)
+                    if data:
+                        answer = listener.feed(data)
+                    if answer is not None:
+                        await self._answer(answer)
+                except DeliveryError as exc:
+                    await self._call(self.port.close)
+                    listener.line_lost(exc.reason)
+                    log.debug("%s: idle line: %s", self.machine, exc.reason)
+                    await asyncio.sleep(REOPEN_AFTER)
+            await asyncio.sleep(LISTEN_EVERY)
+
+    async def _answer(self, text: bytes) -> None:
+        try:
+            wire = frame_program(text, self.line)
+        except FramingError as exc:
+            log.warning("%s: the answer cannot be sent: %s", self.machine, exc)
+            return
+        started = datetime.now(UTC)
+        error: DeliveryError | None = None
+        outcome: Outcome | None = None
+        try:
+            outcome = await self._answer_transfer(wire)
+        except DeliveryError as exc:
+            error = exc
+            raise
+        finally:
+            name = text.lstrip(b"%\r\n \0").split(b"\n", 1)[0].decode("ascii", "replace").strip() or "?"
+            answer = Program(name, Path(os.devnull), len(text), hashlib.sha256(text).hexdigest(), None)
+            await self._log(answer, wire, started, outcome, error, None)
+
+    async def _answer_transfer(self, wire: WireProgram) -> Outcome:
+        settings = self.settings
+        result: Outcome = await self._call(
+            lambda: run_transfer(
+                self.port,
+                wire,
+                self.line,
+                wait_for_dc1=settings.start == "dc1",
+                dc1_timeout=settings.dc1_timeout,
+                stall_timeout=settings.stall_timeout,
+                control=Control(),
+                timing=None,
+                report=lambda _pos: None,
+            )
+        )
+        return result
+
+    # --- the checkpoint ----------------------------------------------------------------------------
+
+    def _write_checkpoint(self, program: Program, pos: Position, resume: int | None) -> None:
+        path = self.checkpoint_path
+        if path is None:
+            return
+        point = Checkpoint(
+            str(program.path),
+            program.sha256,
+            self.settings.mode == "drip",
+            pos.sent,
+            pos.total,
+            resume,
+            pos.line,
+            None if pos.lead is None else round(pos.lead, 1),
+            None if pos.remaining is None else round(pos.remaining, 1),
+            pos.held,
+        )
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp")
+            tmp.write_text(point.as_json())
+            os.replace(tmp, path)
+        except OSError as exc:
+            log.warning("%s: drip checkpoint not written: %s", self.machine, exc)
+
+    def _read_checkpoint(self) -> Checkpoint | None:
+        path = self.checkpoint_path
+        if path is None:
+            return None
+        try:
+            return Checkpoint.parse(path.read_text())
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            log.warning("%s: drip checkpoint %s unreadable (%s); ignored", self.machine, path, exc)
+            return None
+
+    def _clear_checkpoint(self) -> None:
+        if self.checkpoint_path is not None:
+            with contextlib.suppress(OSError):
+                self.checkpoint_path.unlink(missing_ok=True)
+
+
+def restart_file(program: Path) -> Path:
+    """Where a restart at a line waits for the job's next delivery: beside its spooled program, so that
+    `cnc-gateway jobs restart` (another process) and a gateway restart keep it."""
+    return program.with_suffix(".restart")
+
+
+def request_restart(program: Path, line: int) -> None:
+    """The next delivery of `program` starts at source line `line` (header, modal state, line on)."""
+    path = restart_file(program)
+    tmp = path.with_suffix(".restart-tmp")
+    tmp.write_text(f"{line}\n")
+    os.replace(tmp, path)
+
+
+def take_restart(program: Path) -> int | None:
+    """The line a restart asked for (and forget it), None for the whole program."""
+    path = restart_file(program)
+    try:
+        text = path.read_text().strip()
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise DeliveryError(f"cannot read the restart request {path}: {exc.strerror or exc}") from None
+    path.unlink(missing_ok=True)
+    if not text.isdigit() or int(text) < 1:
+        raise DeliveryError(f"the restart request {path} holds {text!r}, not a line number", permanent=True)
+    return int(text)
+
+
+def _read_checked(program: Program) -> bytes:
+    """The validated program, checked byte for byte against what validation saw (size and SHA-256)."""
+    try:
+        data = program.path.read_bytes()
+    except OSError as exc:
+        raise DeliveryError(f"cannot read {program.path}: {exc.strerror or exc}", permanent=True) from None
+    digest = hashlib.sha256(data).hexdigest()
+    if len(data) != program.size or (program.sha256 and digest != program.sha256):
+        raise DeliveryError(
+            f"{program.path} is not the program validated ({len(data)} bytes, sha256 {digest[:12]}…; "
+            f"expected {program.size} bytes, {program.sha256[:12]}…)",
+            permanent=True,
+        )
+    return data

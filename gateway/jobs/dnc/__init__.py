@@ -1,0 +1,1 @@
+"""Serial DNC for jobs: one owner per serial line (send, drip-feed control, idle listening)."""

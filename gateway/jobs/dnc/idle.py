@@ -1,0 +1,28 @@
+"""What a serial line's owner does with bytes that arrive while no job is sending: `IdleListener`.
+
+The line owner (gateway/jobs/dnc/line.py) keeps the port open between
+transfers. When nothing is being sent it reads the line and hands every byte to
+its idle listener: the punch desk (an operator's PUNCH, a remote request) plugs
+in here. A listener that wants something sent back (the answer to a remote
+request) returns it; the owner sends it as a load before it listens again.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+
+class IdleListener(Protocol):
+    """Hears a serial line while no job uses it. Called on the event loop; must not block."""
+
+    def feed(self, data: bytes) -> bytes | None:
+        """Bytes read from the port (as the port gave them: with software parity, bit 7 still set).
+
+        Returns a program (plain text, `%` markers optional, LF line ends) to send to the
+        controller now, as the answer to a remote request, or None.
+        """
+        ...
+
+    def line_lost(self, reason: str) -> None:
+        """The port closed or failed while listening (the listener drops any half-read program)."""
+        ...
