@@ -15,10 +15,23 @@ import sqlite3
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import ClassVar, Self
 
 from gateway.errors import GatewayError
+
+
+def iso(ts: datetime) -> str:
+    """A time as stored in our tables' text columns: UTC with microseconds and a Z, so that text order is
+    time order and `--since` compares strings."""
+    ts = ts if ts.tzinfo else ts.replace(tzinfo=UTC)
+    return ts.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def parse_iso(text: str) -> datetime:
+    """A stored time (`iso`) read back, aware, in UTC."""
+    return datetime.strptime(text, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=UTC)
 
 
 class SqliteFile:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
-from gateway.sqlite_file import SqliteFile
+from gateway.sqlite_file import SqliteFile, iso, parse_iso
 
 FILE_NAME = "audit.sqlite3"
 SCHEMA_VERSION = 1  # files from before the version was kept have 0, and the same table
@@ -46,15 +46,6 @@ COLUMNS = "ts, kind, machine, target, origin, user, role, old, new, status, reas
 
 def audit_path(state_dir: Path) -> Path:
     return state_dir / FILE_NAME
-
-
-def iso(ts: datetime) -> str:
-    ts = ts if ts.tzinfo else ts.replace(tzinfo=UTC)
-    return ts.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-
-
-def parse_iso(text: str) -> datetime:
-    return datetime.strptime(text, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=UTC)
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,12 +11,13 @@ import json
 import sys
 from pathlib import Path
 
-from gateway.audit.store import AuditStore, audit_path, iso
+from gateway.audit.store import AuditStore, audit_path
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
 from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
 from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
+from gateway.sqlite_file import iso
 
 KIND_WIDTH = len("acknowledge")  # write, call, acknowledge, confirm
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Literal, get_args
 
 from gateway.errors import TransferLogError
-from gateway.sqlite_file import SqliteFile
+from gateway.sqlite_file import SqliteFile, iso, parse_iso
 
 FILE_NAME = "transfers.sqlite3"
 SCHEMA_VERSION = 1
@@ -56,15 +56,6 @@ COLUMNS = "machine, direction, program, size, sha256, started, ended, outcome, u
 
 def transfers_path(state_dir: Path) -> Path:
     return state_dir / "dnc" / FILE_NAME
-
-
-def iso(ts: datetime) -> str:
-    ts = ts if ts.tzinfo else ts.replace(tzinfo=UTC)
-    return ts.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-
-
-def parse_iso(text: str) -> datetime:
-    return datetime.strptime(text, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=UTC)
 
 
 @dataclass(frozen=True, slots=True)
