@@ -153,7 +153,12 @@ def judge_14(ctx: Context) -> list[Target]:
     over = d.get("overrun", {})
     if over:
         sent = over["sent_after_dc3"]
-        where = f"{over['size'] / 1e6:.2f} MB drip, {sent['n']:,} DC3s"
+        arrived = over.get("arrived_after_dc3") or {}
+        where = (
+            f"{over['size'] / 1e6:.2f} MB drip, {sent['n']:,} DC3s, "
+            "written between a DC3 and its DC1 (timed); "
+            f"reached the device server after it: p99 {arrived.get('p99')}, max {arrived.get('max')}"
+        )
         targets.append(Target(
             "characters sent after DC3, p99 (115,200 baud)", 10, 2, "chars", higher_is_better=False,
             value=sent["p99"], source=where,

@@ -3,17 +3,23 @@ serial.py, pyserial in a thread per line) sending to the simulated device server
 write the load figure is compared with. This process's CPU is the gateway's in the fleet figure.
 
 Commands: `load` (url, baud, program file): one load, seconds; `raw` (url, baud, program file): the framed
-program written to the port in one call; `drip` (urls, baud, program files, buffer): one drip per line at
-once; `restart` (url, baud, program file, line, repeats): a drip restarted at a line, the command's time
-(CLOCK_MONOTONIC) per repeat.
+program written to the port in one call; `drip` (urls, baud, program files, buffer, record): one drip per
+line at once, with `record` the time (CLOCK_MONOTONIC) and size of every write the transport made;
+`sent_after` (holds: [DC3 time, DC1 time or null] from the controller): the characters the transport wrote
+within each hold, from the last recorded drip; `restart` (url, baud, program file, line, repeats): a drip
+restarted at a line, the command's time (CLOCK_MONOTONIC) per repeat.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import bisect
 import hashlib
+import itertools
+import math
 import time
+from array import array
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +30,44 @@ from gateway.codecs.dnc import frame_program
 from gateway.config.jobs import ControllerSerial
 from gateway.jobs.delivery.transport import Program, Progress
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
-from gateway.jobs.dnc.port import line_settings
+from gateway.jobs.dnc.port import SerialPort, line_settings
+
+
+class WriteLog:
+    """Every write the serial transport makes while recording: when (just before the call, so that a write
+    racing a DC3 counts as after it) and how many characters the port took. One line's worth (the overrun
+    figure drips one program); a few million writes are a few tens of MB in two arrays."""
+
+    def __init__(self) -> None:
+        self.times = array("d")
+        self.counts = array("q")
+        self.on = False
+        self._write = SerialPort.write
+
+        def write(port: SerialPort, data: bytes) -> int:
+            if not self.on:
+                return self._write(port, data)
+            now = time.monotonic()
+            n = self._write(port, data)
+            self.times.append(now)
+            self.counts.append(n)
+            return n
+
+        SerialPort.write = write  # type: ignore[method-assign]
+
+    def start(self) -> None:
+        self.times, self.counts, self.on = array("d"), array("q"), True
+
+    def within(self, holds: list[list[float | None]]) -> list[int]:
+        """Characters written after each hold's DC3 and before its DC1."""
+        totals = [0, *itertools.accumulate(self.counts)]
+        out = []
+        for start, end in holds:
+            assert start is not None
+            a = bisect.bisect_right(self.times, start)
+            b = bisect.bisect_left(self.times, math.inf if end is None else end)
+            out.append(totals[b] - totals[a])
+        return out
 
 
 def settings(url: str, baud: int, **more: Any) -> ControllerSerial:
@@ -43,6 +86,8 @@ def ignore(_progress: Progress) -> None:
 
 
 async def main(workdir: Path) -> None:
+    log = WriteLog()
+
     async def load(request: dict[str, Any]) -> dict[str, Any]:
         line = SerialTransport(
             settings(request["url"], int(request["baud"])), machine="bench", state_dir=workdir
@@ -87,6 +132,9 @@ async def main(workdir: Path) -> None:
             )
             for i, url in enumerate(urls)
         ]
+        log.on = False
+        if request.get("record"):
+            log.start()
         before = process_stats()
         started = time.monotonic()
         try:
@@ -98,6 +146,7 @@ async def main(workdir: Path) -> None:
             for line in lines:
                 line.close()
         after = process_stats()
+        log.on = False
         failures = [f"{type(r).__name__}: {r}" for r in results if isinstance(r, BaseException)]
         wall = time.monotonic() - started
         return {"seconds": wall, "cpu_share": (after["cpu"] - before["cpu"]) / wall, "failures": failures}
@@ -121,7 +170,10 @@ async def main(workdir: Path) -> None:
             await asyncio.sleep(float(request.get("pause", 0.5)))  # the controller back to reading
         return {"commands": commands}
 
-    await serve({"load": load, "raw": raw, "drip": drip, "restart": restart})
+    def sent_after(request: dict[str, Any]) -> dict[str, Any]:
+        return {"counts": log.within(request["holds"]), "writes": len(log.times)}
+
+    await serve({"load": load, "raw": raw, "drip": drip, "sent_after": sent_after, "restart": restart})
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -47,22 +48,29 @@ class TimedFace(DncFace):
     timed: Timed
     in_flight: list[int]
     sent_after: list[int]
+    holds: list[list[float]]  # [when the DC3 left, when the DC1 after it left (or inf)], CLOCK_MONOTONIC
     _after: int | None
 
     def watch_dc3(self) -> None:
-        self.in_flight, self.sent_after, self._after = [], [], None
+        self.in_flight, self.sent_after, self.holds, self._after = [], [], [], None
         controller = self.controller
         send_flow = controller._send_flow
 
         def watched(char: int) -> None:
+            now = time.monotonic()
             if char == DC3:
+                if not self.holds or self.holds[-1][1] != math.inf:
+                    self.holds.append([now, math.inf])
                 self.in_flight.append(len(controller.wire))
                 if self._after is not None:
                     self.sent_after.append(self._after)
                 self._after = 0
-            elif self._after is not None:
-                self.sent_after.append(self._after)
-                self._after = None
+            else:
+                if self.holds and self.holds[-1][1] == math.inf:
+                    self.holds[-1][1] = now
+                if self._after is not None:
+                    self.sent_after.append(self._after)
+                    self._after = None
             send_flow(char)
 
         controller._send_flow = watched  # type: ignore[method-assign]
@@ -148,6 +156,7 @@ async def main() -> None:
             face.controller.episodes.clear()
             face.in_flight.clear()
             face.sent_after.clear()
+            face.holds.clear()
         return {}
 
     def stats(_request: dict[str, Any]) -> dict[str, Any]:
@@ -162,6 +171,7 @@ async def main() -> None:
                     "episodes": len(episodes),
                     "in_flight_at_dc3": percentiles([float(n) for n in face.in_flight]),
                     "sent_after_dc3": percentiles([float(n) for n in face.sent_after]),
+                    "holds": [[a, b if b != math.inf else None] for a, b in face.holds],
                     "first": face.timed.first,
                     "last": face.timed.last,
                     "chars": face.timed.chars,

@@ -8,13 +8,16 @@ came after each of its DC3s, when its machine waited for data.
 * Load: a program (1 MB; quick 40 KB) at 115,200 baud 7E2, as the share of the line rate the controller
   received (characters over the time from its first to its last character), beside the same framed
   bytes written with one raw pyserial call, and the line rate itself.
-* DC3 overrun: characters sent after each of the controller's DC3s (those that reached the device server
-  after the DC3 left it, until the DC1), p99 and max, over a drip-feed (10 MB, about 40 minutes on a
-  loaded machine; quick 40 KB) at 115,200 baud, real time, whose machine cuts slower than the line,
-  so that the buffer fills and DC3/DC1 cycle (the controller's levels are a 256-byte buffer's, with room
-  behind them, so that an overrun is counted rather than ending the run with alarm 087). Beside
-  it: what the controller received after its DC3, which adds what the device server held at that moment
-  (on a loaded machine, the simulator's own late wake-ups pile characters up there).
+* DC3 overrun: characters sent after each of the controller's DC3s, p99 and max, over a drip-feed (10 MB,
+  about 40 minutes on a loaded machine; quick 40 KB) at 115,200 baud, real time, whose machine cuts
+  slower than the line, so that the buffer fills and DC3/DC1 cycle (the controller's levels are a
+  256-byte buffer's, with room behind them, so that an overrun is counted rather than ending the run with
+  alarm 087). "Sent after" is timed: the controller notes when each DC3 and the DC1 after it left
+  (CLOCK_MONOTONIC, which both processes share), the transport's process when it made each write, and
+  the characters written in between are the ones sent after the DC3. Beside it, from the controller's
+  side alone: the characters that reached the device server after its DC3 (those include what the
+  sender wrote before the DC3 but the simulator read late: on a loaded machine its wake-ups lag), and
+  what the controller received after its DC3, which adds what the device server already held.
 * Fleet: 20 machines drip-fed at once at 38,400 baud (real time), each cutting at its program's pace
   (slower than the line) with a 4 KB receive buffer: starvation events and their seconds, and the CPU of
   the gateway's process (20 serial transports, no queue and no sinks).
@@ -28,6 +31,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
+from bench.agents.protocol import percentiles
 from bench.context import Context
 from bench.procs import Agent
 
@@ -125,14 +129,18 @@ async def _overrun(
     setup = {"count": 1, "baud": BAUD, "mode": "drip", "buffer": 16384, "high": 224, "low": 64}
     (url,) = (await sim.ask("setup", **setup))["urls"]
     timeout = size / 6400 * 3 + 120
-    answer = await gw.ask("drip", urls=[url], baud=BAUD, programs=[str(path)], timeout=timeout)
+    answer = await gw.ask("drip", urls=[url], baud=BAUD, programs=[str(path)], timeout=timeout, record=True)
     [face] = (await sim.ask("stats"))["faces"]
-    sent, got, flight = face["sent_after_dc3"], face["after_dc3"], face["in_flight_at_dc3"]
+    arrived, got, flight = face["sent_after_dc3"], face["after_dc3"], face["in_flight_at_dc3"]
+    timed = await gw.ask("sent_after", holds=face["holds"], timeout=120)
+    sent = percentiles([float(n) for n in timed["counts"]])
     seconds = answer["seconds"]
     details["overrun"] = {
         "size": path.stat().st_size,
         "seconds": seconds,
         "sent_after_dc3": sent,
+        "arrived_after_dc3": arrived,
+        "writes": timed["writes"],
         "received_after_dc3": got,
         "in_flight_at_dc3": flight,
         "dc3_sent": face["dc3_sent"],
@@ -144,7 +152,9 @@ async def _overrun(
     ctx.log(
         f"overrun: {face['dc3_sent']:,} DC3s in {seconds:.0f} s; sent after DC3 p50 {sent['p50']} "
         f"p99 {sent['p99']} "
-        f"max {sent['max']}; in the device server at DC3 p50 {flight['p50']} max {flight['max']}; the "
+        f"max {sent['max']} ({timed['writes']:,} writes); reached the device server after DC3 p99 "
+        f"{arrived['p99']} max {arrived['max']}; in the device server at DC3 p50 {flight['p50']} max "
+        f"{flight['max']}; the "
         f"controller received after DC3 p99 {got['p99']} max {got['max']}; failures {answer['failures']}"
     )
     note = f"{path.stat().st_size / 1e6:.2f} MB drip at 115,200 baud, {sent['n']:,} DC3s"
@@ -162,7 +172,16 @@ async def _overrun(
         "characters sent after the controller's DC3, max",
         sent["max"],
         "chars",
-        note=f"reached the device server after the DC3 left it; p50 {sent['p50']}",
+        note=f"written between the DC3 leaving the controller and its DC1 (timed); p50 {sent['p50']}",
+    )
+    ctx.results.add(
+        "dnc.dc3.arrived_p99",
+        SECTION,
+        "characters that reached the device server after the controller's DC3, p99",
+        arrived["p99"],
+        "chars",
+        note=f"the controller's count alone: includes what was sent before the DC3 and read late; max "
+        f"{arrived['max']}",
     )
     ctx.results.add(
         "dnc.dc3.received_p99",
