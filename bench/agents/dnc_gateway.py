@@ -3,8 +3,9 @@ serial.py, pyserial in a thread per line) sending to the simulated device server
 write the load figure is compared with. This process's CPU is the gateway's in the fleet figure.
 
 Commands: `load` (url, baud, program file): one load, seconds; `raw` (url, baud, program file): the framed
-program written to the port in one call; `drip` (urls, baud, program files, buffer, record): one drip per
-line at once, with `record` the time (CLOCK_MONOTONIC) and size of every write the transport made;
+program written to the port in one call; `drip` (urls, baud, program files, buffer, link, record): one drip
+per line at once, the lines in one fleet (gateway/jobs/dnc/fleet.py; `link`: they share a device
+server of that capacity), with `record` the time (CLOCK_MONOTONIC) and size of every write the transport made;
 `sent_after` (holds: [DC3 time, DC1 time or null] from the controller): the characters the transport wrote
 within each hold, from the last recorded drip; `restart` (url, baud, program file, line, repeats): a drip
 restarted at a line, the command's time (CLOCK_MONOTONIC) per repeat.
@@ -30,6 +31,7 @@ from gateway.codecs.dnc import frame_program
 from gateway.config.jobs import ControllerSerial
 from gateway.jobs.delivery.transport import Program, Progress
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
+from gateway.jobs.dnc.fleet import DripFleet
 from gateway.jobs.dnc.port import SerialPort, line_settings
 
 
@@ -124,13 +126,16 @@ async def main(workdir: Path) -> None:
     async def drip(request: dict[str, Any]) -> dict[str, Any]:
         urls: list[str] = request["urls"]
         files: list[str] = request["programs"]
+        link = request.get("link")  # {"name": …, "capacity": chars/s}: the lines share one device server
+        shared = {"link": link["name"], "link_capacity": float(link["capacity"])} if link else {}
+        line_settings_ = [
+            settings(url, int(request["baud"]), mode="drip", buffer=int(request.get("buffer", 256)), **shared)
+            for url in urls
+        ]
+        fleet = DripFleet.for_lines((f"m{i:02d}", s) for i, s in enumerate(line_settings_))
         lines = [
-            SerialTransport(
-                settings(url, int(request["baud"]), mode="drip", buffer=int(request.get("buffer", 256))),
-                machine=f"m{i:02d}",
-                state_dir=workdir / f"m{i:02d}",
-            )
-            for i, url in enumerate(urls)
+            SerialTransport(s, machine=f"m{i:02d}", state_dir=workdir / f"m{i:02d}", fleet=fleet)
+            for i, s in enumerate(line_settings_)
         ]
         log.on = False
         if request.get("record"):

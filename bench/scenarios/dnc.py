@@ -19,8 +19,10 @@ came after each of its DC3s, when its machine waited for data.
   sender wrote before the DC3 but the simulator read late: on a loaded machine its wake-ups lag), and
   what the controller received after its DC3, which adds what the device server already held.
 * Fleet: 20 machines drip-fed at once at 38,400 baud (real time), each cutting at its program's pace
-  (slower than the line) with a 4 KB receive buffer: starvation events and their seconds, and the CPU of
-  the gateway's process (20 serial transports, no queue and no sinks).
+  (slower than the line) with a 4 KB receive buffer, the 20 lines sharing one device server's uplink of
+  1.2 times what they cut together (their lines could carry 1.7 times): the gateway's drip scheduler
+  shares it (gateway/jobs/dnc/fleet.py). Starvation events and their seconds, and the CPU of the
+  gateway's process (20 serial transports, no queue and no sinks).
 * Restart: a drip restarted at a line near the end of its program (header, modal state, that line on):
   from the command to the first byte at the device server, median and max of a few.
 """
@@ -39,6 +41,7 @@ SECTION = "Serial DNC: the gateway's serial transport → simulated device serve
 BAUD = 115_200
 FLEET_BAUD = 38_400
 BITS_PER_CHAR = 11  # 7E2: start, 7 data, parity, 2 stop
+LINK_SHARE = 1.2  # the fleet's shared link, relative to what its machines cut together
 
 
 def line_rate(baud: float) -> float:
@@ -129,7 +132,12 @@ async def _overrun(
     setup = {"count": 1, "baud": BAUD, "mode": "drip", "buffer": 16384, "high": 224, "low": 64}
     (url,) = (await sim.ask("setup", **setup))["urls"]
     timeout = size / 6400 * 3 + 120
-    answer = await gw.ask("drip", urls=[url], baud=BAUD, programs=[str(path)], timeout=timeout, record=True)
+    # The gateway is told the controller holds 16 KB: its scheduler then leaves the regulating to DC3/DC1,
+    # as with a controller whose buffer is not known, so that every one of the many DC3s tests its reaction
+    # (told 256 bytes, it would keep the buffer below the DC3 level most of the time).
+    answer = await gw.ask(
+        "drip", urls=[url], baud=BAUD, programs=[str(path)], timeout=timeout, record=True, buffer=16384
+    )
     [face] = (await sim.ask("stats"))["faces"]
     arrived, got, flight = face["sent_after_dc3"], face["after_dc3"], face["in_flight_at_dc3"]
     timed = await gw.ask("sent_after", holds=face["holds"], timeout=120)
@@ -211,7 +219,18 @@ async def _fleet(
     # machine, which would count as starvations of the gateway's making
     setup = {"count": count, "baud": FLEET_BAUD, "mode": "drip", "buffer": 4096, "high": 3584, "low": 1024}
     urls = (await sim.ask("setup", **setup))["urls"]
-    answer = await gw.ask("drip", urls=urls, baud=FLEET_BAUD, programs=paths, timeout=seconds * 5 + 120)
+    # The 20 lines share one device server's uplink, configured at 1.2 times what the machines cut together
+    # (less than the lines could carry together): the scheduler shares it, earliest dry first.
+    link = {"name": "nport", "capacity": round(LINK_SHARE * count * pace)}
+    answer = await gw.ask(
+        "drip",
+        urls=urls,
+        baud=FLEET_BAUD,
+        programs=paths,
+        timeout=seconds * 5 + 120,
+        buffer=setup["high"],
+        link=link,
+    )
     faces = (await sim.ask("stats"))["faces"]
     events = sum(f["starvations"] for f in faces)
     starved = sum(f["starved_seconds"] for f in faces)
@@ -221,6 +240,7 @@ async def _fleet(
         "baud": FLEET_BAUD,
         "line_rate": rate,
         "cutting_pace": pace,
+        "link_capacity": link["capacity"],
         "seconds": answer["seconds"],
         "starvations": events,
         "starved_seconds": starved,
@@ -236,7 +256,7 @@ async def _fleet(
     )
     note = (
         f"{count} machines × {FLEET_BAUD:,} baud, {answer['seconds']:.0f} s, "
-        f"cutting at {pace / rate:.0%} of the line"
+        f"cutting at {pace / rate:.0%} of the line, sharing a {link['capacity']:,} chars/s link"
     )
     ctx.results.add("dnc.fleet.starvations", SECTION, "fleet drip: starvation events", events, "", note=note)
     ctx.results.add(
@@ -265,6 +285,9 @@ async def _restart(
     (url,) = (await sim.ask("setup", count=1, baud=BAUD, mode="drip"))["urls"]
     delays = []
     for _ in range(repeats):
+        # The controller ready again: the machine has finished the blocks it holds from the last restart
+        # (the first move of a restart, a rapid back to that line's position, can take seconds).
+        await _settled(sim, lambda f: f["machine"] == "IDLE", timeout=120)
         await sim.ask("mark")
         answer = await gw.ask(
             "restart", url=url, baud=BAUD, program=str(path), line=line, repeats=1, timeout=120

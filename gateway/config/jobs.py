@@ -148,6 +148,18 @@ class ControllerSerial(Strict):
     buffer: int = Field(
         default=256, ge=8, le=16 * 1024 * 1024, description="The controller's receive buffer, bytes"
     )
+    link: str | None = Field(
+        default=None,
+        pattern=r"^[A-Za-z0-9_.:-]{1,64}$",
+        description="Drip: the device server or uplink this line shares with other machines' lines (any "
+        "name; the same name in each machine's file); with link_capacity, the lines share it so that the "
+        "machine whose buffer runs dry first is served first",
+    )
+    link_capacity: float | None = Field(
+        default=None,
+        gt=0,
+        description="Characters per second the shared link carries for all its lines together",
+    )
     rapid: float = Field(
         default=10_000.0, gt=0, description="Rapid rate, mm/min, for the run-time estimate while dripping"
     )
@@ -180,6 +192,8 @@ class ControllerSerial(Strict):
     def _line(self) -> ControllerSerial:
         if self.software_parity and (self.bytesize != 7 or self.parity == "none"):
             raise ValueError("software_parity needs bytesize 7 and parity even or odd")
+        if self.link_capacity is not None and self.link is None:
+            raise ValueError("link_capacity needs link: the name of the device server or uplink it is of")
         return self
 
     @property

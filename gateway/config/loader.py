@@ -404,6 +404,31 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
             continue
         seen[mapping.machine] = file
         machines.append(mapping)
+    issues.extend(_shared_links(machines, seen))
     if issues:
         raise ConfigError(issues)
     return Config(gateway, tuple(machines), base_dir, tuple(mapping_files))
+
+
+def _shared_links(machines: Sequence[MachineMapping], files: Mapping[str, Path]) -> list[ConfigIssue]:
+    """Serial lines that name the same `link` (one device server or uplink) must agree on its capacity."""
+    capacities: dict[str, tuple[float, str]] = {}
+    issues = []
+    for mapping in machines:
+        controller = mapping.jobs.controller if mapping.jobs is not None else None
+        link = getattr(controller, "link", None)
+        capacity = getattr(controller, "link_capacity", None)
+        if link is None or capacity is None:
+            continue
+        seen = capacities.setdefault(link, (capacity, mapping.machine))
+        if seen[0] != capacity:
+            issues.append(
+                ConfigIssue(
+                    str(files[mapping.machine]),
+                    None,
+                    "jobs.controller.link_capacity",
+                    f"link {link!r} carries {seen[0]:g} characters/s in machine {seen[1]!r} "
+                    f"({files[seen[1]]}) but {capacity:g} here: one link, one capacity",
+                )
+            )
+    return issues

@@ -32,7 +32,7 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
-from gateway.config.jobs import AlarmWhen, ControllerFtp, JobsConfig
+from gateway.config.jobs import AlarmWhen, ControllerFtp, ControllerSerial, JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import (
     ConfigError,
@@ -49,6 +49,7 @@ from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
 from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.dnc.desk import PunchDesk
+from gateway.jobs.dnc.fleet import DripFleet
 from gateway.jobs.dnc.received import ReceivedStore
 from gateway.jobs.dnc.transfers import TransferLog
 from gateway.jobs.drip import drip_methods
@@ -124,6 +125,12 @@ class JobService:
         self.workers: dict[str, DeliveryWorker] = {}
         self.lines: dict[str, SerialTransport] = {}  # the serial DNC lines, by machine
         self.transfer_log: TransferLog | None = None  # opened with the queue when there are serial lines
+        # One scheduler for every drip-feed: lines that share a device server share its capacity.
+        fleet = DripFleet.for_lines(
+            (name, jobs.controller)
+            for name, jobs in self.machines.items()
+            if isinstance(jobs.controller, ControllerSerial)
+        )
         for name, jobs in self.machines.items():
             machine = tree.machines[name]
             if jobs.auto is not None:
@@ -142,6 +149,7 @@ class JobService:
             )
             if isinstance(transport, SerialTransport):
                 self.lines[name] = transport
+                transport.fleet = fleet
                 transport.alarm = alarm_reader(machine, transport.settings.alarm_when)
                 for method in drip_methods(transport, functools.partial(self.restart_job, machine=name)):
                     machine.add_method(method)

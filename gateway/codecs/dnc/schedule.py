@@ -23,7 +23,9 @@ its predecessor is done). From it:
 
 The caller sends what it is granted, tells `start(key, now)` when the machine
 starts executing (cycle start), and `set_paused(key, ...)` while a DC3 holds the
-line. Time is whatever monotonic clock the caller uses, in seconds.
+line. The model is an estimate (feed override, acceleration); the controller's
+DC1 says what it really holds, and `resync(key, now, holds)` puts the model right.
+Time is whatever monotonic clock the caller uses, in seconds.
 """
 
 from __future__ import annotations
@@ -63,7 +65,8 @@ class DripLine:
 
     `rate`: characters per second of the line (LineSettings.bytes_per_second);
     `buffer_size`: bytes the controller takes without holding the sender back
-    (its DC3 level); `link`: the shared device server or uplink it goes through, if any.
+    (its DC3 level); `link`: the shared device server or uplink it goes through, if any;
+    `lead_time`: this line's own lead (default: the scheduler's).
     """
 
     key: str
@@ -71,6 +74,7 @@ class DripLine:
     buffer_size: int
     blocks: Sequence[BlockCost]
     link: str | None = None
+    lead_time: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +111,8 @@ class _Line:
     starvations: int = 0
     executed_any: bool = False
     last_served: float = -math.inf
+    target: float = math.inf  # seconds of cutting it is filled to
+    queued: int = 0  # bytes of the granted blocks in `queue`
     queue: deque[_Granted] = field(default_factory=deque)
 
     @property
@@ -156,7 +162,10 @@ class DripScheduler:
                     f"line {line.key!r}: block {index + 1} ({block.size} bytes) is longer than the "
                     f"controller's buffer ({line.buffer_size} bytes): it cannot be drip-fed"
                 )
-        self._lines[line.key] = _Line(line)
+        if line.lead_time is not None and line.lead_time <= 0:
+            raise ValueError(f"line {line.key!r}: lead_time must be > 0 s")
+        target = self.target if line.lead_time is None else self.target / self.lead_time * line.lead_time
+        self._lines[line.key] = _Line(line, target=target)
 
     def remove(self, key: str) -> None:
         self._lines.pop(key, None)
@@ -180,12 +189,29 @@ class DripScheduler:
         """A DC3 holds this line (True) until its DC1 (False): it gets no grants meanwhile."""
         self._lines[key].paused = paused
 
+    def resync(self, key: str, now: float, holds: int = 0) -> None:
+        """The controller says it holds about `holds` bytes (its DC1: down to its low level): granted blocks
+        beyond those count as executed, the rest run from now. A machine that cut faster than the
+        estimate is served again at once; one that cut slower has already held the line with DC3."""
+        line = self._lines[key]
+        self._expire(line, now)
+        queue = line.queue
+        while queue and line.partial + line.queued > max(0, holds):
+            line.queued -= queue.popleft().size
+        if not line.started:
+            line.started = True
+            line.executed_any = bool(queue)
+        line.exec_end = now
+        for item in queue:
+            item.finishes = max(item.arrives, line.exec_end) + item.seconds
+            line.exec_end = item.finishes
+
     # --- the model -------------------------------------------------------------------------------
 
     def _expire(self, line: _Line, now: float) -> None:
         queue = line.queue
         while queue and queue[0].finishes is not None and queue[0].finishes <= now:
-            queue.popleft()
+            line.queued -= queue.popleft().size
 
     def ahead(self, key: str, now: float) -> float:
         """Seconds of cutting the controller holds (granted blocks not yet executed)."""
@@ -201,7 +227,7 @@ class DripScheduler:
         """Bytes the controller holds or will hold from what was granted, not yet executed."""
         line = self._lines[key]
         self._expire(line, now)
-        return line.partial + sum(item.size for item in line.queue)
+        return line.partial + line.queued
 
     def starvations(self, key: str) -> int:
         """How often the model's machine waited for data after it had started."""
@@ -228,7 +254,7 @@ class DripScheduler:
         link = line.spec.link
         if link is not None and self._link_free.get(link, -math.inf) > now:
             return False
-        if self._ahead(line, now) >= self.target:
+        if self._ahead(line, now) >= line.target:
             return False
         room = line.spec.buffer_size - self.buffered(line.spec.key, now)
         return room >= self._need(line)
@@ -270,7 +296,7 @@ class DripScheduler:
             size += piece
             seconds += block.seconds
             whole.append((block.size, block.seconds))
-            if ahead + seconds >= self.target:
+            if ahead + seconds >= line.target:
                 break
         rate = self._rate(line)
         arrives = now + size / rate
@@ -294,40 +320,43 @@ class DripScheduler:
             line.exec_end = finishes
             line.executed_any = True
         line.queue.append(_Granted(size, seconds, arrives, finishes))
+        line.queued += size
 
-    def wake_at(self, now: float) -> float | None:
-        """The earliest time after `now` when `next_grant` may give something, None if never (until a
-        `start` or `set_paused` changes the picture)."""
+    def wake_at(self, now: float, key: str | None = None) -> float | None:
+        """The earliest time after `now` when `next_grant` may give something (to line `key` alone, when
+        given), None if never (until a `start`, `resync` or `set_paused` changes the picture)."""
+        lines = self._lines.values() if key is None else [self._lines[key]]
         best: float | None = None
-        for line in self._lines.values():
-            if line.finished_sending or line.paused:
-                continue
-            when = max(now, line.free_at)
-            link = line.spec.link
-            if link is not None:
-                when = max(when, self._link_free.get(link, -math.inf))
-            if self._ahead(line, now) >= self.target:
-                if not line.started:
-                    continue  # holds enough until its machine starts
-                # Strictly after: at exec_end - target the line holds exactly the target, not less.
-                when = max(when, line.exec_end - self.target)
-                if when <= now:
-                    when = now + 1e-9 * max(1.0, abs(now))
-            self._expire(line, now)
-            room = line.spec.buffer_size - self.buffered(line.spec.key, now)
-            if room < self._need(line):
-                freed = room
-                for item in line.queue:  # finish times are in order
-                    if item.finishes is None:
-                        break
-                    freed += item.size
-                    if freed >= self._need(line):
-                        when = max(when, item.finishes)
-                        break
-                else:
-                    continue
-                if freed < self._need(line):
-                    continue
-            if when > now and (best is None or when < best):
+        for line in lines:
+            when = self._line_wake(line, now)
+            if when is not None and when > now and (best is None or when < best):
                 best = when
         return best
+
+    def _line_wake(self, line: _Line, now: float) -> float | None:
+        if line.finished_sending or line.paused:
+            return None
+        when = max(now, line.free_at)
+        link = line.spec.link
+        if link is not None:
+            when = max(when, self._link_free.get(link, -math.inf))
+        if self._ahead(line, now) >= line.target:
+            if not line.started:
+                return None  # holds enough until its machine starts
+            # Strictly after: at exec_end - target the line holds exactly the target, not less.
+            when = max(when, line.exec_end - line.target)
+            if when <= now:
+                when = now + 1e-9 * max(1.0, abs(now))
+        self._expire(line, now)
+        room = line.spec.buffer_size - self.buffered(line.spec.key, now)
+        need = self._need(line)
+        if room < need:
+            freed = room
+            for item in line.queue:  # finish times are in order
+                if item.finishes is None:
+                    return None
+                freed += item.size
+                if freed >= need:
+                    return max(when, item.finishes)
+            return None
+        return when

@@ -147,20 +147,38 @@ class SerialPort:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
         return data
 
-    def wait(self) -> bytes:
-        """What the controller sends within a few milliseconds (back at its first byte). Raises LineLost."""
+    def wait(self, also: int | None = None, timeout: float = WAIT) -> bytes:
+        """What the controller sends within `timeout` (back at its first byte, or when descriptor `also`
+        becomes readable: another line's grant, fleet.py). Raises LineLost."""
         port = self._open_port()
         try:
             if self._fd is not None:
-                select.select([self._fd], [], [], WAIT)
+                select.select([self._fd] if also is None else [self._fd, also], [], [], timeout)
+            elif also is not None:
+                select.select([also], [], [], min(timeout, POLL))
             else:
-                time.sleep(POLL)
+                time.sleep(min(timeout, POLL))
             data: bytes = port.read(4096)
             if self._dsr and not port.dsr:
                 raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
         return data
+
+    def pause(self, seconds: float) -> bool:
+        """Let `seconds` pass, back early if the controller sends; whether it may have sent something (a
+        port without a descriptor cannot tell: True). Raises LineLost."""
+        port = self._open_port()
+        if self._fd is None:
+            time.sleep(seconds)
+            return True
+        try:
+            readable, _, _ = select.select([self._fd], [], [], seconds)
+        except (OSError, ValueError) as exc:
+            raise LineLost(f"the line dropped ({_why(exc)})") from None
+        if self._dsr and not port.dsr:
+            raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
+        return bool(readable)
 
     def write(self, data: bytes) -> int:
         """Hand bytes to the port; how many it took. Raises LineLost."""

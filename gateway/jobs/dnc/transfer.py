@@ -5,7 +5,9 @@ under the line's rate, and reads the port between two slices, so that a DC3 stop
 it within a few characters even through a device server (whose buffer would
 otherwise hold what was written too early, the article's alarm 087). The
 operator's pause and abort (set from the event loop through `Control`) are looked
-at between slices too. Progress goes back to the loop as `Position`s.
+at between slices too. Progress goes back to the loop as `Position`s. A drip-feed
+that is part of a fleet (fleet.py) writes only what the fleet's scheduler granted
+it, and tells it of the controller's DC3s and DC1s.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 
 from gateway.codecs.dnc import DncSender, Junk, LineSettings, Pause, WireProgram
 from gateway.errors import DeliveryError
+from gateway.jobs.dnc.fleet import FleetLine
 from gateway.jobs.dnc.port import SerialPort
 
 SLICE = 8  # characters written at a time, at least (the sender sleeps until a slice is due)
@@ -133,6 +136,7 @@ def run_transfer(
     timing: Timing | None,
     report: Callable[[Position], None],
     alarm: Callable[[], str | None] | None = None,
+    fleet: FleetLine | None = None,
 ) -> Outcome:
     """Send `wire` over `port` (blocking). Raises TransferFailed with the position reached."""
     sender = DncSender(wire, line, wait_for_dc1=wait_for_dc1)
@@ -146,6 +150,10 @@ def run_transfer(
     digest = hashlib.sha256()
     junk = 0
     held = "waiting for DC1" if sender.waiting_for_dc1 else ""
+    granted = True  # a fleet's line: whether it has something granted to write (else it waits for it)
+    dc3 = False  # the controller's DC3 as the fleet was last told
+    cutting = False  # the fleet was told the controller takes the program
+    look = True  # whether the controller may have sent something since the port was last read
 
     def where(held: str) -> Position:
         if timing is not None:
@@ -169,7 +177,16 @@ def run_transfer(
         while not sender.done:
             if control.abort_reason is not None:
                 raise fail(control.abort_reason, permanent=True)
-            data = port.wait() if held else port.read()
+            if held:
+                data = port.wait()
+            elif not granted and fleet is not None:
+                data = port.wait(fleet.wake_fd, fleet.wait_seconds())
+                fleet.drain()
+            elif look:
+                data = port.read()
+            else:
+                data = b""  # the pause just before watched the port: nothing came
+            look = True
             if data:
                 for event in sender.feed(data):
                     if isinstance(event, Junk):
@@ -178,6 +195,13 @@ def run_transfer(
                             raise fail(f"garbage from the controller: {event.reason}", permanent=True)
                     elif isinstance(event, Pause):
                         pass
+            if fleet is not None:
+                if not cutting and not sender.waiting_for_dc1:
+                    cutting = True
+                    fleet.started()
+                if sender.paused != dc3:
+                    dc3 = sender.paused
+                    fleet.held(dc3)
             now = time.monotonic()
             held = (
                 "paused"
@@ -213,14 +237,23 @@ def run_transfer(
             tokens = min(ahead, tokens + (now - last) * rate)
             last = now
             if tokens < SLICE and sender.remaining > tokens:
-                # A whole slice at a time: fewer, larger writes, and a thread that sleeps in between.
-                time.sleep((SLICE - tokens) / rate)
+                # A whole slice at a time: fewer, larger writes, and a thread that waits in between,
+                # on the port: a DC3 meanwhile is read at once.
+                look = port.pause((SLICE - tokens) / rate)
                 continue
-            chunk = sender.next_chunk(int(tokens))
+            allowed = int(tokens)
+            if fleet is not None:
+                granted = (allowance := fleet.allowance()) > 0
+                if not granted:
+                    continue  # the next look at the port also waits for a grant
+                allowed = min(allowed, allowance)
+            chunk = sender.next_chunk(allowed)
             written = port.write(chunk)
             digest.update(wire.data[sender.offset : sender.offset + written])
             sender.sent(written)
             tokens -= written
+            if fleet is not None:
+                fleet.wrote(written)
         port.flush()
     except TransferFailed:
         raise

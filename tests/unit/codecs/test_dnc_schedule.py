@@ -294,3 +294,77 @@ def test_identical_machines_on_a_short_link_share_it_fairly(
     finish = sorted(result.finished.values())
     assert finish[-1] - finish[0] <= (max_chunk / capacity) * k + 2 * seconds + 1e-6
     assert not math.isinf(finish[-1])
+
+
+# --- the controller's word: DC1 resynchronises, a line's own lead --------------------------------
+
+
+def test_resync_on_dc1_frees_what_the_controller_ran_faster_than_estimated() -> None:
+    """The model thought the buffer full (estimated 1 s a block); the controller's DC1 says it is down to
+    its low level: the line is served again at once, with the rest running from now."""
+    blocks = [BlockCost(50, 1.0)] * 40
+    sched = DripScheduler(lead_time=100.0, max_chunk=200)
+    sched.add(DripLine("a", rate=10_000.0, buffer_size=200, blocks=blocks))
+    sched.start("a", 0.0)
+    grant = sched.next_grant(0.0)
+    assert grant is not None and grant.size == 200
+    assert sched.buffered("a", 0.5) == 200
+    assert sched.next_grant(0.5) is None  # no room in the model
+    sched.set_paused("a", True)  # DC3 ...
+    sched.set_paused("a", False)  # ... and DC1: the controller holds 50 bytes, not 200
+    sched.resync("a", 0.5, holds=50)
+    assert sched.buffered("a", 0.5) == 50
+    assert sched.ahead("a", 0.5) == pytest.approx(1.0)  # the block it holds runs from now
+    again = sched.next_grant(0.5)
+    assert again is not None and again.size == 150
+
+
+def test_resync_starts_a_machine_the_model_had_not_seen_start() -> None:
+    blocks = [BlockCost(10, 1.0)] * 10
+    sched = DripScheduler(lead_time=1.0)
+    sched.add(DripLine("a", rate=1000.0, buffer_size=100, blocks=blocks))
+    assert sched.next_grant(0.0) is not None
+    sched.resync("a", 1.0, holds=0)
+    assert sched.buffered("a", 1.0) == 0
+    assert sched.ahead("a", 1.0) == 0.0
+    assert sched.next_grant(1.0) is not None  # dry: served at once
+
+
+def test_a_line_with_a_longer_lead_is_filled_further() -> None:
+    blocks = [BlockCost(10, 1.0)] * 100
+    sched = DripScheduler(lead_time=2.0, max_chunk=1000)
+    sched.add(DripLine("short", rate=10_000.0, buffer_size=1000, blocks=blocks))
+    sched.add(DripLine("long", rate=10_000.0, buffer_size=1000, blocks=blocks, lead_time=5.0))
+    for key in ("short", "long"):
+        sched.start(key, 0.0)
+    granted = {"short": 0.0, "long": 0.0}
+    while (grant := sched.next_grant(0.0)) is not None:
+        granted[grant.key] += grant.seconds
+    assert granted == {"short": pytest.approx(4.0), "long": pytest.approx(10.0)}  # 2 x lead each
+    with pytest.raises(ValueError, match="lead_time"):
+        sched.add(DripLine("bad", 1.0, 10, [], lead_time=0))
+
+
+@given(fleets(sufficient=False), st.lists(st.tuples(st.floats(0, 50), st.integers(0, 500)), max_size=20))
+@settings(max_examples=100, deadline=None)
+def test_buffered_bookkeeping_matches_the_grants_through_resyncs(
+    case: tuple[list[DripLine], dict[str, float], float, int], resyncs: list[tuple[float, int]]
+) -> None:
+    """`buffered` is kept as a running sum: it must equal what the queue holds, however resyncs cut it."""
+    lines, links, lead, max_chunk = case
+    sched = DripScheduler(lead_time=lead, links=links, max_chunk=max_chunk)
+    for line in lines:
+        sched.add(line)
+        sched.start(line.key, 0.0)
+    events = sorted(resyncs)
+    now = 0.0
+    for when, holds in events:
+        while sched.next_grant(now) is not None:
+            pass
+        now = max(now, when)
+        for line in lines:
+            sched.resync(line.key, now, holds)
+            state = sched._lines[line.key]
+            assert state.queued == sum(item.size for item in state.queue)
+            assert sched.buffered(line.key, now) == state.partial + state.queued
+            assert state.queued <= max(holds, 0) or not state.queue

@@ -90,3 +90,38 @@ def test_gateway_file_inbox_errors_are_located(tmp_path: Path) -> None:
         load([gw], environ={})
     issue = info.value.issues[0]
     assert issue.line == 6 and issue.key == "inbox.accounts[0].password_hash"
+
+
+def _serial_machine(folder: Path, name: str, controller: str) -> str:
+    (folder / f"{name}.yaml").write_text(
+        f"machine: {name}\ndriver: {{endpoint: 'opc.tcp://127.0.0.1:4841'}}\nvariables:\n"
+        "  - {path: A, source: 'ns=2;s=a', type: Double}\n"
+        f"jobs:\n  controller: {controller}\n"
+    )
+    return f"{name}.yaml"
+
+
+def test_lines_sharing_a_link_must_agree_on_its_capacity(tmp_path: Path) -> None:
+    serial = "{type: serial, where: 'socket://10.0.0.9:%d', mode: drip, link: nport-7, link_capacity: %d}"
+    files = [
+        _serial_machine(tmp_path, "fanuc-1", serial % (4001, 4000)),
+        _serial_machine(tmp_path, "fanuc-2", serial % (4002, 4000)),
+        _serial_machine(tmp_path, "fanuc-3", serial % (4003, 3000)),
+    ]
+    gw = tmp_path / "gateway.yaml"
+    gw.write_text(f"machines: [{', '.join(files)}]\n")
+    with pytest.raises(ConfigError) as info:
+        load([gw], environ={})
+    [issue] = info.value.issues
+    assert issue.file.endswith("fanuc-3.yaml") and issue.key == "jobs.controller.link_capacity"
+    assert "'nport-7'" in issue.message and "fanuc-1" in issue.message and "3000" in issue.message
+    gw.write_text(f"machines: [{', '.join(files[:2])}]\n")
+    config = load([gw], environ={})
+    assert {m.jobs.controller.link for m in config.machines if m.jobs} == {"nport-7"}  # type: ignore[union-attr]
+
+
+def test_a_link_capacity_names_its_link() -> None:
+    with pytest.raises(ValidationError, match="link_capacity needs link"):
+        JobsConfig.model_validate({"controller": {"type": "serial", "where": "COM3", "link_capacity": 100}})
+    with pytest.raises(ValidationError, match="link"):
+        JobsConfig.model_validate({"controller": {"type": "serial", "where": "COM3", "link": "a b"}})

@@ -35,10 +35,18 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TypeVar
 
-from gateway.codecs.dnc import FramingError, WireProgram, block_times, frame_program, restart_lines
+from gateway.codecs.dnc import (
+    FramingError,
+    WireProgram,
+    block_times,
+    frame_program,
+    program_costs,
+    restart_lines,
+)
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError, InvalidState, StoreError
 from gateway.jobs.delivery.transport import Program, Progress, ReportProgress
+from gateway.jobs.dnc.fleet import DripFleet, FleetLine
 from gateway.jobs.dnc.idle import IdleListener
 from gateway.jobs.dnc.port import SerialPort, describe, line_settings
 from gateway.jobs.dnc.transfer import Control, Outcome, Position, Timing, TransferFailed, run_transfer
@@ -112,8 +120,11 @@ class SerialTransport:
         machine: str = "",
         state_dir: Path | None = None,
         transfer_log: TransferLog | None = None,
+        fleet: DripFleet | None = None,
     ) -> None:
         self.settings = settings
+        #: The scheduler its drip-feeds take part in: the gateway's one (JobService), or the line's own.
+        self.fleet = fleet or DripFleet.for_lines([(machine, settings)])
         self.machine = machine
         self.line = line_settings(settings)
         self.port = SerialPort(settings)
@@ -190,18 +201,33 @@ class SerialTransport:
             raise DeliveryError(f"cannot send over a serial line: {exc}", permanent=True) from None
         drip = self.settings.mode == "drip"
         timing = None
+        member: FleetLine | None = None
         if drip:
             times = block_times(data.decode("latin-1"), rapid=self.settings.rapid)
             timing = Timing(wire, times, self.settings.buffer)
+            try:
+                member = self.fleet.join(
+                    self.machine or self.where,
+                    rate=self.line.bytes_per_second,
+                    buffer_size=self.settings.buffer,
+                    blocks=program_costs(wire, times),
+                    link=self.settings.link,
+                    lead_time=self.settings.lead_time,
+                )
+            except ValueError as exc:
+                raise DeliveryError(f"cannot drip-feed {program.name}: {exc}", permanent=True) from None
         what = f"{program.name} from line {start}" if start is not None else program.name
         started = datetime.now(UTC)
         async with self._lock:
             outcome: Outcome | None = None
             error: DeliveryError | None = None
             try:
-                outcome = await self._send(program, wire, timing, progress, what)
+                outcome = await self._send(program, wire, timing, progress, what, member)
             except DeliveryError as exc:
                 error = exc
+            finally:
+                if member is not None:
+                    member.close()
             await self._log(program, wire, started, outcome, error, start)
         if error is not None:
             raise error
@@ -221,6 +247,7 @@ class SerialTransport:
         timing: Timing | None,
         progress: ReportProgress,
         what: str,
+        member: FleetLine | None = None,
     ) -> Outcome:
         loop = asyncio.get_running_loop()
         drip = Drip(program, Control())
@@ -256,6 +283,7 @@ class SerialTransport:
                     timing=timing,
                     report=report,
                     alarm=self.alarm,
+                    fleet=member,
                 )
             )
         except TransferFailed as exc:
