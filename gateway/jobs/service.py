@@ -45,6 +45,7 @@ from gateway.errors import (
     JobError,
     NotFound,
     PathRefused,
+    RequestError,
     SinkError,
     StoreError,
 )
@@ -52,6 +53,7 @@ from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
 from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.dnc import control
 from gateway.jobs.dnc.desk import PunchDesk, QueuedProgram
 from gateway.jobs.dnc.received import ReceivedStore
 from gateway.jobs.dnc.transfers import TransferLog
@@ -67,11 +69,13 @@ from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
 from gateway.jobs.validation.upload_check import UploadCheck
 from gateway.jobs.validation.verdict import Verdict
+from gateway.model.context import WriteContext
 from gateway.model.tree import Machine, VariableTree
 
 log = logging.getLogger("gateway.jobs")
 
 T = TypeVar("T")
+CONTROL_EVERY = 0.2  # s between looks for drip-feed commands from the shell (jobs pause|resume|abort)
 WATCH_INTERVAL = 1.0  # s between looks for changes made by other processes (the CLI)
 ENDED_SWEEP = 200  # ended jobs past a machine's retained limit whose records are cleared at start-up
 
@@ -304,6 +308,33 @@ class JobService:
                 tg.create_task(desk.run(), name=f"jobs:punch:{name}")
             for name, line in self.lines.items():
                 tg.create_task(line.run(), name=f"jobs:dnc-line:{name}")
+            if self.lines:
+                tg.create_task(self._shell_commands(), name="jobs:dnc-control")
+
+    async def _shell_commands(self) -> None:
+        """`cnc-gateway jobs pause|resume|abort MACHINE` (gateway/jobs/dnc/control.py), until cancelled."""
+        state = self.config.state_dir
+        while True:
+            for request in await asyncio.to_thread(control.take_requests, state):
+                reply = await self.shell_command(request)
+                try:
+                    await asyncio.to_thread(control.answer, request, reply)
+                except OSError as exc:
+                    log.warning("%s: cannot answer %s: %s", request.machine, request.path.name, exc)
+            await asyncio.sleep(CONTROL_EVERY)
+
+    async def shell_command(self, request: control.ControlRequest) -> control.ControlReply:
+        """One drip-feed command from the shell, as a method call of origin `cli` (role checked, audited)."""
+        machine = self.tree.machines.get(request.machine)
+        method = None if machine is None else machine.methods.get(("Commands", request.method))
+        if machine is None or method is None:
+            return control.ControlReply("BadNotFound", f"{request.machine} has no serial line here")
+        try:
+            result = await machine.call_method(method, [], WriteContext("cli", request.user, method.role))
+        except RequestError as exc:
+            return control.ControlReply(exc.status, exc.reason)
+        log.info("%s: %s from the shell by %s: %s", request.machine, request.method, request.user, result[0])
+        return control.ControlReply("Good", str(result[0]))
 
     # --- arrivals ----------------------------------------------------------------------------------
 
