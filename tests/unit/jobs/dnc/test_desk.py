@@ -303,3 +303,26 @@ def test_a_queue_request_to_queue_submits_the_jobs_program_in_its_submitters_nam
     desk.feed(b"%\nO9999 (PRG=O4711)\nM30\n%\n")
     asyncio.run(desk.drain())
     assert submitted == [("fanuc-1", "O4711.nc", QUEUED, "alice", "dnc")] and sent == []
+
+
+def test_programs_received_get_prints_or_saves_one_checked(
+    tmp_path: Path, capsysbinary: pytest.CaptureFixture[bytes]
+) -> None:
+    from gateway.cli.main import main
+
+    desk, _, _ = make_desk(tmp_path / "state")
+    desk.feed(PUNCH)
+    asyncio.run(desk.drain())
+    base = ["programs", "received", "--state-dir", str(tmp_path / "state")]
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "O4711"]) == 0
+    assert capsysbinary.readouterr().out == STORED
+    out = tmp_path / "copy.nc"
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "bracket", "-o", str(out)]) == 0
+    assert out.read_bytes() == STORED
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "O0815"]) == 1
+    assert b"no program punched on fanuc-1 is named 'O0815'" in capsysbinary.readouterr().err
+    assert main([*base, "--get", "O4711"]) == 2  # which machine's?
+    [program] = desk.store.list()
+    desk.store.path(program).write_bytes(STORED.replace(b"X10", b"X99"))  # changed since it arrived
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "O4711"]) == 1
+    assert b"not the program received" in capsysbinary.readouterr().err
