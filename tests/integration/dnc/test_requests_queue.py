@@ -63,7 +63,10 @@ async def test_a_request_is_answered_with_a_delivered_jobs_program(harness: Buil
             [job] = h.jobs()
             await h.wait_state(job.seq, JobState.DELIVERED, timeout=30)
             kept = h.state / "jobs" / "spool" / "delivered" / "lathe" / f"{job.id}.program"
-            assert kept.read_bytes() == program, "the delivered program is kept for requests"
+            await wait_until(
+                kept.is_file, message="the delivered program kept for requests"
+            )  # after DELIVERED
+            assert kept.read_bytes() == program
             loaded = face(sim).controller.stats.programs_loaded
             await wait_until(lambda: face(sim).stats()["link"], message="the line open between jobs")
 
@@ -108,3 +111,18 @@ async def test_an_answer_on_a_drip_line_is_drip_fed_and_can_be_paused(harness: B
                 timeout=60,
                 message="the controller ran the answer as it arrived",
             )
+
+
+async def test_send_load_answers_a_drip_line_with_a_load(harness: Build, tmp_path: Path) -> None:
+    folder = tmp_path / "programs"
+    folder.mkdir()
+    (folder / "O0042.nc").write_bytes(drip_program(20))
+    async with simulator(tmp_path, mode=Mode.DRIP) as sim:
+        requests = f'{{folder: "{folder}", send: load}}'
+        text = mapping(face(sim).socket_url or "", mode="drip", requests=requests)
+        async with harness([text], accounts=[]) as h:
+            await wait_until(lambda: face(sim).stats()["link"], message="the line open between jobs")
+            face(sim).request("O0042")
+            await wait_until(lambda: sends(h.state), timeout=60, message="the answer's send logged")
+            [answer] = sends(h.state)
+            assert (answer.outcome, answer.detail, answer.user) == ("ok", "answer, load", "operator")
