@@ -24,7 +24,7 @@ from gateway.config.mapping import MachineMapping
 log = logging.getLogger("gateway.demo")
 
 DRIP_NAME = "drip-demo.nc"
-PAUSE = 10.0  # s between the end of one drip-feed and the next
+PAUSE = 30.0  # s between the end of one drip-feed and the next: time to try a remote request (README)
 
 
 def drip_program(turns: int = 12, points: int = 90) -> bytes:

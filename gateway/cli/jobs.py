@@ -1,4 +1,5 @@
-"""`cnc-gateway jobs list|show|retry|restart|cancel|priority|submit`: the job queue from the command line.
+"""`cnc-gateway jobs list|show|retry|restart|cancel|priority|submit|pause|resume|abort`: the job queue from
+the command line.
 
 list/show/retry/restart/cancel/priority open the queue file in the state
 directory directly, so they work whether the gateway runs or not; a running
@@ -7,6 +8,12 @@ the FTP inbox, like nesting software does, and prints the gateway's verdict;
 with `--follow` it then shows the job's delivery as a progress bar (a serial
 line's progress file, `<state>/jobs/dnc/<machine>.json`: bytes, the line running,
 the lead in the controller's buffer and the run time left) until it ends.
+
+pause/resume/abort hold, continue or stop what a serial machine's line is
+sending (a job's drip-feed, or the answer to a remote request): they need the
+running gateway, which they reach through a request file in the state directory
+(gateway/jobs/dnc/control.py); it calls the machine's `Commands/DripPause` …
+like OPC UA or MQTT would, audited with origin `cli` and the file owner's name.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ import argparse
 import getpass
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -62,6 +70,20 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     q.add_argument("job")
     q.add_argument("--line", type=int, required=True, help="the program line (the job's reason names it)")
     q.set_defaults(handler=handle_restart)
+
+    for action, text in (
+        (
+            "pause",
+            "hold the drip-feed a serial machine's line is sending (the controller runs what it holds)",
+        ),
+        ("resume", "go on with a paused drip-feed"),
+        ("abort", "stop the drip-feed being sent; its job is FAILED with the line to restart at"),
+    ):
+        q = jobs.add_parser(action, help=text + " (needs the running gateway)")
+        common(q)
+        q.add_argument("machine", help="the serial machine, as in its mapping")
+        q.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the gateway's answer")
+        q.set_defaults(handler=handle_drip, action=action)
 
     q = jobs.add_parser("cancel", help="take waiting jobs out of the queue")
     common(q)
@@ -287,6 +309,41 @@ def handle_restart(args: argparse.Namespace) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 1
     print(f"{job.id} {job.state.value}: restarts at line {args.line}")
+    return 0
+
+
+def handle_drip(args: argparse.Namespace) -> int:
+    """pause/resume/abort: a request file the running gateway takes, acts on and answers."""
+    from gateway.jobs.dnc.control import ask, read_reply, reply_for
+
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", args.machine):
+        print(f"error: {args.machine!r} is not a machine name", file=sys.stderr)
+        return 2
+    state = state_dir(args)
+    try:
+        request = ask(state, args.machine, args.action)
+    except OSError as exc:
+        print(f"error: cannot write the request in {state}: {exc}", file=sys.stderr)
+        return 2
+    reply_file = reply_for(request)
+    deadline = time.monotonic() + args.timeout
+    while (reply := read_reply(reply_file)) is None:
+        if time.monotonic() >= deadline:
+            request.unlink(missing_ok=True)
+            if (reply := read_reply(reply_file)) is not None:  # taken as the time ran out
+                break
+            print(
+                f"error: no answer from the gateway within {args.timeout:g} s (is it running, with the "
+                f"state directory {state}?); nothing was changed",
+                file=sys.stderr,
+            )
+            return 1
+        time.sleep(0.1)
+    reply_file.unlink(missing_ok=True)
+    if reply.status != "Good":
+        print(f"error: {args.machine}: {reply.text} ({reply.status})", file=sys.stderr)
+        return 1
+    print(f"{args.machine}: {reply.text}")
     return 0
 
 

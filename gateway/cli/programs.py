@@ -1,7 +1,10 @@
 """`cnc-gateway programs list|get|put|delete MACHINE …`: the controller's program store (FTP).
 
 `programs received [MACHINE]` lists the programs operators punched on serial
-machines, which the gateway stored under its state directory (`dnc/received/`).
+machines, which the gateway stored under its state directory (`dnc/received/`);
+`programs received MACHINE --get NAME [-o FILE]` prints or saves one (the
+newest whose stored file, O-number or name matches), checked against the
+SHA-256 recorded when it arrived.
 
 The machine's mapping file says where the store is (`jobs.controller`). `put`
 checks the program with the machine's validation rules first (`--no-validate`
@@ -42,6 +45,7 @@ from gateway.model.audit import AuditEntry, as_text
 
 if TYPE_CHECKING:
     from gateway.jobs.delivery.transport import OpenStore
+    from gateway.jobs.dnc.received import ReceivedProgram, ReceivedStore
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -100,6 +104,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     q.add_argument("machine", nargs="?", default=None, help="one machine's (default: every machine's)")
     add_state_dir_options(q)
     q.add_argument("--json", action="store_true", help="one JSON object per line")
+    q.add_argument(
+        "--get",
+        metavar="NAME",
+        default=None,
+        help="print or save one: its stored file, O-number (O4711) or name; the newest that matches",
+    )
+    q.add_argument("-o", "--output", default="-", help="with --get: the file to write (default -: stdout)")
     q.set_defaults(handler=handle_received)
 
 
@@ -113,11 +124,16 @@ def handle_received(args: argparse.Namespace) -> int:
 
     state = resolve_state_dir(args, "received programs", transfers_path)
     store = ReceivedStore(state)
+    if args.get is not None and not args.machine:
+        print("error: --get needs the machine: programs received MACHINE --get NAME", file=sys.stderr)
+        return 2
     try:
         programs = store.list(args.machine)
     except PathRefused as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.get is not None:
+        return _get_received(store, [p for p in programs if received_matches(p, args.get)], args)
     for p in programs:
         if args.json:
             print(json.dumps({**p.as_dict(), "path": str(store.path(p))}, ensure_ascii=False))
@@ -127,6 +143,42 @@ def handle_received(args: argparse.Namespace) -> int:
             print(f"{local}  {p.machine}  {p.file}  {p.size} B  sha256 {p.sha256[:16]}{verdict}")
     if not programs and not args.json:
         print("no received programs", file=sys.stderr)
+    return 0
+
+
+def received_matches(program: ReceivedProgram, name: str) -> bool:
+    """Does `name` name this punched program: its stored file (with or without .nc), its O-number
+    (O4711 = O04711 = 4711) or the name in its header?"""
+    wanted = name.strip().upper()
+    if wanted in (program.file.upper(), program.file.upper().removesuffix(".NC")):
+        return True
+    if program.name is not None and program.name.upper() == wanted:
+        return True
+    digits = wanted.removeprefix("O")
+    return program.number is not None and digits.isdigit() and int(digits) == program.number
+
+
+def _get_received(store: ReceivedStore, matching: list[ReceivedProgram], args: argparse.Namespace) -> int:
+    import hashlib
+
+    if not matching:
+        print(f"error: no program punched on {args.machine} is named {args.get!r}", file=sys.stderr)
+        return 1
+    program = matching[-1]  # oldest first: the newest
+    try:
+        data = store.path(program).read_bytes()
+    except OSError as exc:
+        print(f"error: cannot read {program.file}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    if len(data) != program.size or hashlib.sha256(data).hexdigest() != program.sha256:
+        print(f"error: {program.file} is not the program received (size or SHA-256 differ)", file=sys.stderr)
+        return 1
+    if args.output == "-":
+        sys.stdout.buffer.write(data)
+        sys.stdout.flush()
+    else:
+        Path(args.output).write_bytes(data)
+        print(f"wrote {args.output} ({len(data)} bytes, {program.file})", file=sys.stderr)
     return 0
 
 

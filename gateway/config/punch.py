@@ -2,8 +2,9 @@
 
 An operator's PUNCH is stored under the state directory (and optionally
 validated and filed as a backup); a punched remote request (`O9999 (PRG=O4711)`)
-is answered with the named program from `requests.folder`. Without `punch:`
-the gateway ignores what the controller sends while no job is sending.
+is answered with the named program from `requests.folder` and/or the programs
+the machine's job queue accepted (`requests.from`). Without `punch:` the gateway
+ignores what the controller sends while no job is sending.
 """
 
 from __future__ import annotations
@@ -11,17 +12,46 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from gateway.config.base import Strict
 
 _KEY_CHARS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_")
 
 
-class RemoteRequests(Strict):
-    """Punched requests for a program, answered from a folder of the gateway's host."""
+Source = Literal["folder", "queue"]
 
-    folder: Path = Field(description="Folder of the programs an operator may request (nothing outside it)")
+
+def _folder_only() -> list[Source]:
+    return ["folder"]
+
+
+class RemoteRequests(Strict):
+    """Punched requests for a program, answered from a folder of the gateway's host and/or from the
+    programs the machine's job queue accepted."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+    folder: Path | None = Field(
+        default=None,
+        description="Folder of the programs an operator may request (nothing outside it); needed when "
+        "`from` names folder",
+    )
+    sources: list[Source] = Field(
+        default_factory=_folder_only,
+        alias="from",
+        min_length=1,
+        description="Where a requested program is looked for, in this order: folder (requests.folder) and "
+        "queue (the newest job of this machine the queue accepted whose file name or program number "
+        "matches; not rejected or cancelled ones)",
+    )
+    keep_delivered: int = Field(
+        default=50,
+        ge=0,
+        le=100_000,
+        description="With from: queue, the validated programs of this many delivered jobs are kept "
+        "(spool/delivered/<machine>/) so that a request can name them",
+    )
     number: int = Field(
         default=9999, ge=1, le=99_999_999, description="O-number that marks a punched program as a request"
     )
@@ -30,15 +60,17 @@ class RemoteRequests(Strict):
         default_factory=lambda: ["", ".nc", ".NC", ".txt"],
         description="Tried in turn after the requested name to find its file",
     )
-    send: Literal["load", "queue"] = Field(
-        default="load",
-        description="load: send the program back at once as a load; queue: submit it as a job (validated, "
-        "delivered load or drip as jobs.controller says, visible in cnc-gateway jobs)",
+    send: Literal["now", "load", "queue"] = Field(
+        default="now",
+        description="now: send the program back at once, load or drip as jobs.controller.mode says; load: at "
+        "once, always as a load; queue: submit it as a job (validated, delivered load or drip as "
+        "jobs.controller says, visible in cnc-gateway jobs)",
     )
     max_size: int = Field(
         default=1024 * 1024,
         ge=1,
-        description="Largest program answered at once (send: load); a larger one is refused, use send: queue",
+        description="Largest program answered at once (send: now or load); a larger one is refused, use "
+        "send: queue",
     )
     user: str = Field(
         default="operator",
@@ -53,6 +85,19 @@ class RemoteRequests(Strict):
         if not key or not set(key.upper()) <= _KEY_CHARS:
             raise ValueError(f"key {key!r}: letters, digits and _ only (e.g. PRG)")
         return key
+
+    @field_validator("sources")
+    @classmethod
+    def _sources(cls, sources: list[Source]) -> list[Source]:
+        if len(set(sources)) != len(sources):
+            raise ValueError("each of folder and queue at most once")
+        return sources
+
+    @model_validator(mode="after")
+    def _folder(self) -> RemoteRequests:
+        if "folder" in self.sources and self.folder is None:
+            raise ValueError("folder: needed when from names folder (or from: [queue])")
+        return self
 
     @field_validator("extensions")
     @classmethod

@@ -13,6 +13,9 @@ Files under the state directory:
     jobs/queue.sqlite3          the queue
     jobs/spool/<id>.received    an upload between arrival and validation
     jobs/spool/<id>.program     a validated program waiting for delivery (kept for FAILED/CANCELLED: retry)
+    jobs/spool/delivered/<machine>/<id>.program
+                                a delivered job's program, kept for remote requests
+                                (punch.requests.from: queue; the newest keep_delivered of the machine)
     rejected/<id>-<name>        a rejected upload, and <id>-<name>.reason saying why
     backups/<machine>/          programs fetched with Programs.Backup (and punched ones, with punch.backup)
     dnc/transfers.sqlite3       the serial transfer log (cnc-gateway dnc log)
@@ -27,6 +30,7 @@ import functools
 import hashlib
 import logging
 import os
+import re
 import uuid
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
@@ -41,6 +45,7 @@ from gateway.errors import (
     JobError,
     NotFound,
     PathRefused,
+    RequestError,
     SinkError,
     StoreError,
 )
@@ -48,7 +53,8 @@ from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
 from gateway.jobs.delivery.worker import DeliveryWorker
-from gateway.jobs.dnc.desk import PunchDesk
+from gateway.jobs.dnc import control
+from gateway.jobs.dnc.desk import PunchDesk, QueuedProgram
 from gateway.jobs.dnc.fleet import DripFleet
 from gateway.jobs.dnc.received import ReceivedStore
 from gateway.jobs.dnc.transfers import TransferLog
@@ -64,20 +70,42 @@ from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
 from gateway.jobs.validation.upload_check import UploadCheck
 from gateway.jobs.validation.verdict import Verdict
+from gateway.model.context import WriteContext
 from gateway.model.tree import Machine, VariableTree
 
 log = logging.getLogger("gateway.jobs")
 
 T = TypeVar("T")
+CONTROL_EVERY = 0.2  # s between looks for drip-feed commands from the shell (jobs pause|resume|abort)
 WATCH_INTERVAL = 1.0  # s between looks for changes made by other processes (the CLI)
 ENDED_SWEEP = 200  # ended jobs past a machine's retained limit whose records are cleared at start-up
 
 
 class Spool:
-    """Where job files live between arrival and delivery."""
+    """Where job files live between arrival and delivery (and after it, for machines that answer remote
+    requests from the queue: `keep` delivered programs per machine)."""
 
-    def __init__(self, root: Path) -> None:
+    def __init__(self, root: Path, keep: Mapping[str, int] | None = None) -> None:
         self.root = root
+        self.keep = dict(keep or {})
+
+    def kept(self, job: Job) -> Path:
+        return self.root / "delivered" / job.machine / f"{job.id}.program"
+
+    def delivered(self, job: Job) -> None:
+        """The job was delivered: keep its program for remote requests where the machine wants that."""
+        keep = self.keep.get(job.machine, 0)
+        program = self.program(job)
+        if keep <= 0 or not program.is_file():
+            self.discard(job)
+            return
+        folder = self.kept(job).parent
+        folder.mkdir(parents=True, exist_ok=True)
+        os.replace(program, self.kept(job))
+        self.received(job).unlink(missing_ok=True)
+        kept = sorted(folder.glob("J*.program"), key=lambda p: _kept_seq(p.stem))
+        for old in kept[: max(0, len(kept) - keep)]:
+            old.unlink(missing_ok=True)
 
     def received(self, job: Job) -> Path:
         return self.root / f"{job.id}.received"
@@ -114,7 +142,14 @@ class JobService:
             m.machine: m.jobs for m in config.machines if m.jobs is not None
         }
         state = config.state_dir
-        self.spool = Spool(state / "jobs" / "spool")
+        keep = {
+            name: jobs.punch.requests.keep_delivered
+            for name, jobs in self.machines.items()
+            if jobs.punch is not None
+            and jobs.punch.requests is not None
+            and "queue" in jobs.punch.requests.sources
+        }
+        self.spool = Spool(state / "jobs" / "spool", keep)
         self.rejected_dir = state / "rejected"
         self.backups_dir = state / "backups"
         self.inbox_root = state / "inbox"
@@ -167,6 +202,7 @@ class JobService:
                 rules=jobs.validation,
                 backups=self.backups_dir / name,
                 submit=self._submit_request,
+                find_job=self.find_requested,
                 blocking=self.threads.work,
             )
             for name, jobs in self.machines.items()
@@ -176,6 +212,7 @@ class JobService:
             line = self.lines.get(name)
             if line is not None:
                 line.listener = desk  # the line listens for it between jobs
+                desk.send_answer = line.send_answer
         self.inbox: Inbox | None = None
         self._changed = asyncio.Event()
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -279,6 +316,33 @@ class JobService:
                 tg.create_task(desk.run(), name=f"jobs:punch:{name}")
             for name, line in self.lines.items():
                 tg.create_task(line.run(), name=f"jobs:dnc-line:{name}")
+            if self.lines:
+                tg.create_task(self._shell_commands(), name="jobs:dnc-control")
+
+    async def _shell_commands(self) -> None:
+        """`cnc-gateway jobs pause|resume|abort MACHINE` (gateway/jobs/dnc/control.py), until cancelled."""
+        state = self.config.state_dir
+        while True:
+            for request in await asyncio.to_thread(control.take_requests, state):
+                reply = await self.shell_command(request)
+                try:
+                    await asyncio.to_thread(control.answer, request, reply)
+                except OSError as exc:
+                    log.warning("%s: cannot answer %s: %s", request.machine, request.path.name, exc)
+            await asyncio.sleep(CONTROL_EVERY)
+
+    async def shell_command(self, request: control.ControlRequest) -> control.ControlReply:
+        """One drip-feed command from the shell, as a method call of origin `cli` (role checked, audited)."""
+        machine = self.tree.machines.get(request.machine)
+        method = None if machine is None else machine.methods.get(("Commands", request.method))
+        if machine is None or method is None:
+            return control.ControlReply("BadNotFound", f"{request.machine} has no serial line here")
+        try:
+            result = await machine.call_method(method, [], WriteContext("cli", request.user, method.role))
+        except RequestError as exc:
+            return control.ControlReply(exc.status, exc.reason)
+        log.info("%s: %s from the shell by %s: %s", request.machine, request.method, request.user, result[0])
+        return control.ControlReply("Good", str(result[0]))
 
     # --- arrivals ----------------------------------------------------------------------------------
 
@@ -318,6 +382,37 @@ class JobService:
         """A remote request answered through the queue (punch.requests.send: queue)."""
         reply = await self.submit_bytes(machine, filename, data, user=user, origin=origin)
         return reply.message
+
+    async def find_requested(self, machine: str, name: str) -> QueuedProgram | None:
+        """The newest accepted job of `machine` that a remote request for `name` names, with its validated
+        program (read from the spool, checked against the SHA-256 validation gave it); None if none."""
+        jobs = await self.threads.queue(
+            self.queue.list, machine=machine, states=REQUESTABLE, limit=REQUEST_SCAN
+        )
+        for job in jobs:
+            if not matches(job, name):
+                continue
+            data = await self.threads.work(self._spooled, job)
+            if data is not None:
+                return QueuedProgram(data, job.filename, job.user, job.id)
+        return None
+
+    def _spooled(self, job: Job) -> bytes | None:
+        for path in (self.spool.program(job), self.spool.kept(job)):
+            try:
+                data = path.read_bytes()
+            except FileNotFoundError:
+                continue
+            except OSError as exc:
+                log.warning("%s: %s's program unreadable for a request: %s", job.machine, job.id, exc)
+                return None
+            if job.program_sha256 and hashlib.sha256(data).hexdigest() != job.program_sha256:
+                log.warning(
+                    "%s: %s's program %s is not the one validated; not sent", job.machine, job.id, path
+                )
+                return None
+            return data
+        return None
 
     async def _take(self, upload: Upload, holder: dict[str, Job]) -> UploadReply:
         self._processing[upload.machine] += 1
@@ -713,6 +808,33 @@ def alarm_reader(machine: Machine, when: AlarmWhen | None) -> Callable[[], str |
         )
 
     return read
+
+
+def _kept_seq(stem: str) -> int:
+    try:
+        return parse_job_id(stem)
+    except JobError:
+        return -1
+
+
+def matches(job: Job, name: str) -> bool:
+    """Does a remote request for `name` name this job: its file name (with or without its extension), or
+    its program's own name (the O-number, O4711 = O04711)?"""
+    wanted = name.upper()
+    filename = job.filename.upper()
+    if wanted in (filename, filename.rsplit(".", 1)[0]):
+        return True
+    own = (job.program_name or "").upper()
+    if own and own == wanted:
+        return True
+    a, b = _O_NUMBER.fullmatch(wanted), _O_NUMBER.fullmatch(own)
+    return a is not None and b is not None and int(a.group(1)) == int(b.group(1))
+
+
+_O_NUMBER = re.compile(r"O0*(\d+)")
+# Accepted jobs whose program a remote request may name: not rejected, not withdrawn (CANCELLED).
+REQUESTABLE = (JobState.DELIVERED, JobState.SENDING, JobState.QUEUED, JobState.VALIDATED, JobState.FAILED)
+REQUEST_SCAN = 2000  # the newest jobs of a machine looked through for a requested name
 
 
 def _seq(job_id: str) -> int:

@@ -53,6 +53,8 @@ class Spool(Protocol):
 
     def discard(self, job: Job) -> None: ...
 
+    def delivered(self, job: Job) -> None: ...
+
 
 # Runs a JobQueue method off the event loop (and tells the publisher something may have changed).
 QueueCall = Callable[..., Awaitable[Any]]
@@ -139,7 +141,7 @@ class DeliveryWorker:
         seconds = time.monotonic() - started
         job = await self._q(self.queue.delivered, job.seq, name, f"delivered to {where} in {seconds:.1f} s")
         log.info("%s: %s delivered as %s", self.machine, job.id, name)
-        self.spool.discard(job)
+        self.spool.delivered(job)
         if self.autostart is not None:
             outcome = await self.autostart.run(job, name)
             log.info("%s: %s %s", self.machine, job.id, outcome)
@@ -184,7 +186,7 @@ class DeliveryWorker:
                     log.info(
                         "%s: %s was delivered before the restart; not sending it again", self.machine, job.id
                     )
-                    self.spool.discard(job)
+                    self.spool.delivered(job)
                     return
                 break
             except DeliveryError as exc:

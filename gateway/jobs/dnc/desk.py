@@ -5,14 +5,18 @@
   validated with the machine's rules and filed as a backup, shown in the
   machine's `Jobs/Dnc/...` variables and as a `dnc/received` event (MQTT), and
   recorded in the transfer log (direction receive; the line records the answer it sends).
-- **A remote request** (`O9999 (PRG=O4711)`) is answered with the named program
-  from the configured folder: at once, returned to the line owner which sends it
-  as a load once the machine's validation rules accept it (`send: load`), or
-  submitted as a job (`send: queue`), which the
-  machine's transport delivers load or drip like any job. A name that is unknown
-  or would leave the folder is answered with a short program whose comment says
-  why (the operator reads it on the controller's screen). Every request is
-  audited (`call Dnc.Request`, origin `dnc`): an answer changes the machine.
+- **A remote request** (`O9999 (PRG=O4711)`) is answered with the named program,
+  looked for where `requests.from` says, in order: the configured folder, and
+  the programs the machine's job queue accepted (the newest matching job; the
+  service's `find_job`). `send: now` sends it back at once, load or drip as the
+  line's mode says (`send: load`: always a load), once the machine's validation
+  rules accept it (a queued program was validated when it arrived);
+  `send: queue` submits it as a job, which the machine's transport delivers load
+  or drip like any job. A name that is unknown or would leave the folder is
+  answered with a short program whose comment says why (the operator reads it on
+  the controller's screen). Every request is audited (`call Dnc.Request`, origin
+  `dnc`): an answer changes the machine. The answer's send is logged with the
+  job's submitter as the user when it came from the queue.
 - **Refusals**: a punch without its closing `%` (the line went quiet for
   `idle_timeout` seconds, or was lost), or larger than `max_size`, is refused
   with its reason, counted (`Jobs/Dnc/RefusedCount`), logged, and what arrived is
@@ -21,14 +25,17 @@
 
 `feed` runs on the event loop and never blocks on files: stores, validation and
 log records are queued to `run()`, which does them one after another in a
-thread. The one exception is reading a requested program for `send: load`
-(at most `requests.max_size` bytes, 1 MB by default), because the answer is
-what `feed` returns.
+thread. The one exception is reading a requested program from the folder when
+`from` is only the folder (at most `requests.max_size` bytes, 1 MB by default),
+because the answer is what `feed` returns. When `from` names the queue, the
+request is answered in `run()` (a query of the queue file) and the answer handed
+to the line with `send_answer`.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 import logging
 import os
@@ -69,6 +76,22 @@ T = TypeVar("T")
 Blocking = Callable[[Callable[[], T]], Awaitable[T]]
 # (machine, file name, program bytes, user, origin) -> a reply whose text says what became of it
 Submit = Callable[[str, str, bytes, str, str], Awaitable[str]]
+
+
+@dataclass(frozen=True, slots=True)
+class QueuedProgram:
+    """A validated program of an accepted job, found for a request (the job service reads the spool)."""
+
+    data: bytes
+    file: str  # the job's file name
+    user: str  # who submitted the job
+    job: str  # its id, J000042
+
+
+# (machine, requested name) -> the newest accepted job's program that matches, or None
+FindJob = Callable[[str, str], Awaitable[QueuedProgram | None]]
+# (program, user for the transfer log, send as a load whatever the line's mode): the line sends it
+SendAnswer = Callable[[bytes, str | None, bool], None]
 MAX_PENDING = 200  # stored punches waiting for the thread; beyond, refused and counted
 ORIGIN = "dnc"
 JUNK_LOG_EVERY = 60.0  # s between log lines about junk on an idle line
@@ -86,12 +109,21 @@ class Answer:
     status: str  # "Good" or a Bad status name, for the audit trail
     reason: str  # short, as in the answer's comment; "" when answered with the program
     program: bytes | None
-    file: str = ""  # the program's file in the folder
+    file: str = ""  # the program's file in the folder, or the job's file name
+    user: str | None = None  # named in the transfer log for the answer's send
+    job: str = ""  # the job it came from (from: queue)
+    queued: bytes | None = None  # to submit as a job (send: queue, found in the queue)
+
+    @property
+    def source(self) -> str:
+        return f"{self.file} ({self.job})" if self.job else self.file
 
 
 def find_program(requests: RemoteRequests, name: str) -> Path | None:
     """The requested program's file in the folder, or None; never a file outside it (symbolic links
     included: a link that points out of the folder is not found)."""
+    if requests.folder is None:
+        return None
     folder = Path(os.path.realpath(requests.folder))
     for ext in requests.extensions:
         candidate = Path(os.path.realpath(folder / f"{name}{ext}"))
@@ -113,6 +145,8 @@ class PunchDesk:
         rules: ValidationRules | None = None,
         backups: Path | None = None,
         submit: Submit | None = None,
+        find_job: FindJob | None = None,
+        send_answer: SendAnswer | None = None,
         blocking: Blocking[Any] = _in_thread,
         strip_parity: bool = True,
     ) -> None:
@@ -125,7 +159,13 @@ class PunchDesk:
         self.request_rules = rules  # what answers a request is what validation accepts, always
         self.backups = backups if settings.backup else None
         self.submit = submit
+        self.find_job = find_job
+        self.send_answer = send_answer
         self.blocking = blocking
+        # What the line needs to send the answer `feed` returns (the IdleListener seam): who is named in
+        # the transfer log, and whether to send it as a load whatever the line's mode.
+        self.answer_user: str | None = None
+        self.answer_load = False
         self.receiver = ProgramReceiver(max_size=settings.max_size, strip_parity=strip_parity)
         self.received = 0
         self.refused = 0
@@ -303,11 +343,31 @@ class PunchDesk:
         started: datetime,
     ) -> bytes | None:
         self.requests += 1
+        if isinstance(request, RemoteRequest) and "queue" in requests.sources:
+
+            async def later() -> None:  # the queue file is read off the loop; the line gets the answer
+                answer = await self.answer_later(request, requests)
+                self._answered(answer, requests, event, started)
+                if answer.program is not None:
+                    if self.send_answer is None:
+                        log.warning("%s: no line to send the answer to %s", self.name, request.name)
+                    else:
+                        self.send_answer(answer.program, answer.user, requests.send == "load")
+
+            self._queue(later)
+            return None
         answer = self.answer(request, requests)
+        self._answered(answer, requests, event, started)
+        self.answer_user, self.answer_load = answer.user, requests.send == "load"
+        return answer.program
+
+    def _answered(
+        self, answer: Answer, requests: RemoteRequests, event: ProgramReceived, started: datetime
+    ) -> None:
+        """Report, audit and log one answered request; submit it when it is to be queued."""
         name = answer.requested or "?"
-        shown = f"{name}: " + (
-            answer.reason or (f"queued {answer.file}" if answer.program is None else f"sent {answer.file}")
-        )
+        done = f"queued {answer.source}" if answer.program is None else f"sent {answer.source}"
+        shown = f"{name}: " + (answer.reason or done)
         self.machine.set_internal(self.v_request, shown)
         self.machine.tree.events.publish(
             Event(
@@ -318,11 +378,15 @@ class PunchDesk:
                     "status": answer.status,
                     "reason": answer.reason,
                     "file": answer.file,
+                    "job": answer.job,
                 },
             )
         )
         log.info(
-            "%s: remote request for %s: %s", self.name, name, answer.reason or f"answered with {answer.file}"
+            "%s: remote request for %s: %s",
+            self.name,
+            name,
+            answer.reason or f"answered with {answer.source}",
         )
         self.machine.tree.audit(
             AuditEntry(
@@ -342,7 +406,8 @@ class PunchDesk:
         )
         outcome: Outcome = "ok" if answer.status == "Good" else "refused"
         detail = f"request for {name}: " + (
-            answer.reason or ("queued as a job" if answer.program is None else f"answered with {answer.file}")
+            answer.reason
+            or ("queued as a job" if answer.program is None else f"answered with {answer.source}")
         )
         self._log(
             "receive",
@@ -355,11 +420,53 @@ class PunchDesk:
             user=requests.user,
         )
         if answer.program is None and answer.status == "Good" and self.submit is not None:
-            self._queue_submit(answer, requests, name)
-        return answer.program
+            if answer.queued is not None:
+                self._queue_job(answer, name)
+            else:
+                self._queue_submit(answer, requests, name)
+
+    async def answer_later(self, request: RemoteRequest, requests: RemoteRequests) -> Answer:
+        """The answer to a request looked for where `requests.from` says, in order (in `run()`)."""
+        for source in requests.sources:
+            if source == "folder":
+                path = await self.blocking(lambda: find_program(requests, request.name))
+                if path is not None:
+                    answer: Answer = await self.blocking(
+                        functools.partial(self._from_folder, request, requests, path)
+                    )
+                    return answer
+            elif self.find_job is not None:
+                job = await self.find_job(self.name, request.name)
+                if job is not None:
+                    return self._from_queue(request, requests, job)
+        return self._not_found(request, requests)
+
+    def _not_found(self, request: RemoteRequest, requests: RemoteRequests) -> Answer:
+        return Answer(
+            request.name,
+            "BadNotFound",
+            f"NOT FOUND {request.name}",
+            not_found(request.name, number=requests.number),
+        )
+
+    def _from_queue(self, request: RemoteRequest, requests: RemoteRequests, job: QueuedProgram) -> Answer:
+        """An accepted job's program: validated when it arrived, checked against its SHA-256 when read."""
+        if requests.send == "queue":
+            if self.submit is None:
+                reason = "NO JOB QUEUE FOR REQUESTS"
+                return Answer(
+                    request.name, "BadInvalidState", reason, answer_program(reason, number=requests.number)
+                )
+            return Answer(request.name, "Good", "", None, job.file, job.user, job.job, job.data)
+        if len(job.data) > requests.max_size:
+            reason = f"TOO LARGE {request.name} {len(job.data)} BYTES"
+            return Answer(
+                request.name, "BadOutOfRange", reason, answer_program(reason, number=requests.number)
+            )
+        return Answer(request.name, "Good", "", job.data, job.file, job.user, job.job)
 
     def answer(self, request: RemoteRequest | BadRequest, requests: RemoteRequests) -> Answer:
-        """The answer to one request (reads the program for `send: load`)."""
+        """The answer to one request from the folder (reads the program, for `send: now` or `load`)."""
         if isinstance(request, BadRequest):
             return Answer(
                 request.name,
@@ -369,19 +476,17 @@ class PunchDesk:
             )
         path = find_program(requests, request.name)
         if path is None:
-            return Answer(
-                request.name,
-                "BadNotFound",
-                f"NOT FOUND {request.name}",
-                not_found(request.name, number=requests.number),
-            )
+            return self._not_found(request, requests)
+        return self._from_folder(request, requests, path)
+
+    def _from_folder(self, request: RemoteRequest, requests: RemoteRequests, path: Path) -> Answer:
         if requests.send == "queue":
             if self.submit is None:
                 reason = "NO JOB QUEUE FOR REQUESTS"
                 return Answer(
                     request.name, "BadInvalidState", reason, answer_program(reason, number=requests.number)
                 )
-            return Answer(request.name, "Good", "", None, path.name)
+            return Answer(request.name, "Good", "", None, path.name, requests.user)
         try:
             size = path.stat().st_size
             if size > requests.max_size:
@@ -411,7 +516,7 @@ class PunchDesk:
                     answer_program(f"{reason} {first}", number=requests.number),
                 )
             data = verdict.program
-        return Answer(request.name, "Good", "", data, path.name)
+        return Answer(request.name, "Good", "", data, path.name, requests.user)
 
     def _queue_submit(self, answer: Answer, requests: RemoteRequests, name: str) -> None:
         submit = self.submit
@@ -426,6 +531,19 @@ class PunchDesk:
             data = await self.blocking(path.read_bytes)
             reply = await submit(self.name, path.name, data, requests.user, ORIGIN)
             log.info("%s: remote request for %s queued: %s", self.name, name, reply)
+            self.machine.set_internal(self.v_request, f"{name}: {reply}")
+
+        self._queue(go)
+
+    def _queue_job(self, answer: Answer, name: str) -> None:
+        """Submit an accepted job's program again as a new job, in its submitter's name."""
+        submit, data = self.submit, answer.queued
+        assert submit is not None and data is not None
+        user = answer.user or "?"
+
+        async def go() -> None:
+            reply = await submit(self.name, answer.file, data, user, ORIGIN)
+            log.info("%s: remote request for %s queued from %s: %s", self.name, name, answer.job, reply)
             self.machine.set_internal(self.v_request, f"{name}: {reply}")
 
         self._queue(go)

@@ -6,7 +6,9 @@ does every blocking call on it (so a DC3 is acted on between two small writes,
 transfer.py), and the operator's hold on a drip-feed (pause, resume, abort).
 Between jobs it listens to the line for an `IdleListener` (the punch desk) when
 one is attached, and keeps the port open for it; without one the port is open
-only while a program goes out.
+only while a program goes out. The listener's answers (a remote request's
+program) go out load or drip as the line's mode says; a dripped answer can be
+paused, resumed and aborted like a job's drip-feed.
 
 A drip-feed that stopped part way (a dropped line, an alarm, an abort, a gateway
 restart) is never sent again on its own: its job is FAILED with the line to
@@ -136,6 +138,7 @@ class SerialTransport:
         self.alarm: Callable[[], str | None] | None = None
         self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
         self._lock = asyncio.Lock()
+        self._answers: set[asyncio.Task[None]] = set()  # answers waiting for the line (send_answer)
         self._thread = ThreadPoolExecutor(1, thread_name_prefix=f"dnc-{machine or 'line'}")
 
     @property
@@ -149,6 +152,8 @@ class SerialTransport:
         """Stop the line's thread (after the last transfer; the gateway is stopping)."""
         if self.current is not None:
             self.current.control.abort("the gateway is stopping")
+        for task in self._answers:
+            task.cancel()
         # After the transfer in hand has seen the abort (within a slice), the port closes, in that thread.
         self._thread.submit(self.port.close)
         self._thread.shutdown(wait=False)
@@ -205,17 +210,7 @@ class SerialTransport:
         if drip:
             times = block_times(data.decode("latin-1"), rapid=self.settings.rapid)
             timing = Timing(wire, times, self.settings.buffer)
-            try:
-                member = self.fleet.join(
-                    self.machine or self.where,
-                    rate=self.line.bytes_per_second,
-                    buffer_size=self.settings.buffer,
-                    blocks=program_costs(wire, times),
-                    link=self.settings.link,
-                    lead_time=self.settings.lead_time,
-                )
-            except ValueError as exc:
-                raise DeliveryError(f"cannot drip-feed {program.name}: {exc}", permanent=True) from None
+            member = self._join(program.name, wire, times)
         what = f"{program.name} from line {start}" if start is not None else program.name
         started = datetime.now(UTC)
         async with self._lock:
@@ -228,7 +223,7 @@ class SerialTransport:
             finally:
                 if member is not None:
                     member.close()
-            await self._log(program, wire, started, outcome, error, start)
+            await self._log(program, wire, started, outcome, error, start, self.settings.mode)
         if error is not None:
             raise error
         assert outcome is not None
@@ -239,6 +234,20 @@ class SerialTransport:
             f"{outcome.sent} bytes, sha256 {outcome.sha256[:12]}…; program sha256 {program.sha256[:12]}… "
             f"checked; {outcome.pauses} DC3, at most {outcome.after_dc3_max} characters after one)"
         )
+
+    def _join(self, name: str, wire: WireProgram, times: dict[int, float]) -> FleetLine:
+        """A drip-feed's place in the gateway's drip scheduler."""
+        try:
+            return self.fleet.join(
+                self.machine or self.where,
+                rate=self.line.bytes_per_second,
+                buffer_size=self.settings.buffer,
+                blocks=program_costs(wire, times),
+                link=self.settings.link,
+                lead_time=self.settings.lead_time,
+            )
+        except ValueError as exc:
+            raise DeliveryError(f"cannot drip-feed {name}: {exc}", permanent=True) from None
 
     async def _send(
         self,
@@ -309,10 +318,11 @@ class SerialTransport:
         outcome: Outcome | None,
         error: DeliveryError | None,
         start: int | None,
+        mode: str,
     ) -> None:
         if self.transfer_log is None:
             return
-        detail = f"{self.settings.mode}" + (f" from line {start}" if start is not None else "")
+        detail = mode + (f" from line {start}" if start is not None else "")
         if error is not None:
             detail = f"{detail}: {error.reason}"
         aborted = error is not None and "aborted by" in error.reason
@@ -350,7 +360,7 @@ class SerialTransport:
                     if data:
                         answer = listener.feed(data)
                     if answer is not None:
-                        await self._answer(answer)
+                        await self._answer(answer, listener.answer_user, listener.answer_load)
                 except DeliveryError as exc:
                     await self._call(self.port.close)
                     listener.line_lost(exc.reason)
@@ -358,40 +368,88 @@ class SerialTransport:
                     await asyncio.sleep(REOPEN_AFTER)
             await asyncio.sleep(LISTEN_EVERY)
 
-    async def _answer(self, text: bytes) -> None:
+    def send_answer(self, text: bytes, user: str | None, load: bool) -> None:
+        """Send an answer the listener found later (off the line's read loop): as soon as the line is free."""
+        task = asyncio.get_running_loop().create_task(self._send_answer(text, user, load))
+        self._answers.add(task)
+        task.add_done_callback(self._answers.discard)
+
+    async def _send_answer(self, text: bytes, user: str | None, load: bool) -> None:
+        async with self._lock:
+            try:
+                if not self.port.is_open:
+                    await self._call(self.port.open)
+                await self._answer(text, user, load)
+            except DeliveryError as exc:
+                await self._call(self.port.close)
+                if self.listener is not None:
+                    self.listener.line_lost(exc.reason)
+                log.warning("%s: the answer was not sent: %s", self.machine, exc.reason)
+
+    async def _answer(self, text: bytes, user: str | None, load: bool) -> None:
+        """Send a listener's answer (the line's lock held), load or drip as the line's mode says."""
         try:
             wire = frame_program(text, self.line)
         except FramingError as exc:
             log.warning("%s: the answer cannot be sent: %s", self.machine, exc)
             return
+        drip = self.settings.mode == "drip" and not load
+        timing = None
+        member: FleetLine | None = None
+        name = text.lstrip(b"%\r\n \0").split(b"\n", 1)[0].decode("ascii", "replace").strip() or "?"
+        if drip:
+            times = block_times(text.decode("latin-1"), rapid=self.settings.rapid)
+            timing = Timing(wire, times, self.settings.buffer)
+            member = self._join(name, wire, times)
+        answer = Program(
+            name, Path(os.devnull), len(text), hashlib.sha256(text).hexdigest(), None, user or ""
+        )
         started = datetime.now(UTC)
         error: DeliveryError | None = None
         outcome: Outcome | None = None
         try:
-            outcome = await self._answer_transfer(wire)
+            outcome = await self._answer_transfer(answer, wire, timing, member)
         except DeliveryError as exc:
             error = exc
             raise
         finally:
-            name = text.lstrip(b"%\r\n \0").split(b"\n", 1)[0].decode("ascii", "replace").strip() or "?"
-            answer = Program(name, Path(os.devnull), len(text), hashlib.sha256(text).hexdigest(), None)
-            await self._log(answer, wire, started, outcome, error, None)
-
-    async def _answer_transfer(self, wire: WireProgram) -> Outcome:
-        settings = self.settings
-        result: Outcome = await self._call(
-            lambda: run_transfer(
-                self.port,
-                wire,
-                self.line,
-                wait_for_dc1=settings.start == "dc1",
-                dc1_timeout=settings.dc1_timeout,
-                stall_timeout=settings.stall_timeout,
-                control=Control(),
-                timing=None,
-                report=lambda _pos: None,
+            if member is not None:
+                member.close()
+            await self._log(
+                answer, wire, started, outcome, error, None, f"answer, {'drip' if drip else 'load'}"
             )
-        )
+
+    async def _answer_transfer(
+        self, answer: Program, wire: WireProgram, timing: Timing | None, member: FleetLine | None
+    ) -> Outcome:
+        settings = self.settings
+        drip = Drip(answer, Control())
+        self.current = drip  # pause, resume and abort reach a dripped answer too
+
+        def report(pos: Position) -> None:  # in the line's thread
+            drip.position = pos
+
+        try:
+            result: Outcome = await self._call(
+                lambda: run_transfer(
+                    self.port,
+                    wire,
+                    self.line,
+                    wait_for_dc1=settings.start == "dc1",
+                    dc1_timeout=settings.dc1_timeout,
+                    stall_timeout=settings.stall_timeout,
+                    control=drip.control,
+                    timing=timing,
+                    report=report,
+                    alarm=self.alarm if timing is not None else None,
+                    fleet=member,
+                )
+            )
+        except asyncio.CancelledError:
+            drip.control.abort("the gateway is stopping")
+            raise
+        finally:
+            self.current = None
         return result
 
     # --- the checkpoint ----------------------------------------------------------------------------

@@ -12,7 +12,7 @@ import pytest
 from gateway.codecs.dnc import not_found
 from gateway.config.punch import PunchSettings, RemoteRequests
 from gateway.config.validation import ValidationRules
-from gateway.jobs.dnc.desk import PunchDesk
+from gateway.jobs.dnc.desk import PunchDesk, QueuedProgram
 from gateway.jobs.dnc.received import ReceivedStore, safe_name
 from gateway.jobs.dnc.transfers import TransferLog
 from gateway.model.audit import AuditEntry
@@ -234,3 +234,95 @@ def test_a_requested_program_that_validation_refuses_is_not_sent(tmp_path: Path)
     assert answer is not None and answer.startswith(b"%\nO9999 (REJECTED BAD")
     assert [e.status for e in audited] == ["BadInvalidArgument"]
     assert str(value(tree, "Jobs/Dnc/LastRequest")).startswith("BAD: REJECTED BAD")
+
+
+def queue_desk(
+    tmp_path: Path, sources: list[str], **more: object
+) -> tuple[PunchDesk, VariableTree, list[AuditEntry], list[tuple[bytes, str | None, bool]]]:
+    folder = programs_folder(tmp_path)
+    requests = RemoteRequests.model_validate({"folder": folder, "from": sources, **more})
+    desk, tree, audited = make_desk(tmp_path, settings=PunchSettings(requests=requests))
+    sent: list[tuple[bytes, str | None, bool]] = []
+
+    async def find_job(machine: str, name: str) -> QueuedProgram | None:
+        assert machine == "fanuc-1"
+        return QueuedProgram(QUEUED, "O4711.nc", "alice", "J000007") if name == "O4711" else None
+
+    desk.find_job = find_job
+    desk.send_answer = lambda data, user, load: sent.append((data, user, load))
+    return desk, tree, audited, sent
+
+
+QUEUED = b"%\nO4711\nG0 X2\nM30\n%\n"
+
+
+def test_a_request_is_answered_from_the_queues_accepted_jobs(tmp_path: Path) -> None:
+    desk, tree, audited, sent = queue_desk(tmp_path, ["folder", "queue"])
+    assert desk.feed(b"%\nO9999 (PRG=O4711)\nM30\n%\n") is None  # answered off the loop
+    asyncio.run(desk.drain())
+    assert sent == [(QUEUED, "alice", False)]  # the send names the job's submitter
+    assert value(tree, "Jobs/Dnc/LastRequest") == "O4711: sent O4711.nc (J000007)"
+    assert [(e.user, e.status) for e in audited] == [("operator", "Good")]
+
+
+def test_the_folder_comes_first_when_from_says_so(tmp_path: Path) -> None:
+    desk, _, _, sent = queue_desk(tmp_path, ["folder", "queue"], send="load")
+    desk.feed(REQUEST)  # O1234: in the folder
+    asyncio.run(desk.drain())
+    assert sent == [(b"%\nO1234\nG0 X1\nM30\n%\n", "operator", True)]
+
+
+@pytest.mark.parametrize(
+    ("name", "comment", "status"),
+    [
+        ("O0815", "NOT FOUND O0815", "BadNotFound"),
+        ("LINK", "NOT FOUND LINK", "BadNotFound"),
+        ("../secret", "NAME LEAVES THE FOLDER", "BadInvalidArgument"),
+    ],
+)
+def test_queue_requests_for_unknown_or_escaping_names_get_why(
+    tmp_path: Path, name: str, comment: str, status: str
+) -> None:
+    desk, _, audited, sent = queue_desk(tmp_path, ["queue", "folder"])
+    answer = desk.feed(f"%\nO9999 (PRG={name})\nM30\n%\n".encode())
+    asyncio.run(desk.drain())
+    answers = [a for a in [answer, *(s[0] for s in sent)] if a is not None]
+    assert len(answers) == 1 and f"({comment})".encode() in answers[0]
+    assert [e.status for e in audited] == [status]
+
+
+def test_a_queue_request_to_queue_submits_the_jobs_program_in_its_submitters_name(tmp_path: Path) -> None:
+    desk, _, _, sent = queue_desk(tmp_path, ["queue"], send="queue")
+    submitted: list[tuple[str, str, bytes, str, str]] = []
+
+    async def submit(machine: str, name: str, data: bytes, user: str, origin: str) -> str:
+        submitted.append((machine, name, data, user, origin))
+        return "J000008 queued"
+
+    desk.submit = submit
+    desk.feed(b"%\nO9999 (PRG=O4711)\nM30\n%\n")
+    asyncio.run(desk.drain())
+    assert submitted == [("fanuc-1", "O4711.nc", QUEUED, "alice", "dnc")] and sent == []
+
+
+def test_programs_received_get_prints_or_saves_one_checked(
+    tmp_path: Path, capsysbinary: pytest.CaptureFixture[bytes]
+) -> None:
+    from gateway.cli.main import main
+
+    desk, _, _ = make_desk(tmp_path / "state")
+    desk.feed(PUNCH)
+    asyncio.run(desk.drain())
+    base = ["programs", "received", "--state-dir", str(tmp_path / "state")]
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "O4711"]) == 0
+    assert capsysbinary.readouterr().out == STORED
+    out = tmp_path / "copy.nc"
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "bracket", "-o", str(out)]) == 0
+    assert out.read_bytes() == STORED
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "O0815"]) == 1
+    assert b"no program punched on fanuc-1 is named 'O0815'" in capsysbinary.readouterr().err
+    assert main([*base, "--get", "O4711"]) == 2  # which machine's?
+    [program] = desk.store.list()
+    desk.store.path(program).write_bytes(STORED.replace(b"X10", b"X99"))  # changed since it arrived
+    assert main([*base[:2], "fanuc-1", *base[2:], "--get", "O4711"]) == 1
+    assert b"not the program received" in capsysbinary.readouterr().err
