@@ -7,8 +7,9 @@ change to the tree (`ingest`: the simulator, its publish queue and the TCP link 
 it), and when the MQTT sink encodes it into the packets it writes to the socket (`write`).
 What the subscriber sees beyond `write` accrued in the kernel, Mosquitto or the subscriber.
 
-It wraps two methods of the running classes, so it costs a clock read per change and only
-when asked for.
+It wraps two methods of the running classes, only when asked for, and records every
+`STRIDE`th change of each batch: about 0.05 ms of CPU per 1,000 changes, so that the
+peer's CPU figure stays the gateway's (every change: 0.35 ms, 2-6 % of that figure).
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ from gateway.model.tree import VariableNode
 from gateway.sinks.mqtt.sink import MqttSink
 from gateway.sources.opcua_client import OpcUaSource
 from gateway.sources.publish_decode import Change as SourceChange
+
+STRIDE = 8  # every 8th change of a batch: thousands a second under load, plenty for a p99
 
 
 class Ages:
@@ -40,7 +43,7 @@ class Ages:
         def timed_process(self: OpcUaSource, changes: list[SourceChange], *args: Any) -> None:
             now = time.time()
             record = ages.ingest.append
-            for _, _, stamp, _ in changes:
+            for _, _, stamp, _ in changes[::STRIDE]:
                 if stamp is not None:
                     record((now - stamp.timestamp()) * 1000.0)
             ages.responses.append(float(len(changes)))
@@ -49,7 +52,7 @@ class Ages:
         async def timed_encode(self: MqttSink, batch: list[Change[VariableNode]]) -> None:
             now = time.time()
             record = ages.write.append
-            for _, sample in batch:
+            for _, sample in batch[::STRIDE]:
                 record((now - sample.source_ts.timestamp()) * 1000.0)
             await encode(self, batch)
 

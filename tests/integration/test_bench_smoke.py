@@ -75,7 +75,7 @@ async def test_the_peers_gateway_step_says_where_the_age_of_its_values_accrued(t
     ages = step["ages"]
     for point in ("ingest", "write"):
         assert ages[point]["n"] > 0 and ages[point]["p50"] <= ages[point]["p99"] <= ages[point]["max"]
-    assert ages["write"]["n"] >= step["latency"]["n"] * 0.9  # every delivered change was written (and aged)
+    assert ages["write"]["n"] >= step["latency"]["n"] / 8 * 0.9  # a sample of what was delivered (STRIDE)
     assert ages["subscriber_backlog"]["n"] > 0  # the subscriber's socket was sampled in the window
     assert "at the gateway's ingest" in peer.where(step)
     assert out["final"]["match"] == peer.N  # every topic ends at the source's last value
