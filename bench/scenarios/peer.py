@@ -13,7 +13,9 @@ serves none.
 
 Steps: 5,000 and 15,000 changes/s and flat out. Per step: messages/s delivered,
 CPU per 1,000 messages (the process's CPU time over the window / messages
-delivered in it), latency p50/p99 over the window, the highest RSS sampled in it.
+delivered in it), latency p50/p99 over the window, the highest RSS sampled in it; for
+the gateway also where that latency accrued (`where`: the age at its ingest and at its
+MQTT write, bench/agents/ages.py, and the bytes unread in the subscriber's socket).
 Node-RED's figures are the baseline of the gateway's (ratio = gateway / Node-RED).
 
 node-red-contrib-opcua creates its subscription with a lifetime of 30 publishing
