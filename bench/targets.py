@@ -346,7 +346,8 @@ def judge_13(ctx: Context) -> list[Target]:
     targets.append(Target(
         "p99 age of delivered values under overload (source flat out)", 250, 50, "ms", higher_is_better=False,
         value=age, source=(f"gateway flat out: source wrote {flat['offered']:,.0f}/s, "
-                           f"{flat['delivered']:,.0f} msgs/s delivered" if flat else "no flat-out peer step"),
+                           f"{flat['delivered']:,.0f} msgs/s delivered" + _where(flat)
+                           if flat else "no flat-out peer step"),
     ))  # fmt: skip
 
     # 6-7. scale, tighter than issue 7's
@@ -376,6 +377,19 @@ def judge_13(ctx: Context) -> list[Target]:
         )
     )
     return targets
+
+
+def _where(step: dict[str, Any]) -> str:
+    """p99 age before, inside and after the gateway (bench/scenarios/peer.py, `where`)."""
+    ages = step.get("ages") or {}
+    if not ages:
+        return ""
+    ingest, write = ages["ingest"].get("p99"), ages["write"].get("p99")
+    backlog = ages["subscriber_backlog"].get("p99_ms")
+    return (
+        f"; p99 age at the gateway's ingest {_ms(ingest)}, at its MQTT write {_ms(write)}; "
+        f"unread at the subscriber p99 ~{_ms(backlog)} of messages"
+    )
 
 
 def _sound(step: dict[str, Any]) -> bool:

@@ -1,9 +1,9 @@
 """Python's garbage collector left as a test found it.
 
-`settled_heap` (gateway/app.py), which every Gateway start runs, raises the young generation's threshold
-and freezes what start-up built; a Gateway's exit unfreezes, but the threshold stays raised. Tests run
-many gateways in one process, so without this each test after the first would run with whatever GC
-settings the one before it left. tests/conftest.py wraps every test in `gc_state_kept()`.
+`settled_heap` (gateway/shims/heap.py), which every Gateway and Simulator start runs, raises the young
+generation's threshold and freezes what start-up built; their exits unfreeze, but the threshold stays
+raised. Tests run many gateways in one process, so without this each test after the first would run
+with whatever GC settings the one before it left. tests/conftest.py wraps every test in `gc_state_kept()`.
 """
 
 from __future__ import annotations

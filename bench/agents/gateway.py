@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from bench.agents.ages import Ages
 from bench.agents.injector import Injector
 from bench.agents.protocol import serve, setup_logging
 from gateway.app import Gateway
@@ -24,6 +25,9 @@ from gateway.shims.loop import ENV, LOOPS, loop_factory, run
 
 async def main(args: argparse.Namespace) -> None:
     GC_PAUSES.install()  # the collector's pauses, per step (bench/scenarios/mirror.py)
+    ages = Ages() if args.ages else None
+    if ages is not None:
+        ages.install()
     config = load([args.config])
     gateway = Gateway(config)
     injector: Injector | None = None
@@ -52,8 +56,15 @@ async def main(args: argparse.Namespace) -> None:
             injector.set_rate(math.inf if value in ("max", None) else float(value))
             return {}
 
+        def take_ages(request: dict[str, Any]) -> dict[str, Any]:
+            if ages is None:
+                raise RuntimeError("ages needs --ages")
+            return ages.take()
+
         try:
-            await serve({"snap": snap, "rate": rate}, {"opcua": config.gateway.opcua.endpoint})
+            await serve(
+                {"snap": snap, "rate": rate, "ages": take_ages}, {"opcua": config.gateway.opcua.endpoint}
+            )
         finally:
             for task in tasks:
                 task.cancel()
@@ -66,6 +77,7 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser()
     parser.add_argument("--config", type=Path, required=True)
     parser.add_argument("--inject", action="store_true")
+    parser.add_argument("--ages", action="store_true", help="record the age of changes at ingest and write")
     parser.add_argument("--loop", choices=LOOPS, default=None, help=f"default: ${ENV}, else asyncio")
     setup_logging()
     arguments = parser.parse_args()

@@ -5,11 +5,21 @@ raw baseline's imitation of it. The latency of a message is its receipt time min
 its `ts` (the controller's source timestamp, millisecond resolution). The value is
 the noise sequence number, so the last value per topic tells which change a topic
 ended at.
+
+A Python subscriber has a ceiling of its own (the baselines' paho → Mosquitto →
+paho figure). When messages arrive faster than it reads them, they wait in its
+socket, and their latency grows there, after the gateway. So a thread samples the
+bytes waiting unread in the socket (FIONREAD) every 20 ms: `backlog` in a mark's
+window, with the mean size of a message to turn it into messages.
 """
 
 from __future__ import annotations
 
 import argparse
+import fcntl
+import struct
+import termios
+import threading
 import time
 import uuid
 from datetime import datetime
@@ -38,6 +48,8 @@ class Counter:
         self.first_at: float | None = None
         self.last_at: float | None = None
         self._seconds: dict[bytes, float] = {}
+        self.bytes = 0  # topics and payloads received
+        self.backlog: list[float] = []  # bytes unread in the socket, sampled since the last mark
 
     def epoch(self, ts: bytes) -> float:
         """`2026-05-06T07:08:09.123Z` as seconds since the epoch (the seconds part is cached)."""
@@ -53,6 +65,8 @@ class Counter:
     def on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
         now = time.time()
         payload = msg.payload
+        topic = msg.topic
+        self.bytes += len(payload) + len(topic)
         if msg.retain:
             self.retained += 1
         self.count += 1
@@ -68,7 +82,6 @@ class Counter:
             self.latencies.append(latency)
             self.window.append(latency)
         v = payload.find(VALUE_KEY)
-        topic = msg.topic
         if v >= 0:
             end = payload.find(b",", v)
             try:  # noqa: SIM105 - once per message: a try costs nothing, suppress() is a call
@@ -86,6 +99,7 @@ class Counter:
     def mark(self, request: dict[str, Any]) -> dict[str, Any]:
         """Start a measurement window: `snap` then also reports the window's latencies so far."""
         self.window = []
+        self.backlog = []
         return self.snap(request)
 
     def snap(self, request: dict[str, Any]) -> dict[str, Any]:
@@ -99,10 +113,27 @@ class Counter:
             "all_good_at": self.all_good_at,
             "first_at": self.first_at,
             "last_at": self.last_at,
+            "bytes": self.bytes,
+            "backlog": percentiles(self.backlog),
         }
 
     def values(self, request: dict[str, Any]) -> dict[str, Any]:
         return {"last": dict(self.last)}
+
+
+def sample_backlog(client: paho.Client, counter: Counter, every: float = 0.02) -> None:
+    """Bytes the kernel holds for this subscriber that it has not read yet, every `every` s."""
+    buf = bytearray(4)
+    while True:
+        time.sleep(every)
+        sock = client.socket()
+        if sock is None:
+            continue
+        try:
+            fcntl.ioctl(sock.fileno(), termios.FIONREAD, buf)
+        except (OSError, ValueError):
+            continue
+        counter.backlog.append(float(struct.unpack("i", buf)[0]))
 
 
 def main() -> None:
@@ -122,6 +153,7 @@ def main() -> None:
     client.connect("127.0.0.1", args.port, keepalive=60)
     while not subscribed:
         client.loop(timeout=0.05)
+    threading.Thread(target=sample_backlog, args=(client, counter), name="backlog", daemon=True).start()
     serve_in_thread({"snap": counter.snap, "mark": counter.mark, "values": counter.values}, client.disconnect)
     client.loop_forever()
 

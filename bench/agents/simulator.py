@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.agents.protocol import serve, setup_logging
+from gateway.diagnostics import GC_PAUSES
 from simulator.noise import NoiseSpec
 from simulator.runner import Simulator
 
@@ -20,6 +21,7 @@ def _rate(request: dict[str, Any]) -> float:
 
 
 async def main(args: argparse.Namespace) -> None:
+    GC_PAUSES.install()  # the collector's pauses: a stall here ages every value the gateway receives
     spec = NoiseSpec(args.variables, 0.0, args.per_folder)
     async with Simulator(
         opcua_port=args.opcua_port, ftp_port=0, store=args.store, noise=spec, ftp_password="simulator"
@@ -32,7 +34,7 @@ async def main(args: argparse.Namespace) -> None:
             return {}
 
         def snap(request: dict[str, Any]) -> dict[str, Any]:
-            return dataclasses.asdict(noise.stats())
+            return {**dataclasses.asdict(noise.stats()), "gc": GC_PAUSES.stats()}
 
         await serve(
             {"rate": rate, "snap": snap},

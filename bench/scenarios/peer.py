@@ -13,7 +13,9 @@ serves none.
 
 Steps: 5,000 and 15,000 changes/s and flat out. Per step: messages/s delivered,
 CPU per 1,000 messages (the process's CPU time over the window / messages
-delivered in it), latency p50/p99 over the window, the highest RSS sampled in it.
+delivered in it), latency p50/p99 over the window, the highest RSS sampled in it; for
+the gateway also where that latency accrued (`where`: the age at its ingest and at its
+MQTT write, bench/agents/ages.py, and the bytes unread in the subscriber's socket).
 Node-RED's figures are the baseline of the gateway's (ratio = gateway / Node-RED).
 
 node-red-contrib-opcua creates its subscription with a lifetime of 30 publishing
@@ -65,6 +67,9 @@ class PeerStep:
     latency: dict[str, Any] = field(default_factory=dict)  # p50/p99/max/n over the window, ms
     rss: float = 0.0  # bytes, the highest sample in the window
     source_cpu: float = 0.0
+    # Where the age accrued (the gateway only): p50/p99/max ms at the source's ingest and at the MQTT write,
+    # and the bytes (and, by the mean message size and the delivered rate, ms) unread at the subscriber
+    ages: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
@@ -84,9 +89,11 @@ class Party:
         start: Callable[[], Awaitable[int]],
         stop: Callable[[], Awaitable[None]],
         alive: Callable[[], None] = lambda: None,
+        ages: Callable[[], Awaitable[dict[str, Any]]] | None = None,
     ) -> None:
         self.name, self.prefix, self.topics = name, prefix, topics
         self.start, self.stop, self.alive = start, stop, alive
+        self.ages = ages  # the ages at ingest and write since the last call (bench/agents/ages.py)
 
 
 async def run(ctx: Context) -> None:
@@ -177,6 +184,8 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
                 f"rss {step.rss / 1e6:4.0f} MB"
                 f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else "")
             )
+            if step.ages:
+                ctx.log(f"{'':>13}{where(step)}")
             await drain(sim, sub)
             restart = restart or (name == "nodered" and _expired(sim) > seen_expired)  # in the pause
         # Node-RED with an expired subscription will not catch up (the gateway's driver resubscribes by
@@ -204,7 +213,9 @@ def _gateway(ctx: Context, folder: Path, sim: Agent, broker_port: int) -> Party:
 
     async def start() -> int:
         agent[:] = [
-            await Agent.start("peer-gateway", "bench.agents.gateway", ["--config", str(config)], ctx.workdir)
+            await Agent.start(
+                "peer-gateway", "bench.agents.gateway", ["--config", str(config), "--ages"], ctx.workdir
+            )
         ]
         return agent[0].pid
 
@@ -213,7 +224,10 @@ def _gateway(ctx: Context, folder: Path, sim: Agent, broker_port: int) -> Party:
             await a.stop()
         agent.clear()
 
-    return Party("gateway", f"cnc/{MACHINE}/noise/", topics, start, stop)
+    async def ages() -> dict[str, Any]:
+        return await agent[0].ask("ages")
+
+    return Party("gateway", f"cnc/{MACHINE}/noise/", topics, start, stop, ages=ages)
 
 
 def _nodered(folder: Path, sim: Agent, broker_port: int) -> Party:
@@ -296,6 +310,8 @@ async def measure(ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Par
     await sim.ask("rate", rate="max" if math.isinf(rate) else rate)
     await asyncio.sleep(s.warmup)
     step = PeerStep(rate)
+    if party.ages is not None:
+        await party.ages()  # from here
     src0, sub0 = await sim.ask("snap"), await sub.ask("mark")
     cpu0, t0 = meter.cpu(), time.monotonic()
     rss = [meter.rss()]
@@ -315,6 +331,14 @@ async def measure(ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Par
     step.cpu_per_1000 = 1e6 * cpu_rate / step.delivered if step.delivered > 0 else None
     step.latency = sub1["window"]
     step.rss = max(rss)
+    if party.ages is not None:
+        ages = await party.ages()
+        backlog = dict(sub1["backlog"])
+        count = sub1["count"] - sub0["count"]
+        if count > 0 and step.delivered > 0 and backlog.get("p99") is not None:
+            size = (sub1["bytes"] - sub0["bytes"]) / count + 4  # + the PUBLISH header
+            backlog["p99_ms"] = 1000.0 * backlog["p99"] / size / step.delivered
+        step.ages = {"ingest": ages["ingest"], "write": ages["write"], "subscriber_backlog": backlog}
     return step
 
 
@@ -343,6 +367,24 @@ async def final_values(
         "variables": N,
         "settled_after": round(loop.time() - started, 1),
     }
+
+
+def where(step: PeerStep | dict[str, Any]) -> str:
+    """Where the age of the delivered values accrued: before the gateway, inside it, after it."""
+    ages = step.ages if isinstance(step, PeerStep) else step.get("ages") or {}
+    latency = step.latency if isinstance(step, PeerStep) else step.get("latency") or {}
+    if not ages:
+        return ""
+    ingest, write, backlog = ages["ingest"], ages["write"], ages["subscriber_backlog"]
+
+    def pair(d: dict[str, Any]) -> str:
+        return f"{_num(d.get('p50'))}/{_num(d.get('p99'))} ms"
+
+    return (
+        f"age p50/p99 at the gateway's ingest {pair(ingest)}, at its MQTT write {pair(write)}, "
+        f"at the subscriber {pair(latency)}; unread in the subscriber's socket p99 "
+        f"{(backlog.get('p99') or 0) / 1e3:,.0f} kB (~{_num(backlog.get('p99_ms'))} ms of messages)"
+    )
 
 
 def _num(value: float | None) -> str:

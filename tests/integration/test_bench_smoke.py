@@ -17,7 +17,7 @@ pytest.importorskip("psutil")  # the bench extra (make bench installs it)
 
 from bench.context import Context, Settings
 from bench.report import Results, render
-from bench.scenarios import mirror
+from bench.scenarios import mirror, peer
 from bench.targets import judge
 
 
@@ -56,3 +56,26 @@ async def test_a_tiny_mirror_run_counts_every_change_and_reports_it(tmp_path: Pa
     keys = {f["key"] for f in written["figures"]}
     assert {"mirror.inproc.qos1.n50.r500.mqtt_rate", "mirror.inproc.qos1.n50.final_mqtt"} <= keys
     assert len(written["targets"]) == 8
+
+
+async def test_the_peers_gateway_step_says_where_the_age_of_its_values_accrued(tmp_path: Path) -> None:
+    """The gateway's side of the peer scenario (Node-RED is not needed for it): each step carries the ages
+    at the gateway's ingest and MQTT write and the subscriber's unread backlog, beside the subscriber's own
+    latency, so a run tells age before the gateway from age inside it and after it."""
+    settings = Settings.quick_run()
+    settings.warmup, settings.window = 0.3, 1.0
+    settings.peer_rates = [500.0]
+    ctx = Context(settings, tmp_path, Results(args={}))
+    ctx.log = lambda text: None  # type: ignore[method-assign]
+
+    out = await peer.run_party(ctx, "gateway")
+
+    (step,) = out["steps"]
+    assert step["delivered"] > 0
+    ages = step["ages"]
+    for point in ("ingest", "write"):
+        assert ages[point]["n"] > 0 and ages[point]["p50"] <= ages[point]["p99"] <= ages[point]["max"]
+    assert ages["write"]["n"] >= step["latency"]["n"] / 8 * 0.9  # a sample of what was delivered (STRIDE)
+    assert ages["subscriber_backlog"]["n"] > 0  # the subscriber's socket was sampled in the window
+    assert "at the gateway's ingest" in peer.where(step)
+    assert out["final"]["match"] == peer.N  # every topic ends at the source's last value

@@ -7,7 +7,7 @@ import weakref
 
 import pytest
 
-from gateway.app import YOUNG_THRESHOLD, settled_heap
+from gateway.shims.heap import YOUNG_THRESHOLD, settled_heap
 from tests.gc_state import gc_state_kept
 
 

@@ -16,7 +16,7 @@ import pytest
 from gateway.errors import ControllerRefused, ControllerUnavailable
 from gateway.model.context import WriteContext
 from gateway.model.tree import Machine
-from gateway.sources import publish_decode
+from gateway.sources import opcua_client, publish_decode
 from gateway.sources.opcua_client import OpcUaSource
 from tests.integration.opcua.conftest import NS_URI, SOURCE_TS, Controller, make_machine, source_for
 from tests.waiting import free_port, wait_until
@@ -288,3 +288,55 @@ async def test_a_controller_that_stops_answering_is_caught_by_the_watchdog(root:
             process.send_signal(signal.SIGCONT)
             process.kill()
         await process.wait()
+
+
+async def test_a_source_that_falls_behind_is_handed_only_the_newest_value_of_each_variable(
+    controller: Controller, decoding: tuple[str, list[int]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Request-driven flow control (docs/architecture.md, Bounded freshness): one Publish request at the
+    controller at a time, the next only once the answer is in the tree. While the gateway does not ask,
+    the controller keeps just the newest value of each variable (queue size 1), so a source that fell
+    behind by any number of changes gets one change per variable, the latest, and no backlog."""
+    gate = asyncio.Event()
+    gate.set()
+    state = {"in_flight": 0, "most": 0, "held": 0}
+    original = opcua_client.publish
+
+    async def gated(session: object, acks: list[object]) -> publish_decode.Publish:
+        if not gate.is_set():
+            state["held"] += 1
+            await gate.wait()
+        state["in_flight"] += 1
+        state["most"] = max(state["most"], state["in_flight"])
+        try:
+            return await original(session, acks)  # type: ignore[arg-type]
+        finally:
+            state["in_flight"] -= 1
+
+    monkeypatch.setattr(opcua_client, "publish", gated)
+    machine = make_machine(controller.endpoint, variables(controller), publishing_interval=10)
+    counter, position = machine.nodes["Counter"], machine.nodes["Axes/X/Position"]
+    seen = machine.tree.hub.subscribe("test", every_change=True)
+    async with running(machine):
+        await wait_until(lambda: all_good(machine), message="every variable Good")
+        gate.clear()  # the gateway falls behind: it asks for nothing more
+        await wait_until(lambda: state["held"] == 1, message="the source waiting to ask again")
+        server = controller.server
+        assert server is not None and server.bserver is not None
+        (session,) = server.bserver.clients
+
+        def answers_held() -> bool:  # the controller has changes to send and no request to send them with
+            return bool(session.processor._publish_results_subs)
+
+        for n in range(1, 101):
+            await controller.set("Counter", n)
+            await controller.set("ActPos", float(n))
+            if n % 25 == 0:
+                await wait_until(answers_held, message="the controller holding changes")
+        seen.take()
+        gate.set()
+        await wait_until(lambda: counter.sample.value == 100, message="the newest Counter")
+        await wait_until(lambda: position.sample.value == 100.0, message="the newest position")
+        after = [(node, sample.value) for node, sample in seen.take() if node in (counter, position)]
+        assert sorted(after, key=lambda c: c[0].path) == [(position, 100.0), (counter, 100)]
+    assert state["most"] == 1  # never more than one request at the controller
