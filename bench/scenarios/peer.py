@@ -32,12 +32,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import shutil
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict, dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from bench.agents.protocol import percentiles
 from bench.context import Context, rate_key, rate_label
 from bench.nodered import NodeRed, flow, installed_versions
 from bench.procs import Agent, BenchError, Meter, Mosquitto
@@ -70,6 +73,9 @@ class PeerStep:
     # Where the age accrued (the gateway only): p50/p99/max ms at the source's ingest and at the MQTT write,
     # and the bytes (and, by the mean message size and the delivered rate, ms) unread at the subscriber
     ages: dict[str, Any] = field(default_factory=dict)
+    # Flat out: the same window's latency (p50/p99/max/n, ms) at a C subscriber (mosquitto_sub) beside the
+    # Python one, which falls behind there (its unread socket adds age after the party has sent)
+    latency_c: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
@@ -162,7 +168,7 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
                     await party.stop()
                     meter = Meter(await _start(party, sub, sim))
                 seen_expired = _expired(sim)
-                step = await measure(ctx, sim, sub, meter, party, rate)
+                step = await measure(ctx, sim, sub, meter, party, rate, broker.port)
                 expired = _expired(sim) > seen_expired
                 dead = expired or (step.offered > 0 and step.delivered == 0)
                 restart = dead and name == "nodered"  # the gateway's driver resubscribes by itself
@@ -184,6 +190,12 @@ async def run_party(ctx: Context, name: str) -> dict[str, Any]:
                 f"rss {step.rss / 1e6:4.0f} MB"
                 f"  (sim {step.source_cpu:3.0f}%)" + (f"  [{'; '.join(step.notes)}]" if step.notes else "")
             )
+            if step.latency_c:
+                c = step.latency_c
+                ctx.log(
+                    f"{'':>13}at a C subscriber (mosquitto_sub) in the same window: p50/p99 "
+                    f"{_num(c.get('p50'))}/{_num(c.get('p99'))} ms over {c.get('n', 0):,} messages"
+                )
             if step.ages:
                 ctx.log(f"{'':>13}{where(step)}")
             await drain(sim, sub)
@@ -305,13 +317,16 @@ def _expired(sim: Agent) -> int:
         return 0
 
 
-async def measure(ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Party, rate: float) -> PeerStep:
+async def measure(
+    ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Party, rate: float, broker_port: int
+) -> PeerStep:
     s = ctx.settings
     await sim.ask("rate", rate="max" if math.isinf(rate) else rate)
     await asyncio.sleep(s.warmup)
     step = PeerStep(rate)
     if party.ages is not None:
         await party.ages()  # from here
+    c_sub = await CSubscriber.start(ctx.workdir, broker_port, party.prefix) if math.isinf(rate) else None
     src0, sub0 = await sim.ask("snap"), await sub.ask("mark")
     cpu0, t0 = meter.cpu(), time.monotonic()
     rss = [meter.rss()]
@@ -323,6 +338,8 @@ async def measure(ctx: Context, sim: Agent, sub: Agent, meter: Meter, party: Par
     src1, sub1 = await sim.ask("snap"), await sub.ask("snap")
     cpu1, t1 = meter.cpu(), time.monotonic()
     rss.append(meter.rss())
+    if c_sub is not None:
+        step.latency_c = await c_sub.stop()
     step.offered = (src1["written"] - src0["written"]) / (src1["mono"] - src0["mono"])
     step.source_cpu = 100.0 * (src1["cpu"] - src0["cpu"]) / (src1["mono"] - src0["mono"])
     step.delivered = (sub1["count"] - sub0["count"]) / (sub1["mono"] - sub0["mono"])
@@ -473,3 +490,57 @@ def report(ctx: Context, details: dict[str, Any]) -> None:
 def _final(party: dict[str, Any]) -> float | None:
     final = party.get("final")
     return None if final is None else float(final["match"])
+
+
+class CSubscriber:
+    """mosquitto_sub for one window, writing each message's receipt time (`%U`, the wall clock with
+    nanoseconds) and payload to a file; afterwards, the latency of each from its payload's `ts`, as the
+    Python subscriber computes it. Retained messages (stale) are not printed (`-R`)."""
+
+    def __init__(self, proc: asyncio.subprocess.Process, path: Path) -> None:
+        self.proc, self.path = proc, path
+
+    @classmethod
+    async def start(cls, workdir: Path, port: int, prefix: str) -> CSubscriber:
+        exe = shutil.which("mosquitto_sub")
+        if exe is None:
+            raise BenchError("mosquitto_sub is not installed (make system-deps installs mosquitto-clients)")
+        path = workdir / f"mosquitto-sub-{time.monotonic_ns()}.txt"
+        with path.open("wb") as out:
+            proc = await asyncio.create_subprocess_exec(
+                exe, "-h", "127.0.0.1", "-p", str(port), "-t", f"{prefix}#", "-q", "0", "-R",
+                "-F", "%U %p", stdout=out, stderr=asyncio.subprocess.DEVNULL,
+            )  # fmt: skip
+        return cls(proc, path)
+
+    async def stop(self) -> dict[str, Any]:
+        with contextlib.suppress(ProcessLookupError):
+            self.proc.terminate()
+        await self.proc.wait()
+        return await asyncio.to_thread(c_latencies, self.path)
+
+
+def c_latencies(path: Path) -> dict[str, Any]:
+    seconds: dict[str, float] = {}
+    out: list[float] = []
+    with path.open("rb") as lines:
+        for line in lines:
+            stamp, _, payload = line.partition(b" ")
+            t = payload.find(b'"ts":"')
+            if t < 0:
+                continue
+            ts = payload[t + 6 : t + 30].decode("ascii", "replace")
+            head = ts[:19]
+            base = seconds.get(head)
+            if base is None:
+                try:
+                    base = datetime.fromisoformat(head + "+00:00").timestamp()
+                except ValueError:
+                    continue
+                seconds[head] = base
+            try:
+                out.append((float(stamp) - base - int(ts[20:23]) / 1000.0) * 1000.0)
+            except ValueError:
+                continue
+    path.unlink(missing_ok=True)
+    return percentiles(out)

@@ -64,13 +64,17 @@ async def test_the_peers_gateway_step_says_where_the_age_of_its_values_accrued(t
     latency, so a run tells age before the gateway from age inside it and after it."""
     settings = Settings.quick_run()
     settings.warmup, settings.window = 0.3, 1.0
-    settings.peer_rates = [500.0]
+    settings.peer_rates = [500.0, math.inf]
     ctx = Context(settings, tmp_path, Results(args={}))
     ctx.log = lambda text: None  # type: ignore[method-assign]
 
     out = await peer.run_party(ctx, "gateway")
 
-    (step,) = out["steps"]
+    step, flat = out["steps"]
+    # Flat out, a C subscriber measures the same window's latency too (the target is judged there).
+    assert not step["latency_c"] and flat["rate"] is None
+    c = flat["latency_c"]
+    assert c["n"] > 0 and c["p50"] <= c["p99"] <= c["max"]
     assert step["delivered"] > 0
     ages = step["ages"]
     for point in ("ingest", "write"):
