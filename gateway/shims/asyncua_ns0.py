@@ -31,6 +31,7 @@ import stat
 import sys
 import tempfile
 import weakref
+import zlib
 from collections.abc import Callable, Iterator, MutableMapping
 from pathlib import Path
 from typing import Any
@@ -54,11 +55,17 @@ def default_cache_dir() -> Path | None:
 
 
 def cache_file(folder: Path) -> Path:
-    """The cache file for this asyncua, this Python and this format, in `folder`."""
+    """The cache file for this asyncua, this Python and this format, in `folder`. The name includes the
+    fields of the records pickled (asyncua's NodeData, the slim records): change them, a new file."""
     from asyncua import __version__ as asyncua_version
+    from asyncua.server.address_space import NodeData
 
+    from gateway.shims.asyncua_server import SlimAttributeValue
+
+    shape = repr((FORMAT, SlimAttributeValue.__slots__, NodeData.__init__.__code__.co_names))
+    digest = zlib.crc32(shape.encode()) & 0xFFFF
     py = "{}{}".format(*sys.version_info[:2])
-    return folder / f"asyncua-{asyncua_version}-ns0-py{py}-f{FORMAT}.bin"
+    return folder / f"asyncua-{asyncua_version}-ns0-py{py}-f{FORMAT}-{digest:04x}.bin"
 
 
 class LazyNodes(MutableMapping[Any, Any]):
