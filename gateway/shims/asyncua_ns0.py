@@ -209,8 +209,8 @@ def save(path: Path, nodes: dict[Any, Any]) -> None:
 
 def use_cache(iserver: Any, folder: Path) -> Callable[[], bool]:
     """Make this asyncua InternalServer load its standard namespace from the cache in `folder` (writing it
-    when there is none yet). Call before `Server.init`; the returned function says whether the cache was
-    used (after init)."""
+    when there is none yet, then reading it as the next servers will). Call before `Server.init`; the
+    returned function says whether the cache was there already (after init)."""
     path = cache_file(folder)
     build = iserver.load_standard_address_space  # the class's, with its wrappers (asyncua_server.py)
     used = [False]
@@ -224,6 +224,10 @@ def use_cache(iserver: Any, folder: Path) -> Callable[[], bool]:
             return
         await build(shelf_file)
         save(path, aspace._nodes)
+        # From the file from now on, as the next servers will: what was built is freed (17 MB).
+        nodes = load(path)
+        if nodes is not None:
+            aspace._nodes = nodes
 
     iserver.load_standard_address_space = load_standard_address_space
     return lambda: used[0]

@@ -31,7 +31,7 @@ from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
 from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
-from gateway.shims.asyncua_ns0 import LazyNodes
+from gateway.shims.asyncua_ns0 import LazyNodes, cache_file
 from gateway.sinks.opcua import OpcUaSink
 from tests.waiting import free_port, wait_until
 
@@ -122,7 +122,7 @@ async def pair(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Pair]:
     )
     writer.cache_dir = cache
     async with writer:  # the first start builds the standard namespace and writes the cache
-        assert not isinstance(writer.server.iserver.aspace._nodes, LazyNodes)
+        assert cache_file(cache).is_file()
     new = OpcUaSink(
         tree, OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/new"), folder / "new"
     )

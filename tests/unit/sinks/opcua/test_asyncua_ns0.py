@@ -34,6 +34,7 @@ async def test_the_first_server_builds_and_writes_it_the_next_reads_it_node_by_n
     folder = tmp_path / "cache"
     first, used = await _server(folder)
     assert not used and cache_file(folder).is_file()
+    assert isinstance(first.iserver.aspace._nodes, LazyNodes)  # then read from it, as the next ones will
     assert oct(folder.stat().st_mode & 0o777) == oct(0o700)
     second, used = await _server(folder)
     assert used
