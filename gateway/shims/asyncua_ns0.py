@@ -30,6 +30,7 @@ import pickle
 import stat
 import sys
 import tempfile
+import time
 import weakref
 import zlib
 from collections.abc import Callable, Iterator, MutableMapping
@@ -180,6 +181,7 @@ def save(path: Path, nodes: dict[Any, Any]) -> None:
         path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
         if path.exists():
             return
+        _forget_abandoned(path.parent)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".ns0-", suffix=".tmp")
     except OSError as exc:
         log.debug("OPC UA standard namespace cache %s not written: %s", path, exc)
@@ -205,6 +207,15 @@ def save(path: Path, nodes: dict[Any, Any]) -> None:
     finally:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+
+
+def _forget_abandoned(folder: Path, age: float = 600.0) -> None:
+    """Remove temporary files a server killed while writing left behind (older than `age` seconds)."""
+    now = time.time()
+    for stale in folder.glob(".ns0-*.tmp"):
+        with contextlib.suppress(OSError):
+            if now - stale.stat().st_mtime > age:
+                stale.unlink()
 
 
 def use_cache(iserver: Any, folder: Path) -> Callable[[], bool]:

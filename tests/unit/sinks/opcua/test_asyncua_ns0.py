@@ -97,3 +97,15 @@ async def test_a_file_others_may_write_is_not_unpickled(tmp_path: Path) -> None:
         assert load(path) is None
     finally:
         tmp_path.chmod(0o700)
+
+
+async def test_a_temporary_file_left_by_a_killed_writer_goes_when_the_cache_is_next_written(
+    tmp_path: Path,
+) -> None:
+    abandoned, recent = tmp_path / ".ns0-abandoned.tmp", tmp_path / ".ns0-writing.tmp"
+    for path in (abandoned, recent):
+        path.write_bytes(b"half a cache")
+    os.utime(abandoned, (0, 0))
+    _, used = await _server(tmp_path)
+    assert not used and cache_file(tmp_path).is_file()
+    assert not abandoned.exists() and recent.exists()  # another server may be writing that one
