@@ -18,7 +18,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BeforeValidator, Field, SecretStr, field_validator
 
-from gateway.codecs.sparkplug import SparkplugError, check_id
+from gateway.codecs.sparkplug.errors import SparkplugError
+from gateway.codecs.sparkplug.topics import check_id
 from gateway.config.base import Strict
 from gateway.config.mqtt import MqttConfig, MqttReconnect, MqttTls
 

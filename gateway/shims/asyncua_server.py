@@ -102,6 +102,9 @@ class _NoCallbacks(dict[int, Any]):
     setdefault = _refuse
     update = _refuse
 
+    def __reduce__(self) -> str:
+        return "NO_CALLBACKS"  # unpickled (asyncua_ns0.py's cache) as the one shared mapping, not a copy
+
 
 NO_CALLBACKS: dict[int, Any] = _NoCallbacks()
 

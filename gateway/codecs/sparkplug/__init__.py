@@ -16,84 +16,177 @@ the gateway is one edge node, every machine one of its devices.
     host.feed(parse_state(payload))                              # PrimaryHost: gate births and data
 
 The payload schema is sparkplug_b.proto; sparkplug_b_pb2 is generated from it (protoc.py).
+
+The names below are imported from their modules when first used (PEP 562): the configuration
+checks Sparkplug ids with `check_id` (topics.py), and a gateway without `sparkplug:` loads
+nothing else of the codec (nor protobuf).
 """
 
-from gateway.codecs.sparkplug.aliases import Aliases
-from gateway.codecs.sparkplug.commands import (
-    Command,
-    Definition,
-    MetricTable,
-    Write,
-    decode_dcmd,
-    decode_ncmd,
-)
-from gateway.codecs.sparkplug.datatypes import (
-    Scalar,
-    SparkplugType,
-    Value,
-    gateway_type,
-    get_metric_value,
-    pack_array,
-    set_metric_value,
-    sparkplug_type,
-    unpack_array,
-)
-from gateway.codecs.sparkplug.errors import (
-    BadBirth,
-    BadCommand,
-    BadId,
-    BadState,
-    BadTopic,
-    BadValue,
-    MalformedPayload,
-    SparkplugError,
-    Unencodable,
-    UnknownAlias,
-    UnknownMetric,
-    WrongDatatype,
-)
-from gateway.codecs.sparkplug.payloads import (
-    BDSEQ,
-    PROP_DESCRIPTION,
-    PROP_HIGH,
-    PROP_LOW,
-    PROP_QUALITY,
-    PROP_READ_ONLY,
-    PROP_UNIT,
-    REBIRTH,
-    Metric,
-    Property,
-    Quality,
-    Released,
-    encode_command,
-    encode_dbirth,
-    encode_ddata,
-    encode_ddeath,
-    encode_nbirth,
-    encode_ndata,
-    encode_ndeath,
-    encode_stored,
-    metric_properties,
-    quality_of_status,
-    release_stored,
-)
-from gateway.codecs.sparkplug.sequence import BdSeq, Seq
-from gateway.codecs.sparkplug.state import HostState, PrimaryHost, parse_state
-from gateway.codecs.sparkplug.topics import (
-    NAMESPACE,
-    STATE_QOS,
-    STATE_RETAIN,
-    MessageType,
-    StateTopic,
-    Topic,
-    check_id,
-    command_subscriptions,
-    device_topic,
-    node_topic,
-    parse_topic,
-    state_topic,
-)
-from gateway.codecs.sparkplug.wire import MAX_PAYLOAD, parse_payload
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from gateway.codecs.sparkplug.aliases import Aliases
+    from gateway.codecs.sparkplug.commands import (
+        Command,
+        Definition,
+        MetricTable,
+        Write,
+        decode_dcmd,
+        decode_ncmd,
+    )
+    from gateway.codecs.sparkplug.datatypes import (
+        Scalar,
+        SparkplugType,
+        Value,
+        gateway_type,
+        get_metric_value,
+        pack_array,
+        set_metric_value,
+        sparkplug_type,
+        unpack_array,
+    )
+    from gateway.codecs.sparkplug.errors import (
+        BadBirth,
+        BadCommand,
+        BadId,
+        BadState,
+        BadTopic,
+        BadValue,
+        MalformedPayload,
+        SparkplugError,
+        Unencodable,
+        UnknownAlias,
+        UnknownMetric,
+        WrongDatatype,
+    )
+    from gateway.codecs.sparkplug.payloads import (
+        BDSEQ,
+        PROP_DESCRIPTION,
+        PROP_HIGH,
+        PROP_LOW,
+        PROP_QUALITY,
+        PROP_READ_ONLY,
+        PROP_UNIT,
+        REBIRTH,
+        Metric,
+        Property,
+        Quality,
+        Released,
+        encode_command,
+        encode_dbirth,
+        encode_ddata,
+        encode_ddeath,
+        encode_nbirth,
+        encode_ndata,
+        encode_ndeath,
+        encode_stored,
+        metric_properties,
+        quality_of_status,
+        release_stored,
+    )
+    from gateway.codecs.sparkplug.sequence import BdSeq, Seq
+    from gateway.codecs.sparkplug.state import HostState, PrimaryHost, parse_state
+    from gateway.codecs.sparkplug.topics import (
+        NAMESPACE,
+        STATE_QOS,
+        STATE_RETAIN,
+        MessageType,
+        StateTopic,
+        Topic,
+        check_id,
+        command_subscriptions,
+        device_topic,
+        node_topic,
+        parse_topic,
+        state_topic,
+    )
+    from gateway.codecs.sparkplug.wire import MAX_PAYLOAD, parse_payload
+
+_HOMES = {
+    "Aliases": "aliases",
+    "BDSEQ": "payloads",
+    "BadBirth": "errors",
+    "BadCommand": "errors",
+    "BadId": "errors",
+    "BadState": "errors",
+    "BadTopic": "errors",
+    "BadValue": "errors",
+    "BdSeq": "sequence",
+    "Command": "commands",
+    "Definition": "commands",
+    "HostState": "state",
+    "MAX_PAYLOAD": "wire",
+    "MalformedPayload": "errors",
+    "MessageType": "topics",
+    "Metric": "payloads",
+    "MetricTable": "commands",
+    "NAMESPACE": "topics",
+    "PROP_DESCRIPTION": "payloads",
+    "PROP_HIGH": "payloads",
+    "PROP_LOW": "payloads",
+    "PROP_QUALITY": "payloads",
+    "PROP_READ_ONLY": "payloads",
+    "PROP_UNIT": "payloads",
+    "PrimaryHost": "state",
+    "Property": "payloads",
+    "Quality": "payloads",
+    "REBIRTH": "payloads",
+    "Released": "payloads",
+    "STATE_QOS": "topics",
+    "STATE_RETAIN": "topics",
+    "Scalar": "datatypes",
+    "Seq": "sequence",
+    "SparkplugError": "errors",
+    "SparkplugType": "datatypes",
+    "StateTopic": "topics",
+    "Topic": "topics",
+    "Unencodable": "errors",
+    "UnknownAlias": "errors",
+    "UnknownMetric": "errors",
+    "Value": "datatypes",
+    "Write": "commands",
+    "WrongDatatype": "errors",
+    "check_id": "topics",
+    "command_subscriptions": "topics",
+    "decode_dcmd": "commands",
+    "decode_ncmd": "commands",
+    "device_topic": "topics",
+    "encode_command": "payloads",
+    "encode_dbirth": "payloads",
+    "encode_ddata": "payloads",
+    "encode_ddeath": "payloads",
+    "encode_nbirth": "payloads",
+    "encode_ndata": "payloads",
+    "encode_ndeath": "payloads",
+    "encode_stored": "payloads",
+    "gateway_type": "datatypes",
+    "get_metric_value": "datatypes",
+    "metric_properties": "payloads",
+    "node_topic": "topics",
+    "pack_array": "datatypes",
+    "parse_payload": "wire",
+    "parse_state": "state",
+    "parse_topic": "topics",
+    "quality_of_status": "payloads",
+    "release_stored": "payloads",
+    "set_metric_value": "datatypes",
+    "sparkplug_type": "datatypes",
+    "state_topic": "topics",
+    "unpack_array": "datatypes",
+}
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{home}"), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "BDSEQ",

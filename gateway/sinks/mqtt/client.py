@@ -20,6 +20,11 @@ How paho meets asyncio here:
   paho's per-message objects, one socket write per batch instead of one per
   message. `on_drained` says when paho has handed everything to the socket, so
   that the sink gives it the next batch only then (the newest values, not a queue).
+* **PUBACKs without objects.** For each PUBACK paho builds a ReasonCode (which
+  copies its table of reason names) and a Properties; a PUBACK of two bytes
+  (success, no properties: nearly all of them) gets one shared pair instead
+  (`_shared_success_acks`), the same values. At start-up, 10,000 QoS 1 values
+  took about 0.15 s of CPU in that alone.
 * **No hidden queues.** paho's automatic re-sending after a reconnect is not
   used: `take_back()` empties paho's unacknowledged messages when the
   connection drops, and the sink re-sends them from its own backlog, so that
@@ -40,9 +45,11 @@ from pathlib import Path
 from typing import Any, cast
 
 import paho.mqtt.client as paho
+from paho.mqtt import _packet
 from paho.mqtt.enums import CallbackAPIVersion, MessageType, MQTTErrorCode, MQTTProtocolVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
+from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway.config.mqtt import MqttTls
 from gateway.errors import BrokerError, BrokerRefused, SinkError
@@ -54,6 +61,26 @@ log = logging.getLogger(__name__)
 
 PUBLISH = MessageType.PUBLISH
 MISC_INTERVAL = 1.0  # s between paho.loop_misc calls (keepalive pings, dead-connection detection)
+
+
+def _shared_success_acks() -> None:
+    """Decode two-byte PUBACKs (message id only: success, no properties) to one shared ReasonCode and
+    Properties, as paho would build them anew for each (once per process; the rest go to paho)."""
+    decode = _packet.decode_puback
+    if getattr(decode, "_shared_success", False):
+        return
+    reason = ReasonCode(PacketTypes.PUBACK)
+    properties = _properties(PacketTypes.PUBACK)
+
+    def decode_puback(header: int, packet: bytes | bytearray, protocol: MQTTProtocolVersion) -> Any:
+        if len(packet) == 2:
+            return _packet.PubackPacket(
+                mid=(packet[0] << 8) | packet[1], reason=reason, properties=properties
+            )
+        return decode(header, packet, protocol)
+
+    decode_puback._shared_success = True  # type: ignore[attr-defined]
+    _packet.decode_puback = decode_puback
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +186,7 @@ class MqttClient:
             reconnect_on_failure=False,  # also stops paho reconnecting (blocking) on its own
             **kwargs,
         )
+        _shared_success_acks()
         client.suppress_exceptions = True
         client.max_inflight_messages_set(0)  # the sink keeps its own window
         client.max_queued_messages_set(0)

@@ -47,6 +47,7 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.shims.asyncua_ns0 import default_cache_dir, loaded_node_ids, use_cache
 from gateway.shims.asyncua_server import (
     forget_standard_namespace_code,
     keep_written_values,
@@ -274,6 +275,9 @@ class OpcUaSink:
     #: Our nodes go straight into asyncua's address space (bulk.py); False: through asyncua's AddNodes,
     #: as before (tests/integration/opcua/test_address_space_identity.py builds both and compares).
     direct_nodes = True
+    #: Where the standard namespace is cached (gateway/shims/asyncua_ns0.py); None: built at every start.
+    #: Used with `direct_nodes` only, so that the identity test compares a cached one with asyncua's own.
+    cache_dir: Path | None = default_cache_dir()
 
     def __init__(
         self,
@@ -447,13 +451,15 @@ class OpcUaSink:
             self._writer is not None
         ):  # asyncua's generated code builds the standard namespace, the writer adds it
             service.try_add_nodes = self._writer.try_add_nodes  # type: ignore[method-assign,assignment]
+            if self.cache_dir is not None:  # built once, then read node by node from a file (asyncua_ns0.py)
+                use_cache(server.iserver, self.cache_dir)
         try:
             await server.init()
         finally:
             vars(service).pop("try_add_nodes", None)
         self._shared = SharedAttributes(server)
-        # The standard namespace: what this frees, our own nodes reuse (asyncua_tuning.py).
-        self._shared.share()
+        # The standard namespace (what is in memory of it): what this frees, our own nodes reuse.
+        self._shared.share(loaded_node_ids(server.iserver.aspace._nodes))
         await server.set_application_uri(self.application_uri)
         await server.set_build_info(
             server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()

@@ -106,8 +106,7 @@ class Pages:
     def __init__(self, tree: VariableTree, api: Api, latest_jobs: Mapping[str, Mapping[str, Any]]) -> None:
         self.tree = tree
         self.api = api
-        self.templates = Templates()
-        self.templates.env.filters["when"] = when
+        self.templates = Templates(filters={"when": when})
         self.latest_jobs = latest_jobs  # machine -> its latest job record seen on the event bus
         self._summary_paths: dict[
             str, tuple[str | None, str | None, str | None]

@@ -9,6 +9,8 @@ say *when*: server timestamps, and the creation time asyncua stamps on constant
 attributes (present on both or on neither). The same comparison runs on the
 servers' own records (every node of the gateway's namespace, every reference of
 the standard namespace), so that a difference no client happened to reach fails too.
+The new one reads its standard namespace from the cache (gateway/shims/asyncua_ns0.py)
+that a server started before it wrote, node by node as they are asked for.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
 from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
+from gateway.shims.asyncua_ns0 import LazyNodes, cache_file
 from gateway.sinks.opcua import OpcUaSink
 from tests.waiting import free_port, wait_until
 
@@ -113,10 +116,19 @@ async def pair(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Pair]:
         tree, OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/old"), folder / "old"
     )
     old.direct_nodes = False
+    cache = folder / "cache"
+    writer = OpcUaSink(
+        tree, OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/first"), folder / "first"
+    )
+    writer.cache_dir = cache
+    async with writer:  # the first start builds the standard namespace and writes the cache
+        assert cache_file(cache).is_file()
     new = OpcUaSink(
         tree, OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/new"), folder / "new"
     )
+    new.cache_dir = cache
     async with old, new:
+        assert isinstance(new.server.iserver.aspace._nodes, LazyNodes)  # read from the cache
         runners = [asyncio.create_task(s.run(), name=f"run-{s.endpoint}") for s in (old, new)]
         laser = tree.machines["laser"]
         laser.ingest(laser.nodes["Axes/X/Position"], 12.5, TS)
