@@ -154,9 +154,11 @@ def judge_14(ctx: Context) -> list[Target]:
     if over:
         sent = over["sent_after_dc3"]
         arrived = over.get("arrived_after_dc3") or {}
+        upper = over.get("sent_after_dc3_at_most") or {}
         where = (
             f"{over['size'] / 1e6:.2f} MB drip, {sent['n']:,} DC3s, "
             "written between a DC3 and its DC1 (timed); "
+            f"between the simulator's outer stamps p99 {upper.get('p99')}, max {upper.get('max')}; "
             f"reached the device server after it: p99 {arrived.get('p99')}, max {arrived.get('max')}"
         )
         targets.append(Target(

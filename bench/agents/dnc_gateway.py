@@ -6,7 +6,7 @@ Commands: `load` (url, baud, program file): one load, seconds; `raw` (url, baud,
 program written to the port in one call; `drip` (urls, baud, program files, buffer, link, record): one drip
 per line at once, the lines in one fleet (gateway/jobs/dnc/fleet.py; `link`: they share a device
 server of that capacity), with `record` the time (CLOCK_MONOTONIC) and size of every write the transport made;
-`sent_after` (holds: [DC3 time, DC1 time or null] from the controller): the characters the transport wrote
+`sent_after` (holds: [from, to or null], CLOCK_MONOTONIC): the characters the transport wrote
 within each hold, from the last recorded drip; `restart` (url, baud, program file, line, repeats): a drip
 restarted at a line, the command's time (CLOCK_MONOTONIC) per repeat.
 """

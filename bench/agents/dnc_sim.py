@@ -48,7 +48,10 @@ class TimedFace(DncFace):
     timed: Timed
     in_flight: list[int]
     sent_after: list[int]
-    holds: list[list[float]]  # [when the DC3 left, when the DC1 after it left (or inf)], CLOCK_MONOTONIC
+    # Per DC3, CLOCK_MONOTONIC: [just before and just after the DC3 was handed to the socket, just before and
+    # just after the DC1 after it (inf until then)]. A busy simulator can be descheduled between a stamp
+    # and the send, so each moment is known to lie between its two stamps.
+    holds: list[list[float]]
     _after: int | None
 
     def watch_dc3(self) -> None:
@@ -58,20 +61,21 @@ class TimedFace(DncFace):
 
         def watched(char: int) -> None:
             now = time.monotonic()
+            send_flow(char)
+            sent = time.monotonic()
             if char == DC3:
-                if not self.holds or self.holds[-1][1] != math.inf:
-                    self.holds.append([now, math.inf])
+                if not self.holds or self.holds[-1][3] != math.inf:
+                    self.holds.append([now, sent, math.inf, math.inf])
                 self.in_flight.append(len(controller.wire))
                 if self._after is not None:
                     self.sent_after.append(self._after)
                 self._after = 0
             else:
-                if self.holds and self.holds[-1][1] == math.inf:
-                    self.holds[-1][1] = now
+                if self.holds and self.holds[-1][3] == math.inf:
+                    self.holds[-1][2:] = [now, sent]
                 if self._after is not None:
                     self.sent_after.append(self._after)
                     self._after = None
-            send_flow(char)
 
         controller._send_flow = watched  # type: ignore[method-assign]
 
@@ -171,7 +175,7 @@ async def main() -> None:
                     "episodes": len(episodes),
                     "in_flight_at_dc3": percentiles([float(n) for n in face.in_flight]),
                     "sent_after_dc3": percentiles([float(n) for n in face.sent_after]),
-                    "holds": [[a, b if b != math.inf else None] for a, b in face.holds],
+                    "holds": [[t if t != math.inf else None for t in hold] for hold in face.holds],
                     "first": face.timed.first,
                     "last": face.timed.last,
                     "chars": face.timed.chars,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import select
+import socket
 import time
 from typing import Protocol, cast
 
@@ -117,6 +118,12 @@ class SerialPort:
             port.open()
             if url.startswith("socket://"):
                 del port.reset_input_buffer  # the class's again
+                # Each slice goes out as it is written (pyserial leaves Nagle on): held back until the
+                # device server acknowledges the last, slices would reach it in bursts, more of them
+                # already on their way when the controller's DC3 comes.
+                sock = getattr(port, "_socket", None)
+                if sock is not None:
+                    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
         self._port = cast(_Port, port)
