@@ -189,6 +189,7 @@ def noise_mapping(
     publishing_interval: float = 10.0,
     queue_size: int = 10,
     mqtt: dict[str, Any] | None = None,
+    publish_requests: int = 1,
 ) -> str:
     """A gateway mapping file (YAML text) for noise variables [first, first + count).
 
@@ -212,6 +213,7 @@ def noise_mapping(
         f"  endpoint: {endpoint}",
         f"  publishing_interval: {publishing_interval:g}",
         "  timeout: 10",
+        *([f"  publish_requests: {publish_requests}"] if publish_requests != 1 else []),
         "defaults:",
         "  sampling_interval: 0",
         f"  queue_size: {queue_size}",

@@ -52,6 +52,8 @@ N = 1000
 QOS = 0
 INTERVAL_MS = 10.0  # Node-RED's publishing interval (and its items' sampling interval)
 QUEUE_SIZE = 1  # the monitored items' queue at the controller, for both parties
+PUBLISH_REQUESTS = 4  # the gateway's Publish requests at the controller (driver.publish_requests), as
+# Node-RED's client keeps several: flat out, the simulator's publishing is the limit, not the gateway
 MACHINE = "noise"
 SIM_NAMESPACE = 2  # simulator/README.md: urn:cnc-simulator:plc is namespace index 2
 EXPIRED = (
@@ -218,7 +220,13 @@ def _gateway(ctx: Context, folder: Path, sim: Agent, broker_port: int) -> Party:
     # Queue size 1 at the controller, as Node-RED's monitored item group has (bench/nodered.py) and as the
     # gateway's own default is: the same subscription. With the mirror's 10, a gateway that falls behind
     # is handed up to ten old values per variable to decode, and the age of what it sends starts there.
-    mapping = noise_mapping(NoiseSpec(N), sim.ready["endpoint"], machine=MACHINE, queue_size=QUEUE_SIZE)
+    mapping = noise_mapping(
+        NoiseSpec(N),
+        sim.ready["endpoint"],
+        machine=MACHINE,
+        queue_size=QUEUE_SIZE,
+        publish_requests=PUBLISH_REQUESTS,
+    )
     config, _ = write_gateway(folder, {MACHINE: mapping}, mqtt_port=broker_port, mqtt={"qos": QOS})
     topics = [noise_topic(MACHINE, p) for p in noise_paths(0, N)]
     agent: list[Agent] = []

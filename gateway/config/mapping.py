@@ -254,6 +254,15 @@ class OpcUaDriver(Strict):
     timeout: float = Field(default=5.0, gt=0, description="Seconds per request")
     publishing_interval: float = Field(default=100.0, gt=0, description="Milliseconds")
     watchdog_interval: float = Field(default=1.0, gt=0, description="Seconds between liveness probes")
+    publish_requests: int = Field(
+        default=1,
+        ge=1,
+        le=8,
+        description="Publish requests kept at the controller. 1: the next only once an answer is in the "
+        "tree, so a gateway that falls behind is handed just the newest value of each variable; more "
+        "keep the controller answering while the gateway works (more changes per second from a busy "
+        "controller, or over a slow link)",
+    )
     reconnect: Backoff = Backoff()
 
     @field_validator("endpoint")

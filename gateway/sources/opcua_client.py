@@ -28,6 +28,7 @@ import asyncio
 import contextlib
 import logging
 import math
+from collections import deque
 from collections.abc import Callable, Coroutine, Sequence
 from datetime import datetime
 from typing import Any, Self
@@ -53,7 +54,7 @@ from gateway.reconnect import Backoff, OutageLog
 from gateway.shims.ua import new_node_id, new_status_error
 from gateway.sources.asyncua_logs import quiet_asyncua_logging
 from gateway.sources.opcua_status import describe_error, status_doc, status_name
-from gateway.sources.publish_decode import Change, from_notifications, publish
+from gateway.sources.publish_decode import Change, Publish, from_notifications, publish
 
 log = logging.getLogger(__name__)
 
@@ -438,36 +439,51 @@ class OpcUaSource:
             lost("BadInternalError", f"unexpected error: {type(exc).__name__}: {exc}")
 
     async def _receive(self, session: Any, lost: Lost, stall_after: float) -> None:
+        """`publish_requests` requests at the controller (1 by default: the next once an answer is in).
+        Answers are taken in the order they come (the session's one connection keeps it); each answer's
+        acknowledgement goes with the next request."""
         acks: list[ua.SubscriptionAcknowledgement] = []
-        while True:
-            try:
-                async with asyncio.timeout(stall_after):
-                    response = await publish(session, acks)
-            except (BadTimeout, BadTooManyPublishRequests):
-                acks = []
-                await asyncio.sleep(0.05)
-                continue
-            except UaStructParsingError:
-                acks = []  # one undecodable message (logged); the next one may be fine
-                continue
-            except TimeoutError:
-                lost("BadCommunicationError", "subscription stalled (no publish response)")
-                return
-            except Exception as exc:  # noqa: BLE001 - whatever asyncua raised ends this session only
-                status, reason, _ = describe_error(exc)
-                lost(status, reason)
-                return
-            if response.service_result & 0x80000000:
-                lost(*describe_error(new_status_error(response.service_result))[:2])
-                return
-            acks = []
-            if response.notifications:
-                acks.append(
-                    ua.SubscriptionAcknowledgement(
-                        SubscriptionId=response.subscription_id, SequenceNumber=response.sequence_number
+        wanted = self.driver.publish_requests
+        pending: deque[asyncio.Task[Publish]] = deque()
+        try:
+            while True:
+                while len(pending) < wanted:
+                    pending.append(asyncio.create_task(publish(session, acks), name="opcua:publish"))
+                    acks = []
+                task = pending[0]
+                try:
+                    async with asyncio.timeout(stall_after):
+                        response = await asyncio.shield(task)
+                except (BadTimeout, BadTooManyPublishRequests):
+                    await asyncio.sleep(0.05)
+                    continue
+                except UaStructParsingError:
+                    continue  # one undecodable message (logged); the next one may be fine
+                except TimeoutError:
+                    lost("BadCommunicationError", "subscription stalled (no publish response)")
+                    return
+                except Exception as exc:  # noqa: BLE001 - whatever asyncua raised ends this session only
+                    status, reason, _ = describe_error(exc)
+                    lost(status, reason)
+                    return
+                finally:
+                    if task.done():
+                        pending.popleft()
+                if response.service_result & 0x80000000:
+                    lost(*describe_error(new_status_error(response.service_result))[:2])
+                    return
+                if response.notifications:
+                    acks.append(
+                        ua.SubscriptionAcknowledgement(
+                            SubscriptionId=response.subscription_id, SequenceNumber=response.sequence_number
+                        )
                     )
-                )
-                self._process(response.changes, response.statuses, lost)
+                    self._process(response.changes, response.statuses, lost)
+        finally:
+            for task in pending:
+                task.cancel()
+            if pending:
+                await asyncio.wait(pending, timeout=1.0)
 
     def _on_informed(self, lost: Lost) -> Callable[[ua.PublishResult], None]:
         """The callback asyncua calls when its supervisor tells subscriptions the connection is gone."""

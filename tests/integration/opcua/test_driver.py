@@ -340,3 +340,33 @@ async def test_a_source_that_falls_behind_is_handed_only_the_newest_value_of_eac
         after = [(node, sample.value) for node, sample in seen.take() if node in (counter, position)]
         assert sorted(after, key=lambda c: c[0].path) == [(position, 100.0), (counter, 100)]
     assert state["most"] == 1  # never more than one request at the controller
+
+
+async def test_more_publish_requests_keep_that_many_at_the_controller_and_lose_nothing(
+    controller: Controller, decoding: tuple[str, list[int]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`publish_requests: 2`: two requests at the controller while it has nothing to send, answers taken
+    in order, every variable ending at its newest value."""
+    state = {"in_flight": 0, "most": 0}
+    original = opcua_client.publish
+
+    async def counted(session: object, acks: list[object]) -> publish_decode.Publish:
+        state["in_flight"] += 1
+        state["most"] = max(state["most"], state["in_flight"])
+        try:
+            return await original(session, acks)  # type: ignore[arg-type]
+        finally:
+            state["in_flight"] -= 1
+
+    monkeypatch.setattr(opcua_client, "publish", counted)
+    machine = make_machine(
+        controller.endpoint, variables(controller), publishing_interval=10, publish_requests=2
+    )
+    counter = machine.nodes["Counter"]
+    async with running(machine):
+        await wait_until(lambda: all_good(machine), message="every variable Good")
+        await wait_until(lambda: state["in_flight"] == 2, message="two requests at the controller")
+        for n in range(1, 51):
+            await controller.set("Counter", n)
+        await wait_until(lambda: counter.sample.value == 50, message="the newest Counter")
+    assert state["most"] == 2  # never more than asked for
