@@ -72,7 +72,7 @@ soak: $(STAMP) system-deps
 	CNC_DRILL_SCALE=soak $(BIN)/pytest tests/integration/drills
 
 # Throughput, latency, start-up, memory and job delivery against the raw libraries' ceilings and against
-# Node-RED, measured in the same run (bench/README.md). About an hour (the serial DNC scenario's 10 MB drip alone is about 15 min); `make bench BENCH_ARGS=--quick` takes
+# Node-RED, measured in the same run (bench/README.md). About an hour (the serial DNC scenario's 10 MB drip alone is about half an hour); `make bench BENCH_ARGS=--quick` takes
 # about three. Prints one table; the same figures go to bench/results/latest.json.
 bench: $(BENCH_STAMP) $(PEER_STAMP) system-deps
 	$(BIN)/python -m bench.run $(BENCH_ARGS)
