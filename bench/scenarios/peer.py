@@ -53,7 +53,7 @@ QOS = 0
 INTERVAL_MS = 10.0  # Node-RED's publishing interval (and its items' sampling interval)
 QUEUE_SIZE = 1  # the monitored items' queue at the controller, for both parties
 PUBLISH_REQUESTS = 4  # the gateway's Publish requests at the controller (driver.publish_requests), as
-# Node-RED's client keeps several: flat out, the simulator's publishing is the limit, not the gateway
+# Node-RED runs in its fastest setting: flat out, the simulator's publishing is the limit, not the gateway
 MACHINE = "noise"
 SIM_NAMESPACE = 2  # simulator/README.md: urn:cnc-simulator:plc is namespace index 2
 EXPIRED = (
