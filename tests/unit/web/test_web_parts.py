@@ -108,7 +108,7 @@ def test_tokens_act_with_their_users_current_role_and_are_kept_hashed(tmp_path: 
     sessions = _sessions(tmp_path, anonymous=False)
     token = sessions.tokens.create("olga", "grafana")
     stored = (tmp_path / "tokens.json").read_text()
-    assert token.split("_")[2] not in stored and (tmp_path / "tokens.json").stat().st_mode & 0o077 == 0
+    assert token.split("_", 2)[2] not in stored and (tmp_path / "tokens.json").stat().st_mode & 0o077 == 0
     caller = sessions.caller(_request(headers={"authorization": f"Bearer {token}"}))
     assert (caller.user, caller.role, caller.via) == ("olga", "operator", "token")
     sessions.check_csrf(_request(method="POST"), caller)  # no cookie, no CSRF token needed
