@@ -280,21 +280,7 @@ class SerialTransport:
             if opened_here:
                 await self._call(self.port.open)
             log.info("%s: sending %s over %s (%s mode)", self.machine, what, self.where, settings.mode)
-            outcome: Outcome = await self._call(
-                lambda: run_transfer(
-                    self.port,
-                    wire,
-                    self.line,
-                    wait_for_dc1=settings.start == "dc1",
-                    dc1_timeout=settings.dc1_timeout,
-                    stall_timeout=settings.stall_timeout,
-                    control=drip.control,
-                    timing=timing,
-                    report=report,
-                    alarm=self.alarm,
-                    fleet=member,
-                )
-            )
+            outcome = await self._transfer(wire, drip.control, timing, report, self.alarm, member)
         except TransferFailed as exc:
             self._clear_checkpoint()  # the job's reason says where it stopped
             if exc.offset > wire.body_start or not exc.permanent:
@@ -308,6 +294,34 @@ class SerialTransport:
         self._clear_checkpoint()
         if opened_here and self.listener is None:
             await self._call(self.port.close)
+        return outcome
+
+    async def _transfer(
+        self,
+        wire: WireProgram,
+        control: Control,
+        timing: Timing | None,
+        report: Callable[[Position], None],
+        alarm: Callable[[], str | None] | None,
+        member: FleetLine | None,
+    ) -> Outcome:
+        """One transfer on the line's thread, with the line's settings."""
+        settings = self.settings
+        outcome: Outcome = await self._call(
+            lambda: run_transfer(
+                self.port,
+                wire,
+                self.line,
+                wait_for_dc1=settings.start == "dc1",
+                dc1_timeout=settings.dc1_timeout,
+                stall_timeout=settings.stall_timeout,
+                control=control,
+                timing=timing,
+                report=report,
+                alarm=alarm,
+                fleet=member,
+            )
+        )
         return outcome
 
     async def _log(
@@ -422,7 +436,6 @@ class SerialTransport:
     async def _answer_transfer(
         self, answer: Program, wire: WireProgram, timing: Timing | None, member: FleetLine | None
     ) -> Outcome:
-        settings = self.settings
         drip = Drip(answer, Control())
         self.current = drip  # pause, resume and abort reach a dripped answer too
 
@@ -430,21 +443,8 @@ class SerialTransport:
             drip.position = pos
 
         try:
-            result: Outcome = await self._call(
-                lambda: run_transfer(
-                    self.port,
-                    wire,
-                    self.line,
-                    wait_for_dc1=settings.start == "dc1",
-                    dc1_timeout=settings.dc1_timeout,
-                    stall_timeout=settings.stall_timeout,
-                    control=drip.control,
-                    timing=timing,
-                    report=report,
-                    alarm=self.alarm if timing is not None else None,
-                    fleet=member,
-                )
-            )
+            alarm = self.alarm if timing is not None else None
+            result = await self._transfer(wire, drip.control, timing, report, alarm, member)
         except asyncio.CancelledError:
             drip.control.abort("the gateway is stopping")
             raise
