@@ -7,6 +7,9 @@ sender counts the characters that went out after a DC3 had been received: the
 controller tolerates only a few (Fanuc raises alarm 087, buffer overflow, after
 about ten), so that count is the measure of an honest sender.
 
+A DC1 or DC3 is obeyed whatever its bit 7 (see `feed`): a flow-control character
+taken for junk would let the sender run past the controller's DC3.
+
 By default the sender waits for the controller's first DC1 before sending
 anything (`wait_for_dc1`): a Fanuc sends DC1 when the operator starts the read
 (EDIT + READ, or cycle start in RMT mode). With `handshake: rtscts` or `none`
@@ -70,45 +73,81 @@ class DncSender:
         self.pauses = 0
         self.resumes = 0
         self.junk_bytes = 0
-        self.parity_errors = 0
+        self.parity_errors = 0  # other characters with a wrong parity bit (software parity)
+        #: DC1/DC3 whose bit 7 was not what the settings expect (obeyed all the same; see `format_hint`).
+        self.flow_wrong_bit7 = 0
 
     # --- what the controller says ----------------------------------------------------------------
 
     def feed(self, data: bytes) -> list[SenderEvent]:
-        """Bytes read from the port. DC1 and DC3 change the state; anything else is counted as junk."""
-        chars, errors = self.settings.decode(data)
+        """Bytes read from the port. DC1 and DC3 change the state whatever their bit 7; anything else is
+        junk, counted.
+
+        A flow-control character is never junk: a 7-bit device server hands the controller's characters
+        to TCP with bit 7 clear (its UART checked and dropped the parity bit), a transparent port hands
+        them with the parity bit in bit 7, and a sender that took one kind for the other must still stop
+        at the controller's DC3. Such characters are counted (`flow_wrong_bit7`) so that the line can say
+        which setting to check (`format_hint`).
+        """
         events: list[SenderEvent] = []
         junk = bytearray()
         reasons: set[str] = set()
-        bad_positions: set[int] = set()
-        if errors:
-            self.parity_errors += errors
-            reasons.add(
-                f"{errors} parity error(s): is the controller's character format {self.settings.format}?"
-            )
-            bad_positions = {i for i, b in enumerate(data) if b not in self._good}
-        for index, char in enumerate(chars):
-            if index in bad_positions:
-                junk.append(data[index])
-                continue
+        soft = self.settings.software_parity
+        for byte in data:
+            char = byte & 0x7F
+            wrong_bit7 = byte not in self._good if soft else byte > 0x7F and self.settings.seven_bit
             if char in (DC1, DC3) and self._xonxoff:
                 if junk:
                     events.append(self._junk(junk, reasons))
                     junk, reasons = bytearray(), set()
+                self.flow_wrong_bit7 += wrong_bit7
                 events.append(self._resume() if char == DC1 else self._pause())
                 continue
-            junk.append(char)
+            if soft and wrong_bit7:
+                self.parity_errors += 1
+                reasons.add(f"parity error(s): is the controller's character format {self.settings.format}?")
+                junk.append(byte)
+                continue
+            junk.append(char if soft else byte)
             if char in (DC1, DC3):
                 reasons.add(
                     f"{'DC1' if char == DC1 else 'DC3'} while the handshake is {self.settings.handshake}"
                 )
-            elif self.settings.seven_bit and char > 0x7F:
+            elif self.settings.seven_bit and byte > 0x7F:
                 reasons.add("bytes above 0x7F on a 7-bit line (wrong baud rate or character format?)")
             else:
                 reasons.add("characters other than DC1/DC3 while sending (wrong baud rate, or line noise?)")
         if junk:
             events.append(self._junk(junk, reasons))
         return events
+
+    def format_hint(self) -> str | None:
+        """What the flow-control characters say of the line's settings, None when they fit them.
+
+        With software parity on, a DC3 that comes as 0x13 (its even parity bit missing) while DC1 (0x11,
+        even already) fits means a device server whose own UART does the parity: software parity must
+        be off. Without it, a DC1 or DC3 with bit 7 set on a 7-bit line means a transparent port that
+        passes the parity bit on as bit 7: software parity must be on (or the port set to the format).
+        """
+        if not self.flow_wrong_bit7:
+            return None
+        fmt = self.settings.format
+        if self.settings.software_parity:
+            return (
+                f"{self.flow_wrong_bit7} DC1/DC3 came without the parity bit software parity expects: the "
+                f"device server's UART seems to do the {fmt} parity itself (a 7-bit port): set "
+                "software_parity: false"
+            )
+        if self.settings.seven_bit:
+            return (
+                f"{self.flow_wrong_bit7} DC1/DC3 came with bit 7 set: the device server seems to pass the "
+                f"parity bit on (a transparent 8-bit port): set its serial port to {fmt}, or "
+                "software_parity: true"
+            )
+        return (
+            f"{self.flow_wrong_bit7} DC1/DC3 came with bit 7 set on an 8-bit line: the controller sends "
+            f"7 data bits and a parity bit; check its character format against {fmt}"
+        )
 
     def _junk(self, junk: bytearray, reasons: set[str]) -> Junk:
         self.junk_bytes += len(junk)

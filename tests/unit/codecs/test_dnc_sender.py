@@ -89,15 +89,61 @@ def test_software_parity_on_both_directions() -> None:
     s = DncSender(frame_program(PROGRAM, line), line)
     # The controller's DC1 with its even parity bit: 0x11 has two ones, so bit 7 stays 0.
     assert s.feed(b"\x11") == [Resume()]
-    # DC3 (0x13, three ones) with parity is 0x93; a bare 0x13 has a wrong parity bit.
-    events = s.feed(b"\x13")
+    assert s.feed(b"\x93") == [Pause()]  # DC3 (0x13, three ones) with its parity bit
+    assert s.flow_wrong_bit7 == 0 and s.format_hint() is None
+    # Another character with a wrong parity bit is junk, counted as a parity error.
+    events = s.feed(b"\x41")  # "A" has two ones: 0x41 carries its even parity bit, 0xC1 does not
+    assert [type(e) for e in events] == [Junk] and s.parity_errors == 0
+    events = s.feed(b"\xc1")
     assert [type(e) for e in events] == [Junk] and "parity" in events[0].reason  # type: ignore[union-attr]
-    assert s.parity_errors == 1 and not s.paused
-    assert s.feed(b"\x93") == [Pause()]
+    assert s.parity_errors == 1
     s.feed(b"\x11")
     wire = drain(s)
     assert line.decode(wire) == (s.program.data, 0)
     assert wire != s.program.data  # some characters carry a parity bit
+
+
+def test_a_7bit_device_servers_dc3_stops_a_software_parity_sender() -> None:
+    """The defect of issue 22: a device server whose UART does the 7E2 parity hands DC3 to TCP as 0x13.
+    With software parity on, its bit 7 is "wrong"; the DC3 must stop the sender all the same."""
+    line = dataclasses.replace(LINE, software_parity=True)
+    s = DncSender(frame_program(PROGRAM, line), line)
+    assert s.feed(b"\x11") == [Resume()]
+    s.sent(10)
+    assert s.feed(b"\x13") == [Pause()]
+    assert s.paused and s.next_chunk() == b""
+    assert s.parity_errors == 0 and s.flow_wrong_bit7 == 1
+    hint = s.format_hint()
+    assert hint is not None and "software_parity: false" in hint
+
+
+def test_a_transparent_ports_dc3_stops_a_plain_7bit_sender() -> None:
+    """The other way round: a transparent port passes the parity bit as bit 7 (DC3 = 0x93) to a sender
+    that expects 7-bit characters."""
+    s = sender()
+    assert s.feed(b"\x11") == [Resume()]
+    assert s.feed(b"\x93") == [Pause()]
+    assert s.junk_bytes == 0 and s.flow_wrong_bit7 == 1
+    hint = s.format_hint()
+    assert hint is not None and "software_parity: true" in hint
+
+
+@given(
+    st.sampled_from(["7E2", "7O2", "7E1", "7N1", "8N1", "8N2"]),
+    st.booleans(),
+    st.lists(st.integers(0, 255), max_size=40),
+    st.sampled_from([0x13, 0x93]),
+)
+def test_every_dc3_pauses_whatever_its_bit_7_and_the_line(
+    fmt: str, soft: bool, noise: list[int], dc3: int
+) -> None:
+    line = LineSettings.from_format(fmt, LINE)
+    if soft and line.seven_bit and line.parity != "N":
+        line = dataclasses.replace(line, software_parity=True)
+    s = DncSender(frame_program(PROGRAM, line), line)
+    s.feed(b"\x11")
+    events = s.feed(bytes(b for b in noise if b & 0x7F not in (0x11, 0x13)) + bytes([dc3]))
+    assert events[-1] == Pause() and s.paused and s.next_chunk() == b""
 
 
 def test_sent_refuses_more_than_remains() -> None:
