@@ -111,3 +111,43 @@ def test_units_inverse_time_and_what_cannot_be_timed() -> None:
     assert times[5] == pytest.approx(25.4 / (100 * 25.4 / 60))
     with pytest.raises(ValueError, match="rapid"):
         block_times("G0 X1\n", rapid=0)
+
+
+def test_feed_per_revolution_is_timed_with_the_spindle_speed() -> None:
+    # Mill: G95 F0.1 mm/rev at S2000 rpm is 200 mm/min; 10 mm take 3 s. Without S it cannot be timed.
+    times = block_times("G21 G95 F0.1\nG1 X10\nS2000 M3\nG1 X20\nG20\nG91 G1 X1 F0.01\n")
+    assert 2 not in times  # no spindle speed yet: 0 s, the short side
+    assert times[4] == pytest.approx(10 / (0.1 * 2000 / 60))
+    # G20: 1 inch at 0.01 in/rev, 2000 rpm = 20 in/min: 3 s.
+    assert times[6] == pytest.approx(3.0)
+    # Mill G98/G99 are canned-cycle return levels, not feed modes.
+    assert block_times("G99 G1 X10 F600\n")[1] == pytest.approx(1.0)
+
+
+def test_a_lathe_program_in_feed_per_revolution_and_constant_surface_speed() -> None:
+    # Fanuc T, G-code system A: X is a diameter, W incremental Z, G99 feed per revolution, G50 S clamps.
+    program = "\n".join(
+        [
+            "G50 S3000",  # 1: the spindle's top speed under G96
+            "G97 S1000 M3",  # 2: 1000 rpm
+            "G99 G0 X40 Z0",  # 3: rapid to radius 20 (diameter 40), 20 mm at 10,000 mm/min
+            "G1 W-10 F0.2",  # 4: 10 mm along Z at 0.2 mm/rev x 1000 rpm = 200 mm/min: 3 s
+            "G96 S120",  # 5: 120 m/min surface speed
+            "G1 X20 W-10",  # 6: diameter 40 -> 20, fastest at radius 10: 120000 / (2 pi 10) rpm
+            "G1 X0",  # 7: facing to the centre: the G50 clamp
+            "G98 G1 Z10 F300",  # 8: back to feed per minute: Z -20 -> 10, 30 mm at 300 mm/min
+        ]
+    )
+    times = block_times(program, lathe=True)
+    assert times[3] == pytest.approx(20 / (10_000 / 60))
+    assert times[4] == pytest.approx(3.0)
+    rpm = 120_000 / (2 * math.pi * 10)
+    assert times[6] == pytest.approx(math.hypot(10, 10) / (0.2 * rpm / 60))
+    assert times[7] == pytest.approx(10 / (0.2 * 3000 / 60))
+    assert times[8] == pytest.approx(30 / 5.0)
+
+
+def test_arcs_in_the_zx_plane() -> None:
+    # G18: a half circle in Z/X of radius 5 (I is X's centre offset, K Z's) at 600 mm/min.
+    times = block_times("G18 G1 X0 Z0 F600\nG2 X0 Z10 I0 K5\n")
+    assert times[2] == pytest.approx(math.pi * 5 / 10)
