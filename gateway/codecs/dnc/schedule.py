@@ -2,40 +2,62 @@
 
 The network-DNC patent's idea: size each transmission by the run time of the
 G-code it carries (t = s / v per block), so that every machine has data before
-it runs dry. Here each line's controller should always hold at least
-`lead_time` seconds of cutting; the line whose buffer will run dry first is
-served first (earliest dry first); lines that share a device server or uplink
-with a configured capacity share it by that same rule.
+it runs dry. The line whose buffer will run dry first is served first (earliest
+dry first); lines that share a device server or uplink with a configured capacity
+share it by that rule.
+
+Work-conserving. A line whose controller does flow control (DC1/DC3, or RTS/CTS)
+is never held back for the model's sake: whenever its line and its link are free
+it is served, and the controller's DC3 says when its buffer is full. The model
+only decides the order when lines compete for a shared link. Only a line without
+any flow control (`flow_control=False`) is fed by the model alone: never more
+than its buffer has room for, filled to `target` seconds of cutting.
 
 The scheduler keeps a model of each controller: the blocks granted, when each
 arrives (the chunk's last byte, at the slower of the line and the link), and
 when each finishes executing (in order, each starting when it has arrived and
-its predecessor is done). From it:
+its predecessor is done, at the line's learned `speed` times the estimate). From it:
 
 - `ahead(key, now)`: seconds of cutting the controller holds;
-- `buffered(key, now)`: bytes it holds not yet executed (a block's bytes count
-  until it has finished, and bytes on their way count at once: a conservative
-  view that never overruns the buffer);
-- `next_grant(now)`: one chunk for the most urgent eligible line, of whole
-  blocks where possible, at most `max_chunk` bytes and never more than the
-  buffer has room for, filled until the line holds `target` seconds;
+- `buffered(key, now)`: bytes it holds not yet executed (never more than its
+  buffer: bytes sent beyond what the model had room for, with no DC3, prove the
+  machine ran faster, and the oldest count as executed);
+- `next_grant(now)`: one chunk for the most urgent eligible line;
 - `wake_at(now)`: when calling again may give something.
 
-The caller sends what it is granted, tells `start(key, now)` when the machine
-starts executing (cycle start), and `set_paused(key, ...)` while a DC3 holds the
-line. The model is an estimate (feed override, acceleration); the controller's
-DC1 says what it really holds, and `resync(key, now, holds)` puts the model right.
-Time is whatever monotonic clock the caller uses, in seconds.
+The controller is the authority. The caller tells `start(key, now)` when the
+machine starts executing, `dc3(key, now, written)` at its DC3 and `dc1(key, now,
+written)` at its DC1 (`written`: bytes written to the line so far). A DC1 puts the
+model right (the controller is down to its DC1 level, `low_level`) and, from one
+DC1 to the next, teaches the line's speed: the run time the estimate gave the bytes
+the controller took over the cycle, over the cycle's real length. A machine faster
+than its estimate (feed override, rapids faster than the mapping's `rapid`) is
+learned at once: the cycle can only underestimate it (a machine that waited for
+data took less). A slower one is learned gradually, and only from cycles whose
+filling was not held up by other lines. Time is whatever monotonic clock the
+caller uses, in seconds.
 """
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from gateway.codecs.dnc.framing import WireProgram
+
+#: Bounds of a learned speed (the machine's pace over the estimate's).
+MIN_SPEED = 1 / 16
+MAX_SPEED = 64.0
+#: How far one cycle moves a speed down (up moves at once).
+SLOWER_WEIGHT = 0.25
+#: A cycle whose filling went at this share of the line's rate or more was held up by nothing.
+UNHINDERED = 0.8
+#: The smallest grant a line with flow control gets when the model thinks its buffer full.
+PROBE = 32
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,7 +88,8 @@ class DripLine:
     `rate`: characters per second of the line (LineSettings.bytes_per_second);
     `buffer_size`: bytes the controller takes without holding the sender back
     (its DC3 level); `link`: the shared device server or uplink it goes through, if any;
-    `lead_time`: this line's own lead (default: the scheduler's).
+    `lead_time`: this line's own lead (default: the scheduler's); `flow_control`: the controller
+    holds the line back itself (DC1/DC3 or RTS/CTS), so the line is served whenever it is free.
     """
 
     key: str
@@ -75,6 +98,7 @@ class DripLine:
     blocks: Sequence[BlockCost]
     link: str | None = None
     lead_time: float | None = None
+    flow_control: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,6 +138,37 @@ class _Line:
     target: float = math.inf  # seconds of cutting it is filled to
     queued: int = 0  # bytes of the granted blocks in `queue`
     queue: deque[_Granted] = field(default_factory=deque)
+    speed: float = 1.0  # the machine's pace over the estimate's, learned from DC1 to DC1
+    ends: list[int] = field(default_factory=list)  # byte offset after each block
+    secs: list[float] = field(default_factory=list)  # estimated seconds up to the end of each block
+    cycle: tuple[float, int] | None = None  # (time, written) at the last DC1
+    filled: tuple[float, int] | None = None  # (time, written) at the DC3 after it
+    cycles: int = 0  # DC1s seen
+
+    @property
+    def low(self) -> int:
+        """The bytes a controller is taken to hold at its DC1: a quarter of its buffer (Fanuc sends DC1
+        well before its buffer is empty). The order of lines that just sent DC1 depends on it, not
+        whether they are served."""
+        return self.spec.buffer_size // 4
+
+    @property
+    def high(self) -> int:
+        """The bytes a controller is taken to hold at its DC3: all but an eighth of its buffer (room for
+        what a sender still sends after it)."""
+        return self.spec.buffer_size - self.spec.buffer_size // 8
+
+    def seconds_at(self, offset: int) -> float:
+        """The estimate's run time of the program's first `offset` bytes (linear within a block)."""
+        if offset <= 0 or not self.ends:
+            return 0.0
+        index = bisect.bisect_right(self.ends, offset)
+        if index >= len(self.ends):
+            return self.secs[-1]
+        begin = self.ends[index - 1] if index else 0
+        before = self.secs[index - 1] if index else 0.0
+        size = self.ends[index] - begin
+        return before + (self.secs[index] - before) * (offset - begin) / size
 
     @property
     def finished_sending(self) -> bool:
@@ -165,7 +220,10 @@ class DripScheduler:
         if line.lead_time is not None and line.lead_time <= 0:
             raise ValueError(f"line {line.key!r}: lead_time must be > 0 s")
         target = self.target if line.lead_time is None else self.target / self.lead_time * line.lead_time
-        self._lines[line.key] = _Line(line, target=target)
+        state = _Line(line, target=target)
+        state.ends = list(itertools.accumulate(block.size for block in line.blocks))
+        state.secs = list(itertools.accumulate(block.seconds for block in line.blocks))
+        self._lines[line.key] = state
 
     def remove(self, key: str) -> None:
         self._lines.pop(key, None)
@@ -181,7 +239,7 @@ class DripScheduler:
         line.started = True
         line.exec_end = now
         for item in line.queue:
-            item.finishes = max(item.arrives, line.exec_end) + item.seconds
+            item.finishes = max(item.arrives, line.exec_end) + item.seconds / line.speed
             line.exec_end = item.finishes
             line.executed_any = True
 
@@ -189,12 +247,61 @@ class DripScheduler:
         """A DC3 holds this line (True) until its DC1 (False): it gets no grants meanwhile."""
         self._lines[key].paused = paused
 
+    def dc3(self, key: str, now: float, written: int) -> None:
+        """The controller's DC3 after `written` bytes: its buffer is at its DC3 level; no grants until DC1."""
+        line = self._lines[key]
+        line.paused = True
+        if line.filled is None:
+            line.filled = (now, written)
+
+    def dc1(self, key: str, now: float, written: int) -> None:
+        """The controller's DC1 after `written` bytes: it is down to its DC1 level. Learns the line's speed
+        from the cycle since the last DC1, then puts the model right (`resync`) and serves the line."""
+        line = self._lines[key]
+        line.paused = False
+        self._learn(line, now, written)
+        line.cycle = (now, written)
+        line.filled = None
+        line.cycles += 1
+        self.resync(key, now, line.low)
+
+    def _learn(self, line: _Line, now: float, written: int) -> None:
+        if line.cycles < 2 and line.filled is not None:
+            # The first cycle holds the machine's start, so it says little; its pause says more: from the
+            # DC3 to the DC1 the controller went from its DC3 level to its DC1 level, held by nothing.
+            paused_at, at_dc3 = line.filled
+            took = line.seconds_at(written - line.low) - line.seconds_at(at_dc3 - line.high)
+            if took > 0 and now > paused_at:
+                line.speed = min(MAX_SPEED, max(line.speed, took / (now - paused_at)))
+        if line.cycle is None:
+            return
+        then, before = line.cycle
+        took = line.seconds_at(written - line.low) - line.seconds_at(before - line.low)
+        if took <= 0 or now <= then:
+            return  # nothing timed went through the machine: no evidence either way
+        seen = took / (now - then)
+        if seen > line.speed:
+            line.speed = min(seen, MAX_SPEED)  # a lower bound of the truth: taken at once
+            return
+        if line.cycles < 2 or line.filled is None:
+            return  # the first cycle holds the machine's start; a cycle without DC3 is not whole
+        filled_at, filled = line.filled
+        pace = (filled - before) / max(filled_at - then, 1e-9)
+        if pace >= UNHINDERED * self._rate(line):
+            line.speed = max(MIN_SPEED, line.speed + SLOWER_WEIGHT * (seen - line.speed))
+
+    def speed(self, key: str) -> float:
+        """The machine's pace over the estimate's, as learned (1.0 until a DC1 cycle says otherwise)."""
+        return self._lines[key].speed
+
     def resync(self, key: str, now: float, holds: int = 0) -> None:
-        """The controller says it holds about `holds` bytes (its DC1: down to its low level): granted blocks
-        beyond those count as executed, the rest run from now. A machine that cut faster than the
-        estimate is served again at once; one that cut slower has already held the line with DC3."""
+        """The controller says it holds about `holds` bytes: granted blocks beyond those count as executed,
+        the rest run from now at the line's speed."""
         line = self._lines[key]
         self._expire(line, now)
+        self._rebase(line, now, holds)
+
+    def _rebase(self, line: _Line, now: float, holds: int) -> None:
         queue = line.queue
         while queue and line.partial + line.queued > max(0, holds):
             line.queued -= queue.popleft().size
@@ -203,7 +310,7 @@ class DripScheduler:
             line.executed_any = bool(queue)
         line.exec_end = now
         for item in queue:
-            item.finishes = max(item.arrives, line.exec_end) + item.seconds
+            item.finishes = max(item.arrives, line.exec_end) + item.seconds / line.speed
             line.exec_end = item.finishes
 
     # --- the model -------------------------------------------------------------------------------
@@ -248,16 +355,30 @@ class DripScheduler:
         piece = line.spec.blocks[line.cursor].size - line.partial
         return max(1, min(piece, self.max_chunk, max(1, line.spec.buffer_size // 4)))
 
+    def _room(self, line: _Line, now: float) -> int:
+        """What a grant may be now: the buffer's room in the model; at least a probe's worth on a line whose
+        controller says itself when it is full (its DC3 is the authority, not the model)."""
+        spec = line.spec
+        room = spec.buffer_size - self.buffered(spec.key, now)
+        if spec.flow_control:
+            room = max(room, self._need(line), min(PROBE, spec.buffer_size // 8))
+        if spec.link is not None:
+            # A shared link is handed out in small pieces, so that the most urgent line is looked for
+            # again soon: a quarter of the buffer (the DC1 level's worth) at a time.
+            room = min(room, max(self._need(line), spec.buffer_size // 4))
+        return min(self.max_chunk, room)
+
     def _eligible(self, line: _Line, now: float) -> bool:
         if line.finished_sending or line.paused or line.free_at > now:
             return False
         link = line.spec.link
         if link is not None and self._link_free.get(link, -math.inf) > now:
             return False
+        if line.spec.flow_control:
+            return True  # work-conserving: the controller's DC3 says when it is full
         if self._ahead(line, now) >= line.target:
             return False
-        room = line.spec.buffer_size - self.buffered(line.spec.key, now)
-        return room >= self._need(line)
+        return self._room(line, now) >= self._need(line)
 
     def next_grant(self, now: float) -> Grant | None:
         """A chunk for the eligible line that runs dry first, or None (see `wake_at`).
@@ -280,7 +401,7 @@ class DripScheduler:
 
     def _grant(self, line: _Line, now: float, ahead: float) -> Grant:
         spec = line.spec
-        limit = min(self.max_chunk, spec.buffer_size - self.buffered(spec.key, now))
+        limit = self._room(line, now)
         size = 0
         seconds = 0.0
         whole: list[tuple[int, float]] = []  # (bytes, seconds) of the blocks this grant completes
@@ -296,7 +417,7 @@ class DripScheduler:
             size += piece
             seconds += block.seconds
             whole.append((block.size, block.seconds))
-            if ahead + seconds >= line.target:
+            if ahead + seconds >= line.target and not spec.flow_control:
                 break
         rate = self._rate(line)
         arrives = now + size / rate
@@ -304,19 +425,22 @@ class DripScheduler:
         if spec.link is not None:
             self._link_free[spec.link] = now + size / self.links[spec.link]
         for block_size, block_seconds in whole:
-            self._append(line, block_size, block_seconds, arrives)
+            self._append(line, now, block_size, block_seconds, arrives)
         line.cursor += len(whole)
         if whole:
             line.partial = 0
         line.partial += partial_added
         return Grant(spec.key, size, len(whole), seconds, arrives)
 
-    def _append(self, line: _Line, size: int, seconds: float, arrives: float) -> None:
+    def _append(self, line: _Line, now: float, size: int, seconds: float, arrives: float) -> None:
+        if line.started and line.partial + line.queued + size > line.spec.buffer_size:
+            # Sent beyond the model's room with no DC3: the machine ran faster than the model says.
+            self._rebase(line, now, line.spec.buffer_size - size)
         finishes: float | None = None
         if line.started:
             if line.executed_any and arrives > line.exec_end:
                 line.starvations += 1
-            finishes = max(arrives, line.exec_end) + seconds
+            finishes = max(arrives, line.exec_end) + seconds / line.speed
             line.exec_end = finishes
             line.executed_any = True
         line.queue.append(_Granted(size, seconds, arrives, finishes))
@@ -340,6 +464,8 @@ class DripScheduler:
         link = line.spec.link
         if link is not None:
             when = max(when, self._link_free.get(link, -math.inf))
+        if line.spec.flow_control:
+            return when
         if self._ahead(line, now) >= line.target:
             if not line.started:
                 return None  # holds enough until its machine starts

@@ -1,5 +1,9 @@
 """The drip scheduler, against a machine model of its own in simulated time.
 
+The first part feeds lines whose controllers do no flow control (`flow_control=False`): the model alone
+keeps their buffers from overrunning. The last part (`Controller`) simulates DC3/DC1 and machines that cut
+faster or slower than the estimate: the work-conserving lines of issue 22.
+
 `replay` below does not trust the scheduler's bookkeeping: from the grants alone
 it works out when each block arrives, when each machine runs it, what each
 buffer holds, and whether a machine ever waited for data.
@@ -119,7 +123,7 @@ def replay(lines: list[DripLine], out: Outcome, links: dict[str, float]) -> Repl
 def test_one_line_is_fed_by_run_time_not_by_bytes() -> None:
     blocks = [BlockCost(20, 1.0)] * 100  # 20 bytes that run for a second each
     sched = DripScheduler(lead_time=5.0, max_chunk=200)
-    sched.add(DripLine("a", rate=1000.0, buffer_size=256, blocks=blocks))
+    sched.add(DripLine("a", rate=1000.0, buffer_size=256, blocks=blocks, flow_control=False))
     first = sched.next_grant(0.0)
     assert first is not None
     # Fill to target = 2 x lead_time = 10 s: ten blocks, 200 bytes.
@@ -140,7 +144,7 @@ def test_one_line_is_fed_by_run_time_not_by_bytes() -> None:
 def test_grants_never_exceed_the_buffer_and_long_blocks_go_in_pieces() -> None:
     blocks = [BlockCost(250, 10.0), BlockCost(10, 1.0)]
     sched = DripScheduler(lead_time=1.0, max_chunk=200)
-    sched.add(DripLine("a", rate=10_000.0, buffer_size=300, blocks=blocks))
+    sched.add(DripLine("a", rate=10_000.0, buffer_size=300, blocks=blocks, flow_control=False))
     sched.start("a", 0.0)
     sizes = []
     now = 0.0
@@ -163,8 +167,12 @@ def test_earliest_dry_first_and_shared_link() -> None:
     slow = [BlockCost(10, 0.1)] * 50
     fast = [BlockCost(10, 5.0)] * 50
     sched = DripScheduler(lead_time=1.0, links={"nport": 100.0}, max_chunk=50)
-    sched.add(DripLine("cutting-fast", rate=1000.0, buffer_size=256, blocks=slow, link="nport"))
-    sched.add(DripLine("cutting-slow", rate=1000.0, buffer_size=256, blocks=fast, link="nport"))
+    sched.add(
+        DripLine("cutting-fast", rate=1000.0, buffer_size=256, blocks=slow, link="nport", flow_control=False)
+    )
+    sched.add(
+        DripLine("cutting-slow", rate=1000.0, buffer_size=256, blocks=fast, link="nport", flow_control=False)
+    )
     sched.start("cutting-fast", 0.0)
     sched.start("cutting-slow", 0.0)
     first = sched.next_grant(0.0)
@@ -230,7 +238,7 @@ def fleets(draw: st.DrawFn, *, sufficient: bool) -> tuple[list[DripLine], dict[s
     lead = 2 * (k * max_chunk / capacity + max_chunk / slowest) + worst_block + 0.5
     for index, blocks in enumerate(programs):
         room = int(2 * lead * min(worst_demand, rates[index]) + 3 * max_chunk + 60)
-        lines.append(DripLine(f"m{index}", rates[index], room, blocks, link="nport"))
+        lines.append(DripLine(f"m{index}", rates[index], room, blocks, link="nport", flow_control=False))
     return lines, {"nport": capacity}, lead, max_chunk
 
 
@@ -280,7 +288,10 @@ def test_identical_machines_on_a_short_link_share_it_fairly(
     assume(capacity >= 10)
     blocks = [BlockCost(size, seconds)] * n
     max_chunk = 4 * size
-    lines = [DripLine(f"m{i}", 10 * capacity, 10 * max_chunk, blocks, link="uplink") for i in range(k)]
+    lines = [
+        DripLine(f"m{i}", 10 * capacity, 10 * max_chunk, blocks, link="uplink", flow_control=False)
+        for i in range(k)
+    ]
     sched = DripScheduler(lead_time=2 * seconds, links={"uplink": capacity}, max_chunk=max_chunk)
     out = run(sched, lines)
     # Each grant goes to a line that is no better off than any other with data to come.
@@ -304,7 +315,7 @@ def test_resync_on_dc1_frees_what_the_controller_ran_faster_than_estimated() -> 
     its low level: the line is served again at once, with the rest running from now."""
     blocks = [BlockCost(50, 1.0)] * 40
     sched = DripScheduler(lead_time=100.0, max_chunk=200)
-    sched.add(DripLine("a", rate=10_000.0, buffer_size=200, blocks=blocks))
+    sched.add(DripLine("a", rate=10_000.0, buffer_size=200, blocks=blocks, flow_control=False))
     sched.start("a", 0.0)
     grant = sched.next_grant(0.0)
     assert grant is not None and grant.size == 200
@@ -322,7 +333,7 @@ def test_resync_on_dc1_frees_what_the_controller_ran_faster_than_estimated() -> 
 def test_resync_starts_a_machine_the_model_had_not_seen_start() -> None:
     blocks = [BlockCost(10, 1.0)] * 10
     sched = DripScheduler(lead_time=1.0)
-    sched.add(DripLine("a", rate=1000.0, buffer_size=100, blocks=blocks))
+    sched.add(DripLine("a", rate=1000.0, buffer_size=100, blocks=blocks, flow_control=False))
     assert sched.next_grant(0.0) is not None
     sched.resync("a", 1.0, holds=0)
     assert sched.buffered("a", 1.0) == 0
@@ -333,8 +344,10 @@ def test_resync_starts_a_machine_the_model_had_not_seen_start() -> None:
 def test_a_line_with_a_longer_lead_is_filled_further() -> None:
     blocks = [BlockCost(10, 1.0)] * 100
     sched = DripScheduler(lead_time=2.0, max_chunk=1000)
-    sched.add(DripLine("short", rate=10_000.0, buffer_size=1000, blocks=blocks))
-    sched.add(DripLine("long", rate=10_000.0, buffer_size=1000, blocks=blocks, lead_time=5.0))
+    sched.add(DripLine("short", rate=10_000.0, buffer_size=1000, blocks=blocks, flow_control=False))
+    sched.add(
+        DripLine("long", rate=10_000.0, buffer_size=1000, blocks=blocks, lead_time=5.0, flow_control=False)
+    )
     for key in ("short", "long"):
         sched.start(key, 0.0)
     granted = {"short": 0.0, "long": 0.0}
@@ -368,3 +381,167 @@ def test_buffered_bookkeeping_matches_the_grants_through_resyncs(
             assert state.queued == sum(item.size for item in state.queue)
             assert sched.buffered(line.key, now) == state.partial + state.queued
             assert state.queued <= max(holds, 0) or not state.queue
+
+
+# --- work-conserving lines: controllers that say DC3 and DC1, machines faster or slower than estimated --
+
+
+@dataclass
+class Controller:
+    """A Fanuc-style reader in simulated time, independent of the scheduler's model: a receive buffer with
+    its DC3 and DC1 levels, and a machine that takes each block whole from it (freeing its bytes) and runs
+    it for its estimated seconds divided by `pace` (8: eight times faster than the estimate)."""
+
+    blocks: list[BlockCost]
+    buffer_size: int
+    pace: float
+    buffered: int = 0
+    arrived: int = 0
+    taken: int = 0  # blocks the machine has taken
+    busy_until: float = 0.0
+    running: bool = False
+    waiting: bool = False
+    xoff: bool = False
+    starvations: int = 0
+    overruns: int = 0
+    finished_at: float | None = None
+    in_transit: list[tuple[float, int]] = field(default_factory=list)
+    events: list[str] = field(default_factory=list)  # DC3/DC1 for the sender, in order
+
+    @property
+    def high(self) -> int:
+        return self.buffer_size - 32
+
+    @property
+    def low(self) -> int:
+        return self.buffer_size // 4
+
+    def step(self, now: float) -> None:
+        while self.in_transit and self.in_transit[0][0] <= now:
+            _, n = self.in_transit.pop(0)
+            self.arrived += n
+            self.buffered += n
+            if self.buffered > self.buffer_size:
+                self.overruns += 1
+        total = sum(b.size for b in self.blocks)
+        if not self.running and (self.buffered >= self.high or self.arrived >= total):
+            self.running = True
+            self.busy_until = now
+        while self.running and self.taken < len(self.blocks) and now >= self.busy_until:
+            block = self.blocks[self.taken]
+            if self.buffered < block.size or self.arrived < sum(
+                b.size for b in self.blocks[: self.taken + 1]
+            ):
+                if not self.waiting:
+                    self.starvations += 1
+                    self.waiting = True
+                break
+            if self.waiting:
+                self.busy_until = now
+            self.waiting = False
+            self.buffered -= block.size
+            self.busy_until += block.seconds / self.pace
+            self.taken += 1
+        if self.taken == len(self.blocks) and self.finished_at is None and now >= self.busy_until:
+            self.finished_at = now
+        if not self.xoff and self.buffered >= self.high:
+            self.xoff = True
+            self.events.append("DC3")
+        elif self.xoff and self.buffered <= self.low:
+            self.xoff = False
+            self.events.append("DC1")
+
+
+def drip(
+    sched: DripScheduler,
+    lines: list[DripLine],
+    paces: list[float],
+    *,
+    dt: float = 0.0005,
+    limit: float = 120.0,
+) -> list[Controller]:
+    """Drive the scheduler as the transport does: grants become each line's budget, written at the line's
+    rate while no DC3 holds it; the controller's DC3/DC1 go to the scheduler as they come."""
+    controllers = [
+        Controller(list(line.blocks), line.buffer_size, pace) for line, pace in zip(lines, paces, strict=True)
+    ]
+    for line in lines:
+        sched.add(line)
+        sched.start(line.key, 0.0)
+    budget = {line.key: 0 for line in lines}
+    written = {line.key: 0 for line in lines}
+    paused = {line.key: False for line in lines}
+    wire_free = {line.key: 0.0 for line in lines}
+    now = 0.0
+    while now < limit and any(c.finished_at is None for c in controllers):
+        for line, ctl in zip(lines, controllers, strict=True):
+            ctl.step(now)
+            for event in ctl.events:
+                paused[line.key] = event == "DC3"
+                (sched.dc3 if event == "DC3" else sched.dc1)(line.key, now, written[line.key])
+            ctl.events.clear()
+        while (grant := sched.next_grant(now)) is not None:
+            budget[grant.key] += grant.size
+        for line, ctl in zip(lines, controllers, strict=True):
+            key = line.key
+            if paused[key] or budget[key] == 0 or wire_free[key] > now + dt:
+                continue
+            n = min(budget[key], 8)  # a transport's slice
+            start = max(now, wire_free[key])
+            wire_free[key] = start + n / line.rate
+            ctl.in_transit.append((wire_free[key], n))
+            budget[key] -= n
+            written[key] += n
+        now += dt
+    return controllers
+
+
+LINE_RATE = 38_400 / 11  # 7E2 at 38,400 baud
+
+
+def program(size: int, seconds: float, count: int) -> list[BlockCost]:
+    return [BlockCost(size, seconds)] * count
+
+
+@pytest.mark.parametrize("pace", [0.5, 1.0, 1.5, 8.0])
+def test_one_line_is_never_starved_whatever_the_machines_pace(pace: float) -> None:
+    """256-byte buffer; blocks of 20 bytes estimated at 50 ms (400 chars/s at the estimate): at 8x the
+    machine takes 3,200 chars/s of a 3,490 chars/s line. Nothing but the DC3 holds the line back."""
+    blocks = program(20, 0.05, 3000 if pace > 2 else 600)
+    sched = DripScheduler(lead_time=30.0)
+    line = DripLine("m", LINE_RATE, 256, blocks)
+    (ctl,) = drip(sched, [line], [pace])
+    assert ctl.finished_at is not None
+    assert ctl.overruns == 0
+    assert ctl.starvations == 0
+    if pace > 1:
+        assert sched.speed("m") >= 0.8 * pace  # learned from the DC1 cycles
+
+
+def test_twenty_lines_on_a_link_of_1_2_times_their_real_consumption_never_starve() -> None:
+    """Machines at 0.5x to 8x their estimate; the link carries 1.2 times what they really take together
+    (far less than their lines could carry). Served earliest-dry-first by the learned speeds, none runs dry
+    and no buffer overruns."""
+    paces = [0.5, 1.0, 1.5, 8.0] * 5
+    lines = []
+    real = 0.0
+    for index, pace in enumerate(paces):
+        seconds = 0.05 if pace < 8 else 0.2  # the 8x machines: 20 bytes in 25 ms, 800 chars/s
+        blocks = program(20, seconds, int(8.0 * pace / seconds))  # about eight seconds of cutting
+        real += 20 / (seconds / pace)
+        lines.append(DripLine(f"m{index:02d}", LINE_RATE, 256, blocks, link="nport"))
+    sched = DripScheduler(lead_time=30.0, links={"nport": 1.2 * real})
+    controllers = drip(sched, lines, paces, limit=60.0)
+    for line, ctl in zip(lines, controllers, strict=True):
+        assert ctl.finished_at is not None, f"{line.key} did not finish"
+        assert ctl.overruns == 0, f"{line.key} overran"
+        assert ctl.starvations == 0, f"{line.key} starved {ctl.starvations} times"
+
+
+def test_a_model_only_line_starves_a_machine_eight_times_faster() -> None:
+    """Why flow-controlled lines are work-conserving: fed by the model alone, an 8x machine whose controller
+    never reaches its DC3 level is served at the estimate's pace and runs dry again and again."""
+    blocks = program(20, 0.05, 1000)
+    sched = DripScheduler(lead_time=30.0)
+    (ctl,) = drip(sched, [DripLine("m", LINE_RATE, 256, blocks, flow_control=False)], [8.0], limit=40.0)
+    assert ctl.starvations > 10
