@@ -161,8 +161,29 @@ def handle_list(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([j.as_dict() for j in jobs], indent=2))
         return 0
-    print_table(jobs, sys.stdout, state_dir(args))
+    state = state_dir(args)
+    print_table(jobs, sys.stdout, state)
+    for line in _answers(state, args.machine):
+        print(line)
     return 0
+
+
+def _answers(state: Path | None, machine: str | None) -> list[str]:
+    """Remote requests' answers being drip-fed (their progress files), a line each: they are no jobs."""
+    if state is None:
+        return []
+    from gateway.jobs.delivery.transports.serial import ANSWER, progress_path, read_progress
+
+    found = []
+    folder = progress_path(state, "x").parent
+    names = [machine] if machine else sorted(p.stem for p in folder.glob("*.json"))
+    for name in names:
+        point = read_progress(state, name)
+        if point is None or not point.program.startswith(ANSWER):
+            continue
+        text = progress_text(point.offset, point.total, point.line, point.lead, point.remaining, point.held)
+        found.append(f"{name}: answering a remote request with {point.program[len(ANSWER) :]}: {text}")
+    return found
 
 
 def print_table(jobs: list[Job], out: TextIO, state: Path | None = None) -> None:

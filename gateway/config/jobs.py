@@ -121,10 +121,12 @@ class ControllerSerial(Strict):
     leader: int = Field(default=20, ge=0, le=10_000, description="NULs sent before the first %")
     percent: bool = Field(default=True, description="Frame the program with % markers")
     chunk_size: int = Field(default=200, ge=1, le=65_536, description="Most bytes handed to the port at once")
-    software_parity: bool | None = Field(
-        default=None,
-        description="Send a 7-bit line's parity bit as bit 7 of 8-bit bytes (a transparent raw TCP port, "
-        "a pseudo-terminal); default: on for socket:// with 7 data bits and parity, off otherwise",
+    software_parity: bool = Field(
+        default=False,
+        description="Send a 7-bit line's parity bit as bit 7 of 8-bit bytes: only for a transparent 8-bit "
+        "port (a device server whose serial port is set to 8N1/8N2, a pseudo-terminal). A device server "
+        "whose port is set to the controller's format (7E2: the usual set-up) does the parity itself: "
+        "leave it off. DC1/DC3 are obeyed whatever their bit 7 either way (docs/dnc-fanuc.md)",
     )
     mode: Literal["load", "drip"] = Field(
         default="load",
@@ -163,6 +165,16 @@ class ControllerSerial(Strict):
     rapid: float = Field(
         default=10_000.0, gt=0, description="Rapid rate, mm/min, for the run-time estimate while dripping"
     )
+    lathe: bool = Field(
+        default=False,
+        description="Drip: the programs are a lathe's (Fanuc T, G-code system A: X a diameter, G98/G99 feed "
+        "per minute/revolution, G50 S the spindle clamp), for the run-time estimate",
+    )
+    dwell_p: Literal["ms", "s"] = Field(
+        default="ms",
+        description="Drip: the unit of G4 P in the run-time estimate (Fanuc: ms; LinuxCNC: s). The "
+        "estimate errs short, so ms is the default",
+    )
     connect_timeout: float = Field(default=10.0, gt=0, description="Seconds to open the port")
     alarm_when: AlarmWhen | None = Field(
         default=None,
@@ -195,12 +207,6 @@ class ControllerSerial(Strict):
         if self.link_capacity is not None and self.link is None:
             raise ValueError("link_capacity needs link: the name of the device server or uplink it is of")
         return self
-
-    @property
-    def soft_parity(self) -> bool:
-        if self.software_parity is not None:
-            return self.software_parity
-        return self.where.startswith("socket://") and self.bytesize == 7 and self.parity != "none"
 
 
 def _controller_type(value: Any) -> str:

@@ -1,4 +1,5 @@
-"""A serial machine's drip-feed commands: pause, resume, abort, and restart a job at a line.
+"""A serial machine's drip-feed commands (pause, resume, abort, and restart a job at a line) and its line's
+status variables.
 
 Registered on the machine's `Commands` object (gateway.model.methods), so OPC UA
 shows them as Method nodes beside the mapping's commands and MQTT takes them as
@@ -16,6 +17,7 @@ from typing import Any
 from gateway.jobs.delivery.transports.serial import SerialTransport
 from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
+from gateway.model.tree import Machine
 from gateway.model.types import TypeSpec
 
 OBJECT = "Commands"
@@ -59,3 +61,29 @@ def drip_methods(line: SerialTransport, restart: Restart) -> list[Method]:
             (JOB, LINE),
         ),
     ]
+
+
+def line_status(machine: Machine) -> Callable[[SerialTransport], None]:
+    """`Status/DncParityErrors` and `Status/DncLineCheck` for a serial machine, and the callback that keeps
+    them (SerialTransport.on_figures): a line whose characters come with the wrong parity bit, or whose
+    DC1/DC3 say the device server is set up otherwise than the mapping, says so where the operator looks."""
+    errors = machine.add_internal(
+        "Status/DncParityErrors",
+        "UInt32",
+        "Characters from the controller with a wrong parity bit since the start (DC1/DC3 among them are "
+        "obeyed all the same)",
+        0,
+    )
+    check = machine.add_internal(
+        "Status/DncLineCheck",
+        "String",
+        "What the serial line's characters say of its settings (software_parity, the character format); "
+        "empty when they fit",
+        "",
+    )
+
+    def update(line: SerialTransport) -> None:
+        machine.set_internal(errors, line.parity_errors % 2**32)
+        machine.set_internal(check, line.hint)
+
+    return update

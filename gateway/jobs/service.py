@@ -58,7 +58,7 @@ from gateway.jobs.dnc.desk import PunchDesk, QueuedProgram
 from gateway.jobs.dnc.fleet import DripFleet
 from gateway.jobs.dnc.received import ReceivedStore
 from gateway.jobs.dnc.transfers import TransferLog
-from gateway.jobs.drip import drip_methods
+from gateway.jobs.drip import drip_methods, line_status
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
 from gateway.jobs.inbox.paths import check_file_name
@@ -186,6 +186,7 @@ class JobService:
                 self.lines[name] = transport
                 transport.fleet = fleet
                 transport.alarm = alarm_reader(machine, transport.settings.alarm_when)
+                transport.on_figures = line_status(machine)
                 for method in drip_methods(transport, functools.partial(self.restart_job, machine=name)):
                     machine.add_method(method)
             methods = program_methods(

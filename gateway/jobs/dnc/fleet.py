@@ -1,59 +1,46 @@
 """The drip-feeds of one gateway, fed by one scheduler: which line sends next, and how much.
 
-The network-DNC patent's idea (issue 14): every line's controller should hold
-`lead_time` seconds of cutting ahead, each transmission sized by the run time of
-the blocks it carries, and the machine that will run dry first served first.
-`DripScheduler` (gateway/codecs/dnc/schedule.py) decides that, purely; this is
-its place among the line threads (transfer.py, one thread per line).
+The network-DNC patent's idea (issue 14): each transmission sized by the run
+time of the blocks it carries, and the machine that will run dry first served
+first. `DripScheduler` (gateway/codecs/dnc/schedule.py) decides that, purely;
+this is its place among the transfers, which the lines' one I/O thread steps
+(lineio.py, `DripFleet.io`).
 
-A line that drip-feeds joins the fleet and sends only what it was granted. Any
-line's thread that wants more asks the scheduler under the fleet's lock, hands
-every grant it makes to the line it is for, and wakes that line's thread through
-a pipe its wait selects on beside the port. The controller stays the authority:
-its DC3 pauses the line in the model, its DC1 resynchronises the model (the
-controller is down to its low level). Lines that name the same `link` (a device
-server, an uplink) share its `link_capacity` by the same rule.
+A line that drip-feeds joins the fleet and sends only what it was granted. A
+line that wants more asks the scheduler, which hands out whatever can be granted
+now to whichever lines it goes to; a line granted something by another's step
+is told through `on_grant` and stepped at once. The controller stays the
+authority: its DC3 pauses the line in the model, its DC1 puts the model right and
+teaches it the machine's real pace. A line whose controller does flow control is
+never held back when nothing else wants its link (work-conserving); lines that
+name the same `link` (a device server, an uplink) share its `link_capacity`,
+the most urgent first.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from gateway.codecs.dnc import BlockCost, DripLine, DripScheduler
 from gateway.config.jobs import ControllerSerial
+from gateway.jobs.dnc.lineio import LineLoop
 
 NO_GRANT_WAIT = 0.05  # s a line with nothing granted waits at most before it asks again
+MIN_GRANT_WAIT = 0.0005  # s: the soonest it asks again
 
 
 class FleetLine:
-    """One line's part in the fleet, used from that line's thread."""
+    """One line's part in the fleet, used from the lines' I/O thread."""
 
     def __init__(self, fleet: DripFleet, key: str) -> None:
         self.fleet = fleet
         self.key = key
         self.budget = 0  # bytes granted and not yet written (under the fleet's lock)
-        self._read, self._write = os.pipe()
-        os.set_blocking(self._read, False)
-        os.set_blocking(self._write, False)
+        #: Called (on the I/O thread) when another line's step granted this one something.
+        self.on_grant: Callable[[], None] = lambda: None
         self.closed = False
-
-    @property
-    def wake_fd(self) -> int:
-        """Readable when a grant came for this line from another line's thread."""
-        return self._read
-
-    def wake(self) -> None:
-        with contextlib.suppress(BlockingIOError, OSError):  # a full pipe is awake already
-            os.write(self._write, b".")
-
-    def drain(self) -> None:
-        with contextlib.suppress(BlockingIOError, OSError):
-            while os.read(self._read, 64):
-                pass
 
     def allowance(self) -> int:
         """Bytes this line may write now, asking the scheduler when nothing is left of its grants."""
@@ -66,9 +53,8 @@ class FleetLine:
             self.budget = max(0, self.budget - count)
 
     def wait_seconds(self) -> float:
-        """How long to wait for a grant before asking again: until this line may be served (a wake through
-        the pipe, a grant another line's thread made for it, ends it sooner). Only the lines that may be
-        served then wake, not all of them each time the shared link is free."""
+        """How long to wait for a grant before asking again: until this line may be served (a grant another
+        line's step made for it ends it sooner, through `on_grant`)."""
         return self.fleet.wait_seconds(self.key)
 
     def started(self) -> None:
@@ -76,13 +62,14 @@ class FleetLine:
         with self.fleet.lock:
             self.fleet.scheduler.start(self.key, time.monotonic())
 
-    def held(self, held: bool) -> None:
-        """A DC3 (True) or the DC1 after it (False)."""
+    def held(self, held: bool, written: int) -> None:
+        """A DC3 (True) or the DC1 after it (False), after `written` bytes."""
         with self.fleet.lock:
             now = time.monotonic()
-            self.fleet.scheduler.set_paused(self.key, held)
-            if not held:
-                self.fleet.scheduler.resync(self.key, now, 0)
+            if held:
+                self.fleet.scheduler.dc3(self.key, now, written)
+            else:
+                self.fleet.scheduler.dc1(self.key, now, written)
         if not held:
             self.fleet.hand_out(self)
 
@@ -91,18 +78,20 @@ class FleetLine:
         with self.fleet.lock:
             return self.fleet.scheduler.ahead(self.key, time.monotonic())
 
+    def speed(self) -> float:
+        """The machine's pace over its estimate, as learned from its DC1s."""
+        with self.fleet.lock:
+            return self.fleet.scheduler.speed(self.key)
+
     def close(self) -> None:
         if self.closed:
             return
         self.closed = True
         self.fleet.leave(self)
-        for fd in (self._read, self._write):
-            with contextlib.suppress(OSError):
-                os.close(fd)
 
 
 class DripFleet:
-    """One scheduler for every drip-feed of a gateway (a process's lines), thread-safe."""
+    """One scheduler for every drip-feed of a gateway, and the one I/O thread that serves its lines."""
 
     def __init__(
         self, *, lead_time: float = 30.0, links: dict[str, float] | None = None, max_chunk: int = 200
@@ -110,6 +99,7 @@ class DripFleet:
         self.lock = threading.Lock()
         self.scheduler = DripScheduler(lead_time=lead_time, links=links, max_chunk=max_chunk)
         self.links = dict(links or {})
+        self.io = LineLoop()
         self._members: dict[str, FleetLine] = {}
         self._serial = 0
 
@@ -134,6 +124,7 @@ class DripFleet:
         blocks: Sequence[BlockCost],
         link: str | None,
         lead_time: float,
+        flow_control: bool = True,
     ) -> FleetLine:
         """A drip-feed of `blocks` on line `name` takes part. Raises ValueError when it cannot be
         drip-fed (a block longer than the controller's buffer)."""
@@ -148,6 +139,7 @@ class DripFleet:
                     blocks,
                     link=link if link in self.links else None,
                     lead_time=lead_time,
+                    flow_control=flow_control,
                 )
             )
             member = FleetLine(self, key)
@@ -160,8 +152,8 @@ class DripFleet:
             self._members.pop(member.key, None)
 
     def hand_out(self, asking: FleetLine) -> None:
-        """Grant what can be granted now, to whichever lines it goes to, and wake them."""
-        woken: list[FleetLine] = []
+        """Grant what can be granted now, to whichever lines it goes to, and tell them."""
+        granted: list[FleetLine] = []
         with self.lock:
             now = time.monotonic()
             while (grant := self.scheduler.next_grant(now)) is not None:
@@ -170,9 +162,9 @@ class DripFleet:
                     continue
                 member.budget += grant.size
                 if member is not asking:
-                    woken.append(member)
-        for member in woken:
-            member.wake()
+                    granted.append(member)
+        for member in granted:
+            member.on_grant()
 
     def wait_seconds(self, key: str) -> float:
         with self.lock:
@@ -180,4 +172,4 @@ class DripFleet:
             when = self.scheduler.wake_at(now, key)
         if when is None:
             return NO_GRANT_WAIT
-        return min(NO_GRANT_WAIT, max(0.0005, when - now))
+        return min(NO_GRANT_WAIT, max(MIN_GRANT_WAIT, when - now))

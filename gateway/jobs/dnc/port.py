@@ -2,12 +2,17 @@
 
 pyserial serves all three places a DNC line can be: a device path (`/dev/ttyUSB0`,
 `COM3`), `rfc2217://host:port` and `socket://host:port`, through `serial_for_url`.
-Its calls block, and it is used from one thread per line (line.py): the RFC 2217
-client runs its own reader thread and its ports have no file descriptor an event
-loop could watch, so an asyncio wrapper (pyserial-asyncio) would serve device
-paths only. A thread per line is cheap beside a line's pace (at most a few
-thousand characters a second) and lets the sender react to a DC3 between two
-small writes without waiting for the event loop.
+Every serial line of a gateway is served by one I/O thread (lineio.py), so
+nothing here waits once the port is open: `read` returns what is there, `write`
+takes what the port takes now (device paths and sockets are non-blocking), and
+`fileno` gives the descriptor the thread's selector watches. An rfc2217:// port
+has none (pyserial's RFC 2217 client reads in a thread of its own): the thread
+looks at it on a short timer instead. Opening a port may wait (a TCP connect,
+the RFC 2217 negotiation): the caller runs `open` off the I/O thread.
+
+On socket:// the adapter reads and writes pyserial's socket itself: pyserial's
+non-blocking read costs two selects per call, and a line that writes a slice every
+few milliseconds pays that hundreds of times a second.
 
 Every pyserial and OS error becomes a `DeliveryError` here, worded for the
 operator: "device server 10.0.0.9:4001 unreachable (connection refused)",
@@ -17,9 +22,9 @@ operator: "device server 10.0.0.9:4001 unreachable (connection refused)",
 from __future__ import annotations
 
 import contextlib
-import select
 import socket
-import time
+import struct
+import sys
 from typing import Protocol, cast
 
 import serial
@@ -28,8 +33,7 @@ from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
 
-WAIT = 0.05  # s wait() waits at most for a first byte (back at once when one comes); the port never waits
-POLL = 0.002  # s between looks in wait() where the port has no descriptor to select on (rfc2217://)
+READ_SIZE = 4096
 
 _PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD}
 _LETTER = {"none": "N", "even": "E", "odd": "O"}
@@ -42,6 +46,9 @@ class _Port(Protocol):
 
     @property
     def dsr(self) -> bool: ...
+
+    @property
+    def out_waiting(self) -> int: ...
 
     def read(self, size: int = 1) -> bytes: ...
 
@@ -68,7 +75,7 @@ def line_settings(settings: ControllerSerial) -> LineSettings:
         leader=settings.leader,
         markers=settings.percent,
         chunk_size=settings.chunk_size,
-        software_parity=settings.soft_parity,
+        software_parity=settings.software_parity,
     )
 
 
@@ -80,12 +87,14 @@ def describe(where: str) -> str:
 
 
 class SerialPort:
-    """One open serial line. Blocking; used from one thread at a time."""
+    """One open serial line. Non-blocking once open; used from one thread at a time."""
 
     def __init__(self, settings: ControllerSerial) -> None:
         self.settings = settings
         self.where = settings.where
         self._port: _Port | None = None
+        self._socket: socket.socket | None = None  # socket:// lines: pyserial's socket, read and written here
+        self._fd: int | None = None
         self._dsr = settings.dsr and "://" not in settings.where
 
     @property
@@ -93,10 +102,12 @@ class SerialPort:
         return self._port is not None
 
     def open(self) -> None:
-        """Open the line. Raises DeliveryError (not permanent: a device server may come back)."""
+        """Open the line (may wait: run it off the I/O thread). Raises DeliveryError (not permanent: a
+        device server may come back)."""
         s = self.settings
-        soft = s.soft_parity
+        soft = s.software_parity
         url = s.where
+        rfc2217 = url.startswith("rfc2217://")
         try:
             port = serial.serial_for_url(
                 url,
@@ -106,8 +117,8 @@ class SerialPort:
                 stopbits=s.stopbits,
                 rtscts=s.handshake == "rtscts",
                 xonxoff=False,  # the sender does XON/XOFF itself: it must see DC1/DC3 and count them
-                timeout=0,  # reads return what is there (in_waiting is 0/1 on socket://, not a count)
-                write_timeout=None if s.where.startswith("rfc2217://") else s.connect_timeout,
+                timeout=0,  # reads return what is there
+                write_timeout=None if rfc2217 else 0,  # writes take what the port takes now
                 do_not_open=True,
             )
             if url.startswith("socket://"):
@@ -118,22 +129,27 @@ class SerialPort:
             port.open()
             if url.startswith("socket://"):
                 del port.reset_input_buffer  # the class's again
+                sock = cast(socket.socket, port._socket)  # type: ignore[attr-defined]  # the url handler's
                 # Each slice goes out as it is written (pyserial leaves Nagle on): held back until the
                 # device server acknowledges the last, slices would reach it in bursts, more of them
                 # already on their way when the controller's DC3 comes.
-                sock = getattr(port, "_socket", None)
-                if sock is not None:
-                    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock.setblocking(False)
+                self._socket = sock
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeliveryError(f"{describe(s.where)} unreachable ({_why(exc)})") from None
         self._port = cast(_Port, port)
-        try:
-            self._fd: int | None = int(port.fileno())  # posix and socket://
-        except (AttributeError, NotImplementedError, OSError, ValueError, serial.SerialException):
-            self._fd = None  # rfc2217:// reads in a thread of its own: wait() polls
+        self._fd = None
+        if not rfc2217:
+            with contextlib.suppress(AttributeError, NotImplementedError, OSError, ValueError):
+                self._fd = int(port.fileno())
+
+    def fileno(self) -> int | None:
+        """The descriptor the I/O thread selects on; None for rfc2217:// (looked at on a timer)."""
+        return self._fd
 
     def close(self) -> None:
-        port, self._port = self._port, None
+        port, self._port, self._socket, self._fd = self._port, None, None, None
         if port is not None:
             with contextlib.suppress(serial.SerialException, OSError):  # a line that is already gone
                 port.close()
@@ -146,67 +162,65 @@ class SerialPort:
     def read(self) -> bytes:
         """What the controller sent, without waiting (b"" when nothing). Raises LineLost."""
         port = self._open_port()
+        sock = self._socket
         try:
-            data: bytes = port.read(4096)
+            if sock is not None:
+                try:
+                    data = sock.recv(READ_SIZE)
+                except (BlockingIOError, InterruptedError):
+                    return b""
+                if not data:
+                    raise LineLost("the line dropped (socket disconnected)")
+                return data
+            data = port.read(READ_SIZE)
             if self._dsr and not port.dsr:
                 raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
         return data
-
-    def wait(self, also: int | None = None, timeout: float = WAIT) -> bytes:
-        """What the controller sends within `timeout` (back at its first byte, or when descriptor `also`
-        becomes readable: another line's grant, fleet.py). Raises LineLost."""
-        port = self._open_port()
-        try:
-            if self._fd is not None:
-                select.select([self._fd] if also is None else [self._fd, also], [], [], timeout)
-            elif also is not None:
-                select.select([also], [], [], min(timeout, POLL))
-            else:
-                time.sleep(min(timeout, POLL))
-            data: bytes = port.read(4096)
-            if self._dsr and not port.dsr:
-                raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
-        except (serial.SerialException, OSError) as exc:
-            raise LineLost(f"the line dropped ({_why(exc)})") from None
-        return data
-
-    def pause(self, seconds: float) -> bool:
-        """Let `seconds` pass, back early if the controller sends; whether it may have sent something (a
-        port without a descriptor cannot tell: True). Raises LineLost."""
-        port = self._open_port()
-        if self._fd is None:
-            time.sleep(seconds)
-            return True
-        try:
-            readable, _, _ = select.select([self._fd], [], [], seconds)
-        except (OSError, ValueError) as exc:
-            raise LineLost(f"the line dropped ({_why(exc)})") from None
-        if self._dsr and not port.dsr:
-            raise LineLost("DSR is off: the controller's port is not ready (cable, or power)")
-        return bool(readable)
 
     def write(self, data: bytes) -> int:
-        """Hand bytes to the port; how many it took. Raises LineLost."""
+        """Hand bytes to the port without waiting; how many it took (0 when its buffer is full). Raises
+        LineLost."""
         port = self._open_port()
+        sock = self._socket
         try:
+            if sock is not None:
+                try:
+                    return sock.send(data)
+                except (BlockingIOError, InterruptedError):
+                    return 0
             written = port.write(data)
         except serial.SerialTimeoutException:
-            raise LineLost(
-                "the port took nothing for too long (a device server's connection stalled)"
-            ) from None
+            return 0
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
         return len(data) if written is None else int(written)
 
-    def flush(self) -> None:
-        """Wait until the port has passed on what it was given (device paths; a no-op on sockets)."""
+    def unsent(self) -> int:
+        """Bytes the OS still holds for the line (a device's output queue, a socket's unsent bytes): a load
+        is over when they are out. 0 where it cannot tell (rfc2217://). Raises LineLost."""
         port = self._open_port()
         try:
-            port.flush()
+            if self._socket is not None:
+                return _socket_unsent(self._socket)
+            if self._fd is not None:
+                return int(port.out_waiting)
         except (serial.SerialException, OSError) as exc:
             raise LineLost(f"the line dropped ({_why(exc)})") from None
+        return 0
+
+
+def _socket_unsent(sock: socket.socket) -> int:
+    """A TCP socket's bytes not yet acknowledged by the device server (Linux's SIOCOUTQ, the same request
+    number as TIOCOUTQ); 0 where the OS has no such request."""
+    if sys.platform == "win32":
+        return 0
+    import fcntl
+    import termios
+
+    raw = fcntl.ioctl(sock.fileno(), termios.TIOCOUTQ, struct.pack("I", 0))
+    return int(struct.unpack("I", raw)[0])
 
 
 def _keep_input() -> None:

@@ -1,9 +1,11 @@
 """Serial DNC delivery: load a program into the controller's memory, or drip-feed it while it runs.
 
 One `SerialTransport` per machine owns its line (`jobs.controller` with
-`type: serial`): the port (gateway/jobs/dnc/port.py, pyserial), one thread that
-does every blocking call on it (so a DC3 is acted on between two small writes,
-transfer.py), and the operator's hold on a drip-feed (pause, resume, abort).
+`type: serial`): the port (gateway/jobs/dnc/port.py, pyserial) and the operator's
+hold on a drip-feed (pause, resume, abort). Its transfers are stepped by the one
+I/O thread that serves every serial line of the gateway (the fleet's, lineio.py),
+so that a DC3 is acted on between two small writes (transfer.py); opening and
+closing a port, which may wait, run in a worker thread of their own.
 Between jobs it listens to the line for an `IdleListener` (the punch desk) when
 one is attached, and keeps the port open for it; without one the port is open
 only while a program goes out. The listener's answers (a remote request's
@@ -31,11 +33,10 @@ import logging
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TypeVar
 
 from gateway.codecs.dnc import (
     FramingError,
@@ -51,15 +52,15 @@ from gateway.jobs.delivery.transport import Program, Progress, ReportProgress
 from gateway.jobs.dnc.fleet import DripFleet, FleetLine
 from gateway.jobs.dnc.idle import IdleListener
 from gateway.jobs.dnc.port import SerialPort, describe, line_settings
-from gateway.jobs.dnc.transfer import Control, Outcome, Position, Timing, TransferFailed, run_transfer
+from gateway.jobs.dnc.transfer import Control, Outcome, Position, Timing, Transfer, TransferFailed
 from gateway.jobs.dnc.transfers import TransferLog, TransferRecord
 
 log = logging.getLogger("gateway.jobs.dnc")
 
-T = TypeVar("T")
 CHECKPOINT_EVERY = 1.0  # s between checkpoint writes while dripping
 LISTEN_EVERY = 0.05  # s between looks at an idle line
 REOPEN_AFTER = 5.0  # s before an idle line that failed is opened again
+ANSWER = "answer:"  # a progress file's `program` for a remote request's answer (not a job)
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,7 +68,7 @@ class Checkpoint:
     """A transfer in progress, as written to `<state>/jobs/dnc/<machine>.json` about once a second: where
     a drip-feed stopped after a restart (`holds`), and the progress `cnc-gateway jobs` shows."""
 
-    program: str  # spool path of the job's program (its stem is the job id)
+    program: str  # spool path of the job's program (its stem is the job id), or `answer:<name>`
     sha256: str
     drip: bool
     offset: int
@@ -137,26 +138,42 @@ class SerialTransport:
         #: Says why the controller is in alarm, None when it is not (the service reads `alarm_when`).
         self.alarm: Callable[[], str | None] | None = None
         self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
+        self.parity_errors = 0  # characters from the controller with a wrong parity bit, since the start
+        self.hint = ""  # what they say of the line's settings (empty: nothing to check)
+        #: Called after each transfer with the line (its `parity_errors` and `hint`), in the event loop.
+        self.on_figures: Callable[[SerialTransport], None] | None = None
         self._lock = asyncio.Lock()
         self._answers: set[asyncio.Task[None]] = set()  # answers waiting for the line (send_answer)
-        self._thread = ThreadPoolExecutor(1, thread_name_prefix=f"dnc-{machine or 'line'}")
+        self._stepping: Future[None] | None = None  # the transfer the I/O thread steps now
 
     @property
     def where(self) -> str:
         return self.settings.where
 
-    async def _call(self, fn: Any, *args: Any) -> Any:
-        return await asyncio.get_running_loop().run_in_executor(self._thread, fn, *args)
+    async def _open(self) -> None:
+        """Open the port off the I/O thread (a connect or an RFC 2217 negotiation may take seconds)."""
+        await asyncio.to_thread(self.port.open)
+
+    async def _close(self) -> None:
+        await asyncio.to_thread(self.port.close)
+
+    async def _read(self) -> bytes:
+        """What the idle line heard, read on the lines' I/O thread (which owns the port between opens)."""
+        return await asyncio.wrap_future(self.fleet.io.call(self.port.read))
 
     def close(self) -> None:
-        """Stop the line's thread (after the last transfer; the gateway is stopping)."""
+        """The gateway is stopping: abort the transfer in hand, close the port once it has stopped."""
         if self.current is not None:
             self.current.control.abort("the gateway is stopping")
         for task in self._answers:
             task.cancel()
-        # After the transfer in hand has seen the abort (within a slice), the port closes, in that thread.
-        self._thread.submit(self.port.close)
-        self._thread.shutdown(wait=False)
+        stepping = self._stepping
+        if stepping is not None and not stepping.done():
+            # The I/O thread sees the abort at its next step; the port closes after it, on that thread.
+            io = self.fleet.io
+            stepping.add_done_callback(lambda _f: io.call(self.port.close))
+        else:
+            self.port.close()
 
     # --- control (the Commands methods, the CLI through the queue) --------------------------------
 
@@ -208,7 +225,7 @@ class SerialTransport:
         timing = None
         member: FleetLine | None = None
         if drip:
-            times = block_times(data.decode("latin-1"), rapid=self.settings.rapid)
+            times = self._times(data)
             timing = Timing(wire, times, self.settings.buffer)
             member = self._join(program.name, wire, times)
         what = f"{program.name} from line {start}" if start is not None else program.name
@@ -232,8 +249,13 @@ class SerialTransport:
         return (
             f"{describe(self.where)} ({mode}{f' from line {start}' if start is not None else ''}: "
             f"{outcome.sent} bytes, sha256 {outcome.sha256[:12]}…; program sha256 {program.sha256[:12]}… "
-            f"checked; {outcome.pauses} DC3, at most {outcome.after_dc3_max} characters after one)"
+            f"checked; {outcome.describe()})"
         )
+
+    def _times(self, text: bytes) -> dict[int, float]:
+        """The run time of each line, as the drip scheduler estimates it from the mapping's settings."""
+        s = self.settings
+        return block_times(text.decode("latin-1"), rapid=s.rapid, dwell_ms=s.dwell_p == "ms", lathe=s.lathe)
 
     def _join(self, name: str, wire: WireProgram, times: dict[int, float]) -> FleetLine:
         """A drip-feed's place in the gateway's drip scheduler."""
@@ -245,6 +267,7 @@ class SerialTransport:
                 blocks=program_costs(wire, times),
                 link=self.settings.link,
                 lead_time=self.settings.lead_time,
+                flow_control=self.settings.handshake != "none",
             )
         except ValueError as exc:
             raise DeliveryError(f"cannot drip-feed {name}: {exc}", permanent=True) from None
@@ -258,33 +281,23 @@ class SerialTransport:
         what: str,
         member: FleetLine | None = None,
     ) -> Outcome:
-        loop = asyncio.get_running_loop()
         drip = Drip(program, Control())
         self.current = drip
-        last_checkpoint = 0.0
-
-        def report(pos: Position) -> None:  # in the line's thread
-            nonlocal last_checkpoint
-            drip.position = pos
-            now = time.monotonic()
-            if now - last_checkpoint >= CHECKPOINT_EVERY:
-                last_checkpoint = now
-                self._write_checkpoint(program, pos, None if timing is None else timing.resume_line(pos.sent))
-            loop.call_soon_threadsafe(
-                progress, Progress(pos.sent, pos.line, pos.lead, pos.remaining, pos.held)
-            )
+        report = self._reporter(drip, timing, progress)
 
         settings = self.settings
         opened_here = not self.port.is_open
         try:
             if opened_here:
-                await self._call(self.port.open)
+                await self._open()
             log.info("%s: sending %s over %s (%s mode)", self.machine, what, self.where, settings.mode)
             outcome = await self._transfer(wire, drip.control, timing, report, self.alarm, member)
         except TransferFailed as exc:
             self._clear_checkpoint()  # the job's reason says where it stopped
+            if exc.outcome is not None:
+                self._figures(exc.outcome)
             if exc.offset > wire.body_start or not exc.permanent:
-                await self._call(self.port.close)  # a line in doubt is opened afresh next time
+                await self._close()  # a line in doubt is opened afresh next time
             raise
         except asyncio.CancelledError:
             drip.control.abort("the gateway is stopping")
@@ -292,9 +305,44 @@ class SerialTransport:
         finally:
             self.current = None
         self._clear_checkpoint()
+        self._figures(outcome)
         if opened_here and self.listener is None:
-            await self._call(self.port.close)
+            await self._close()
         return outcome
+
+    def _figures(self, outcome: Outcome) -> None:
+        """A transfer's figures for whoever shows them (the machine's Status, JobService)."""
+        self.parity_errors += outcome.parity_errors + outcome.flow_wrong_bit7
+        if outcome.hint is not None:
+            self.hint = outcome.hint
+        elif outcome.pauses and not outcome.flow_wrong_bit7:
+            self.hint = ""  # DC3s came as the settings expect: the line is set up right
+        if self.on_figures is not None:
+            self.on_figures(self)
+
+    def _reporter(
+        self, drip: Drip, timing: Timing | None, progress: ReportProgress | None, *, answer: bool = False
+    ) -> Callable[[Position], None]:
+        """What a transfer's position goes to (called in the lines' I/O thread): the drip's record, the
+        progress file about once a second (`jobs list`, and the restart guard), the job's progress."""
+        loop = asyncio.get_running_loop()
+        last_checkpoint = 0.0
+        program = drip.program
+
+        def report(pos: Position) -> None:
+            nonlocal last_checkpoint
+            drip.position = pos
+            now = time.monotonic()
+            if now - last_checkpoint >= CHECKPOINT_EVERY:
+                last_checkpoint = now
+                resume = None if timing is None else timing.resume_line(pos.sent)
+                self._write_checkpoint(program, pos, resume, answer=answer)
+            if progress is not None:
+                loop.call_soon_threadsafe(
+                    progress, Progress(pos.sent, pos.line, pos.lead, pos.remaining, pos.held)
+                )
+
+        return report
 
     async def _transfer(
         self,
@@ -305,24 +353,40 @@ class SerialTransport:
         alarm: Callable[[], str | None] | None,
         member: FleetLine | None,
     ) -> Outcome:
-        """One transfer on the line's thread, with the line's settings."""
+        """One transfer, stepped by the lines' I/O thread, with the line's settings."""
         settings = self.settings
-        outcome: Outcome = await self._call(
-            lambda: run_transfer(
-                self.port,
-                wire,
-                self.line,
-                wait_for_dc1=settings.start == "dc1",
-                dc1_timeout=settings.dc1_timeout,
-                stall_timeout=settings.stall_timeout,
-                control=control,
-                timing=timing,
-                report=report,
-                alarm=alarm,
-                fleet=member,
-            )
+        io = self.fleet.io
+        transfer = Transfer(
+            self.port,
+            wire,
+            self.line,
+            wait_for_dc1=settings.start == "dc1",
+            dc1_timeout=settings.dc1_timeout,
+            stall_timeout=settings.stall_timeout,
+            control=control,
+            timing=timing,
+            report=report,
+            alarm=alarm,
+            fleet=member,
+            name=self.machine or self.where,
         )
-        return outcome
+
+        def wake() -> None:  # the operator's pause, resume or abort, from the event loop
+            transfer.due = 0.0
+            io.wake()
+
+        control.wake = wake
+        self._stepping = stepping = io.attach(transfer)
+        try:
+            await asyncio.wrap_future(stepping)
+        except asyncio.CancelledError:
+            control.abort("the gateway is stopping")
+            raise
+        finally:
+            if stepping.done():
+                self._stepping = None
+        assert transfer.outcome is not None
+        return transfer.outcome
 
     async def _log(
         self,
@@ -337,6 +401,8 @@ class SerialTransport:
         if self.transfer_log is None:
             return
         detail = mode + (f" from line {start}" if start is not None else "")
+        if outcome is not None:
+            detail = f"{detail}; {outcome.describe()}"
         if error is not None:
             detail = f"{detail}: {error.reason}"
         aborted = error is not None and "aborted by" in error.reason
@@ -369,14 +435,14 @@ class SerialTransport:
                 answer: bytes | None = None
                 try:
                     if not self.port.is_open:
-                        await self._call(self.port.open)
-                    data: bytes = await self._call(self.port.read)
+                        await self._open()
+                    data = await self._read()
                     if data:
                         answer = listener.feed(data)
                     if answer is not None:
                         await self._answer(answer, listener.answer_user, listener.answer_load)
                 except DeliveryError as exc:
-                    await self._call(self.port.close)
+                    await self._close()
                     listener.line_lost(exc.reason)
                     log.debug("%s: idle line: %s", self.machine, exc.reason)
                     await asyncio.sleep(REOPEN_AFTER)
@@ -392,10 +458,10 @@ class SerialTransport:
         async with self._lock:
             try:
                 if not self.port.is_open:
-                    await self._call(self.port.open)
+                    await self._open()
                 await self._answer(text, user, load)
             except DeliveryError as exc:
-                await self._call(self.port.close)
+                await self._close()
                 if self.listener is not None:
                     self.listener.line_lost(exc.reason)
                 log.warning("%s: the answer was not sent: %s", self.machine, exc.reason)
@@ -412,7 +478,7 @@ class SerialTransport:
         member: FleetLine | None = None
         name = text.lstrip(b"%\r\n \0").split(b"\n", 1)[0].decode("ascii", "replace").strip() or "?"
         if drip:
-            times = block_times(text.decode("latin-1"), rapid=self.settings.rapid)
+            times = self._times(text)
             timing = Timing(wire, times, self.settings.buffer)
             member = self._join(name, wire, times)
         answer = Program(
@@ -438,10 +504,8 @@ class SerialTransport:
     ) -> Outcome:
         drip = Drip(answer, Control())
         self.current = drip  # pause, resume and abort reach a dripped answer too
-
-        def report(pos: Position) -> None:  # in the line's thread
-            drip.position = pos
-
+        # A dripped answer writes the progress file too (`jobs list` shows it), never taken for a job's.
+        report = self._reporter(drip, timing, None, answer=timing is not None)
         try:
             alarm = self.alarm if timing is not None else None
             result = await self._transfer(wire, drip.control, timing, report, alarm, member)
@@ -450,16 +514,20 @@ class SerialTransport:
             raise
         finally:
             self.current = None
+            if timing is not None:
+                self._clear_checkpoint()
         return result
 
     # --- the checkpoint ----------------------------------------------------------------------------
 
-    def _write_checkpoint(self, program: Program, pos: Position, resume: int | None) -> None:
+    def _write_checkpoint(
+        self, program: Program, pos: Position, resume: int | None, *, answer: bool = False
+    ) -> None:
         path = self.checkpoint_path
         if path is None:
             return
         point = Checkpoint(
-            str(program.path),
+            f"{ANSWER}{program.name}" if answer else str(program.path),
             program.sha256,
             self.settings.mode == "drip",
             pos.sent,
