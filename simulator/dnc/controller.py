@@ -146,6 +146,7 @@ class DncStats:
     after_dc3_max: int = 0
     after_dc3_total: int = 0
     parity_errors: int = 0
+    device_errors: int = 0  # our characters a 7-bit device server's UART received with an error, handed on
     junk: int = 0
     overflows: int = 0
     line_drops: int = 0
@@ -284,7 +285,9 @@ class DncController:
             return b""
         chars = bytes(self._flow_out)
         self._flow_out.clear()
-        return self._coupling.to_sender(chars)
+        out, errors = self._coupling.to_sender(chars)
+        self.stats.device_errors += errors
+        return out
 
     # --- commands ------------------------------------------------------------------------------
 

@@ -4,6 +4,11 @@ The simulator's line runs at `SIM_BAUD` times its speed factor; over socket:// (
 raw TCP device server, which carries no line settings) the gateway paces at that
 effective rate, so its `baud` is `SIM_BAUD * SPEED`. The pseudo-terminal tests
 run the simulator at speed 1, where the pty's baud rate must match the line's.
+
+The device server is a `transparent` 8-bit port unless a test asks for the `7bit`
+kind (as a device server set 7E2 is, the simulator's default), and the gateway is
+configured for it as a user would (`AS_A_USER`): `software_parity: true` on a
+transparent port, the defaults on a 7-bit one.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.jobs.delivery.transport import Program, Progress
 from gateway.jobs.delivery.transports.serial import SerialTransport
-from simulator.dnc import DncFace, DncOptions, DncSpec, Mode
+from simulator.dnc import DeviceServer, DncFace, DncOptions, DncSpec, Mode
 from simulator.runner import Simulator
 from tests.waiting import free_port
 
@@ -47,13 +52,29 @@ def load_program(blocks: int = 60) -> bytes:
     )
 
 
+#: The gateway's settings for a line through each kind of device server, as the README has a user set it.
+AS_A_USER: dict[DeviceServer, dict[str, Any]] = {
+    DeviceServer.SEVEN_BIT: {},
+    DeviceServer.TRANSPARENT: {"software_parity": True},
+}
+
+
 @asynccontextmanager
 async def simulator(
-    tmp_path: Path, *, speed: float = SPEED, pty: bool = False, **spec: Any
+    tmp_path: Path,
+    *,
+    speed: float = SPEED,
+    pty: bool = False,
+    device_server: DeviceServer = DeviceServer.TRANSPARENT,
+    override: int | None = None,
+    **spec: Any,
 ) -> AsyncIterator[Simulator]:
     line = LineSettings(baud=SIM_BAUD)
     spec = {**ROOMY, **spec}
-    options = DncOptions(DncSpec(line=line, **spec), tcp_port=0, rfc2217_port=None, pty=pty)
+    options = DncOptions(
+        DncSpec(line=line, **spec), tcp_port=0, rfc2217_port=None, pty=pty, device_server=device_server,
+        override=override,
+    )  # fmt: skip
     async with Simulator(
         opcua_port=free_port(), ftp_port=free_port(), speed=speed, store=tmp_path / "sim", dnc=options
     ) as sim:
@@ -65,8 +86,18 @@ def face(sim: Simulator) -> DncFace:
     return sim.dnc
 
 
-def settings(where: str, *, baud: float = SIM_BAUD * SPEED, **more: Any) -> ControllerSerial:
-    return ControllerSerial.model_validate({"type": "serial", "where": where, "baud": int(baud), **more})
+def settings(
+    where: str,
+    *,
+    baud: float = SIM_BAUD * SPEED,
+    device_server: DeviceServer = DeviceServer.TRANSPARENT,
+    **more: Any,
+) -> ControllerSerial:
+    """A serial line's settings: `more` over what a user sets for a socket:// line through `device_server`."""
+    kind = AS_A_USER[device_server] if where.startswith("socket://") else {}
+    return ControllerSerial.model_validate(
+        {"type": "serial", "where": where, "baud": int(baud), **kind, **more}
+    )
 
 
 def program_file(tmp_path: Path, data: bytes, name: str = "part.nc") -> Program:
