@@ -137,6 +137,18 @@ def test_a_complete_load_then_a_closed_connection_is_no_alarm() -> None:
     assert store.exists("O4711") and not machine.alarms and c.stage is Stage.OFFLINE
 
 
+def test_a_slow_memory_takes_a_whole_program_from_its_buffer_after_the_line_closed() -> None:
+    c, machine, store = controller(load_rate=100.0)  # 54 bytes take half a second to store
+    c.take_output()
+    c.feed(wire(), 0.0)
+    c.disconnect(0.0)
+    run_line(c, 0.1)  # the line carried it all into the 256-byte buffer, then closed
+    assert not c.connected and not store.exists("O4711")
+    run_line(c, 1.0, start=0.1)
+    assert store.exists("O4711") and not machine.alarms and c.stats.line_drops == 0
+    assert c.stage is Stage.OFFLINE and c.buffer_level == 0
+
+
 def test_drip_runs_blocks_as_they_arrive_and_counts_starvation() -> None:
     program = b"%\nO7\nG21 G90\n" + b"".join(b"G1 X%d F60000\n" % (i + 1) for i in range(30)) + b"M30\n%\n"
     c, machine, _ = controller(Mode.DRIP, buffer_size=64, high_water=48, low_water=16)
