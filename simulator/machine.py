@@ -37,7 +37,12 @@ RAPID = 30000.0  # mm/min, G0 and the cap for any feed
 AMBIENT = 25.0  # degC
 GAS_ON = 12.0  # bar while the beam is on
 POWER_TABLE = (20.0, 40.0, 60.0, 80.0, 100.0)  # % of S over five feed bands
-OVERRIDE_MAX = 200
+OVERRIDE_MAX = 200  # % the panel's knob (and the OPC UA variable) goes to
+#: % a machine may be set to cut at from the command line (cnc-simulator --dnc-override): beyond the knob,
+#: it stands for everything that makes a machine cut faster than its program's F words say (rapids faster
+#: than an estimator assumes, feed per revolution read as mm/min, macros): 8x and more. The rapid still caps
+#: every feed: a program's F times the override must stay below `rapid` to run that much faster.
+OVERRIDE_LIMIT = 1000
 
 # Time constants (s) of the first-order lags.
 TAU_POWER = 0.05
@@ -227,9 +232,10 @@ class Machine:
         self.alarms.clear()
         self.state = MachineState.IDLE
 
-    def set_override(self, percent: int) -> None:
-        if not 0 <= percent <= OVERRIDE_MAX:
-            raise OutOfRange(f"feed override {percent} % is outside 0..{OVERRIDE_MAX} %")
+    def set_override(self, percent: int, *, limit: int = OVERRIDE_MAX) -> None:
+        """The feed override; `limit` OVERRIDE_LIMIT for the command line's setting beyond the knob."""
+        if not 0 <= percent <= limit:
+            raise OutOfRange(f"feed override {percent} % is outside 0..{limit} %")
         self.override = percent
 
     def set_mode(self, mode: int) -> None:

@@ -89,7 +89,8 @@ class Simulator:
         self.dnc: DncFace | None = None
         if dnc is not None:
             self.dnc = DncFace(dnc.spec, self.machine, self.programs, host=host, tcp_port=dnc.tcp_port,
-                               rfc2217_port=dnc.rfc2217_port, pty=dnc.pty, speed=speed)  # fmt: skip
+                               rfc2217_port=dnc.rfc2217_port, pty=dnc.pty, speed=speed,
+                               device_server=dnc.device_server, override=dnc.override)  # fmt: skip
             self.variables += self.dnc.variables
         # The MTConnect adapter face (simulator/shdr.py): off unless a port is given (0: any free one).
         self.shdr_port = shdr_port

@@ -26,7 +26,7 @@ from typing import Any
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
 from gateway.cli.check import report_config_error
-from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at
+from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
 from gateway.cli.demo_driver import keep_program_running
 from gateway.config.access import AccessConfig, UserConfig
@@ -301,6 +301,8 @@ async def _run_demo(
         serial = gw.tree.machines[config.machines[1].machine]
         state = serial.nodes["Machine/State"]
         tasks.append(("demo:drip", lambda: keep_dripping(jobs, serial.name, lambda: state.sample.value == 0)))
+        if dnc is not None:
+            tasks.append(("demo:punch", lambda: punch_once(dnc, config.state_dir, serial.name)))
     if switch is None:
         log.info("a simulator is already listening on port %d: using it", args.sim_opcua_port)
     else:

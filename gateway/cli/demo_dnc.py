@@ -7,6 +7,12 @@ mappings/laser-dnc.yaml pointed at it. `keep_dripping` submits a generated
 contour program to that machine's job queue whenever its queue is empty and the
 machine idle, so the demo always shows a drip-feed: progress on OPC UA
 (`Jobs/Block`, `Jobs/LeadSeconds`, ...), MQTT (`jobs/<id>`) and `cnc-gateway jobs`.
+
+The device server is the simulator's default kind, a 7-bit one (as an NPort set
+7E2 is: its UART does the parity), and the mapping leaves `software_parity` at
+its default, as a user would. `punch_once` plays the operator once at start:
+the controller punches demo.nc, so that the gateway's store of punched programs
+holds one and `cnc-gateway programs received laser-dnc` has something to show.
 """
 
 from __future__ import annotations
@@ -20,11 +26,15 @@ from typing import Any
 
 from gateway.config.jobs import ControllerSerial
 from gateway.config.mapping import MachineMapping
+from gateway.errors import RequestError
 
 log = logging.getLogger("gateway.demo")
 
 DRIP_NAME = "drip-demo.nc"
 PAUSE = 30.0  # s between the end of one drip-feed and the next: time to try a remote request (README)
+PUNCHED = "demo.nc"  # the program the controller punches at start (one of the simulator's samples)
+PUNCH_TRIES = 30  # looks, PUNCH_EVERY apart, for a moment the line is free to punch
+PUNCH_EVERY = 1.0  # s
 
 
 def drip_program(turns: int = 12, points: int = 90) -> bytes:
@@ -75,8 +85,32 @@ def simulator(args: Any, store: Path) -> Any:
         ftp_port=args.sim_dnc_ftp_port,
         speed=args.speed,
         store=store,
-        dnc=DncOptions(spec, tcp_port=args.sim_dnc_port, rfc2217_port=None),
+        dnc=DncOptions(spec, tcp_port=args.sim_dnc_port, rfc2217_port=None),  # the default 7-bit kind
     )
+
+
+async def punch_once(sim: Any, state_dir: Path, machine: str) -> None:
+    """Unless the machine's store of punched programs holds one already, the operator's PUNCH of demo.nc
+    as soon as the gateway listens on the line (the simulator refuses while a transfer runs: try again)."""
+    from gateway.jobs.dnc.received import ReceivedStore
+
+    if await asyncio.to_thread(ReceivedStore(state_dir).list, machine):
+        return
+    face = sim.dnc
+    for _ in range(PUNCH_TRIES):
+        await asyncio.sleep(PUNCH_EVERY)
+        if not face.controller.connected:
+            continue  # the gateway has not opened the line yet
+        try:
+            face.punch(PUNCHED)
+        except RequestError as exc:
+            log.debug("demo: no punch yet: %s", exc)
+            continue
+        face.kick()
+        log.info("demo: %s punched by %s's controller (cnc-gateway programs received %s)", PUNCHED, machine,
+                 machine)  # fmt: skip
+        return
+    log.warning("demo: %s's line never was free to punch %s", machine, PUNCHED)
 
 
 async def keep_dripping(jobs: Any, machine: str, idle: Callable[[], bool]) -> None:

@@ -6,15 +6,17 @@
         face.punch("demo.nc"); face.request("O4711")          # the operator's PUNCH and remote request
         face.stats()                                         # DC1/DC3, after-DC3 counts, starvations ...
 
-`Simulator(dnc=DncOptions(...))` starts it with the rest of the simulator.
+`Simulator(dnc=DncOptions(...))` starts it with the rest of the simulator; `DncOptions(device_server=...)`
+says what the raw TCP port is (`7bit`, as a device server set 7E2, by default; or `transparent`).
 """
 
 from simulator.dnc.controller import DncController, DncSpec, DncStats, Mode, Stage
 from simulator.dnc.face import DncFace, DncOptions
-from simulator.dnc.uart import Coupling, Frame, resample
+from simulator.dnc.uart import Coupling, DeviceServer, Frame, resample
 
 __all__ = [
     "Coupling",
+    "DeviceServer",
     "DncController",
     "DncFace",
     "DncOptions",

@@ -146,6 +146,7 @@ class DncStats:
     after_dc3_max: int = 0
     after_dc3_total: int = 0
     parity_errors: int = 0
+    device_errors: int = 0  # our characters a 7-bit device server's UART received with an error, handed on
     junk: int = 0
     overflows: int = 0
     line_drops: int = 0
@@ -254,8 +255,9 @@ class DncController:
         self._closing = False
         self.link = ""
         self.wire.clear()
-        if drip_complete:
-            # The whole program arrived: the machine runs what it holds; the line is simply gone.
+        if drip_complete or self._load_buffered():
+            # The whole program arrived: the machine runs what it holds, or the program memory takes the
+            # rest of the buffer (a slow one, `load_rate`); the line is simply gone.
             self.on_change()
             return
         if during is not None:
@@ -284,7 +286,9 @@ class DncController:
             return b""
         chars = bytes(self._flow_out)
         self._flow_out.clear()
-        return self._coupling.to_sender(chars)
+        out, errors = self._coupling.to_sender(chars)
+        self.stats.device_errors += errors
+        return out
 
     # --- commands ------------------------------------------------------------------------------
 
@@ -519,12 +523,24 @@ class DncController:
             if self.alarmed:
                 return
 
+    def _load_buffered(self) -> bool:
+        """A load's closing `%` is in the receive buffer: the program has reached the controller whole."""
+        if self.mode is not Mode.LOAD:
+            return False
+        markers = self.rx.count(b"%")
+        return (self.stage is Stage.RECEIVING and markers >= 1) or (
+            self.stage is Stage.READING and markers >= 2
+        )
+
     def _load_event(self, event: ReceiverEvent) -> None:
         if isinstance(event, ProgramStarted):
             self.stage = Stage.RECEIVING
         elif isinstance(event, ProgramReceived):
             self._store(event)
             self.stage = Stage.READING
+            if self._coupling is None:  # the line went while the memory took the program's end
+                self._reset_reading()
+                self.stage = Stage.OFFLINE
         elif isinstance(event, Overflow):
             self._alarm(no_program_space(event.limit))
         elif isinstance(event, Junk):

@@ -21,9 +21,9 @@ from typing import Any, Self
 
 from simulator.dnc.controller import DncController, DncSpec, WritableStore
 from simulator.dnc.links import Link, PtyLink, TcpServer
-from simulator.dnc.uart import Coupling
+from simulator.dnc.uart import Coupling, DeviceServer
 from simulator.errors import SimulatorError
-from simulator.machine import Machine
+from simulator.machine import OVERRIDE_LIMIT, Machine
 from simulator.variables import Variable
 
 log = logging.getLogger("simulator.dnc")
@@ -37,12 +37,21 @@ DEFAULT_RFC2217_PORT = 4002
 class DncOptions:
     """The DNC face as `Simulator(dnc=...)` starts it: the controller's setup and where it listens.
 
-    A port of None leaves that face off; 0 picks a free port (tests)."""
+    A port of None leaves that face off; 0 picks a free port (tests). `device_server` is the raw TCP
+    port's kind (uart.DeviceServer: `7bit` as a device server set 7E2 is, or `transparent`); `override`
+    the machine's feed override at start, in %, up to machine.OVERRIDE_LIMIT (None: as it is)."""
 
     spec: DncSpec = field(default_factory=DncSpec)
     tcp_port: int | None = DEFAULT_TCP_PORT
     rfc2217_port: int | None = DEFAULT_RFC2217_PORT
     pty: bool = False
+    device_server: DeviceServer = DeviceServer.SEVEN_BIT
+    override: int | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "device_server", DeviceServer(self.device_server))
+        if self.override is not None and not 1 <= self.override <= OVERRIDE_LIMIT:
+            raise ValueError(f"feed override {self.override} % is outside 1..{OVERRIDE_LIMIT} %")
 
 
 class DncFace:
@@ -60,15 +69,20 @@ class DncFace:
         pty: bool = False,
         speed: float = 1.0,
         clock: Callable[[], float] = time.monotonic,
+        device_server: DeviceServer = DeviceServer.SEVEN_BIT,
+        override: int | None = None,
     ) -> None:
         self.spec = spec
         self.host = host
         self.tcp_port = tcp_port
         self.rfc2217_port = rfc2217_port
         self.use_pty = pty
+        self.device_server = DeviceServer(device_server)
         self.clock = clock
         self.controller = DncController(spec, machine, store, speed=speed, on_change=self.kick)
         self.machine = machine
+        if override is not None:
+            machine.set_override(override, limit=OVERRIDE_LIMIT)
         self.pty_path = ""
         self._link: Link | None = None
         self._waiter: asyncio.Future[None] | None = None
@@ -92,7 +106,10 @@ class DncFace:
             for rfc2217, port in ((False, self.tcp_port), (True, self.rfc2217_port)):
                 if port is None:
                     continue
-                server = TcpServer(self, self.spec.line, host=self.host, tcp_port=port, rfc2217=rfc2217)
+                server = TcpServer(
+                    self, self.spec.line, host=self.host, tcp_port=port, rfc2217=rfc2217,
+                    device_server=self.device_server,
+                )  # fmt: skip
                 try:
                     bound = (await stack.enter_async_context(server)).port
                 except OSError as exc:
@@ -114,11 +131,13 @@ class DncFace:
         self._stack = stack
         where = [u for u in (self.socket_url, self.rfc2217_url, self.pty_path) if u]
         log.info(
-            "DNC %s %s, %s mode, on %s",
+            "DNC %s %s, %s mode, on %s (raw TCP: a %s device server), feed override %d %%",
             self.spec.line.baud,
             self.spec.line.format,
             self.controller.mode.value,
             ", ".join(where) or "no link",
+            self.device_server.value,
+            self.machine.override,
         )
         return self
 
@@ -218,6 +237,8 @@ class DncFace:
             "mode": c.mode.value,
             "link": c.link,
             "buffer_level": c.buffer_level,
+            "device_server": self.device_server.value,
+            "override": self.machine.override,
             "starvations": self.machine.starvations,
             "after_dc3_episodes": list(c.episodes),
             **{name: getattr(s, name) for name in s.__dataclass_fields__},
@@ -275,6 +296,11 @@ def _variables(face: DncFace) -> list[Variable]:
         counter("afterDc3Last", lambda: s.after_dc3_last, "Characters received after the last DC3"),
         counter("afterDc3Max", lambda: s.after_dc3_max, "Most characters received after one DC3"),
         counter("parityErrors", lambda: s.parity_errors, "Parity and framing errors"),
+        counter(
+            "deviceErrors",
+            lambda: s.device_errors,
+            "Characters the device server's UART received with an error and passed on",
+        ),
         counter("overflows", lambda: s.overflows, "Receive buffer overflows (alarm 087)"),
         counter("lineDrops", lambda: s.line_drops, "Lines dropped during a transfer (alarm 086)"),
         counter("starvations", lambda: face.machine.starvations, "Drip feed ran dry while running"),

@@ -1,7 +1,8 @@
 """Where the controller's serial port can be reached: a device server (raw TCP, RFC 2217) or a pty.
 
-- raw TCP, like a Moxa NPort in TCP-server mode (`socket://host:4001` for pyserial):
-  bytes pass as they are; 8-bit, no parity (uart.Coupling emulates a 7-bit parity line);
+- raw TCP, like a Moxa NPort in TCP-server mode (`socket://host:4001` for pyserial), of a kind
+  (uart.DeviceServer): `7bit` (its port set to the controller's 7E2: the UART does the parity) or
+  `transparent` (8N1/8N2: the parity bit travels as bit 7; uart.Coupling emulates a 7-bit parity line);
 - RFC 2217 (`rfc2217://host:4002`): Telnet with COM-port control; pyserial's
   `serial.rfc2217.PortManager` answers the client's settings, which the
   controller's UART then sees (a wrong setting garbles the line);
@@ -28,7 +29,7 @@ from typing import Protocol, Self, cast
 from serial.rfc2217 import PortManager, Serial
 
 from gateway.codecs.dnc import LineSettings
-from simulator.dnc.uart import Coupling, Frame
+from simulator.dnc.uart import Coupling, DeviceServer, Frame
 
 log = logging.getLogger("simulator.dnc")
 
@@ -67,16 +68,17 @@ class Port(Protocol):
 class _TcpLink(asyncio.Protocol):
     kind = "tcp"
 
-    def __init__(self, port: Port, line: LineSettings) -> None:
+    def __init__(self, port: Port, line: LineSettings, device_server: DeviceServer) -> None:
         self.port = port
         self.line = line
+        self.device_server = device_server
         self.name = "tcp"
         self.transport: asyncio.Transport | None = None
         self._paused = False
         self.active = False
 
     def coupling(self) -> Coupling:
-        return Coupling(self.line, "tcp")
+        return Coupling(self.line, self.device_server.value)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -156,8 +158,8 @@ class _PortState:
 class _Rfc2217Link(_TcpLink):
     kind = "rfc2217"
 
-    def __init__(self, port: Port, line: LineSettings) -> None:
-        super().__init__(port, line)
+    def __init__(self, port: Port, line: LineSettings, device_server: DeviceServer) -> None:
+        super().__init__(port, line, device_server)  # RFC 2217 sets the UART itself: the kind is unused
         self.state = _PortState(line)
         self.manager: PortManager | None = None
 
@@ -197,9 +199,19 @@ class _Raw:
 class TcpServer:
     """A listening device-server port (raw TCP or RFC 2217). Async context manager."""
 
-    def __init__(self, port: Port, line: LineSettings, *, host: str, tcp_port: int, rfc2217: bool) -> None:
+    def __init__(
+        self,
+        port: Port,
+        line: LineSettings,
+        *,
+        host: str,
+        tcp_port: int,
+        rfc2217: bool,
+        device_server: DeviceServer = DeviceServer.SEVEN_BIT,
+    ) -> None:
         self.port_handler = port
         self.line = line
+        self.device_server = device_server
         self.host = host
         self.port = tcp_port
         self.rfc2217 = rfc2217
@@ -210,7 +222,7 @@ class TcpServer:
         kind = _Rfc2217Link if self.rfc2217 else _TcpLink
 
         def factory() -> asyncio.Protocol:
-            return kind(self.port_handler, self.line)
+            return kind(self.port_handler, self.line, self.device_server)
 
         self._server = await loop.create_server(factory, self.host, self.port, reuse_address=True)
         self.port = self._server.sockets[0].getsockname()[1]

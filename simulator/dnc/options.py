@@ -13,6 +13,8 @@ import os
 from gateway.codecs.dnc import LineSettings, LineSettingsError
 from simulator.dnc.controller import DncSpec, Mode
 from simulator.dnc.face import DEFAULT_RFC2217_PORT, DEFAULT_TCP_PORT, DncFace, DncOptions
+from simulator.dnc.uart import DeviceServer
+from simulator.machine import OVERRIDE_LIMIT
 
 ENV_TCP = "CNC_SIM_DNC_PORT"
 ENV_RFC2217 = "CNC_SIM_DNC_RFC2217_PORT"
@@ -64,6 +66,18 @@ def add_dnc_arguments(parser: argparse.ArgumentParser) -> None:
         "--dnc-mode", choices=[m.value for m in Mode], default="load", help="load (default) or drip"
     )
     group.add_argument("--dnc-buffer", type=int, default=256, help="receive buffer, bytes (default 256)")
+    group.add_argument(
+        "--dnc-device-server", choices=[k.value for k in DeviceServer], default=DeviceServer.SEVEN_BIT.value,
+        help="the raw TCP port's kind: 7bit (default; a device server set to the line's format, e.g. 7E2: "
+        "its UART does the parity, DC1/DC3 arrive as 0x11/0x13) or transparent (8-bit: the parity bit "
+        "travels as bit 7, the sender does software parity)",
+    )  # fmt: skip
+    group.add_argument(
+        "--dnc-override", type=int, default=None, metavar="PCT",
+        help=f"the machine's feed override at start, 1..{OVERRIDE_LIMIT} %% (default: 100): beyond the "
+        "panel's 200 %%, a machine that cuts faster than its programs' F words (a feed is still capped "
+        "at the rapid)",
+    )  # fmt: skip
 
 
 def dnc_options(args: argparse.Namespace) -> DncOptions | None:
@@ -75,18 +89,30 @@ def dnc_options(args: argparse.Namespace) -> DncOptions | None:
             args.dnc_format, LineSettings(baud=args.dnc_baud, handshake=args.dnc_handshake)
         )
         spec = DncSpec(line=line, mode=Mode(args.dnc_mode), buffer_size=args.dnc_buffer)
+        return DncOptions(
+            spec, tcp_port=args.dnc_port, rfc2217_port=args.dnc_rfc2217_port, pty=args.dnc_pty,
+            device_server=DeviceServer(args.dnc_device_server), override=args.dnc_override,
+        )  # fmt: skip
     except (LineSettingsError, ValueError) as exc:
         raise ValueError(f"DNC settings: {exc}") from None
-    return DncOptions(spec, tcp_port=args.dnc_port, rfc2217_port=args.dnc_rfc2217_port, pty=args.dnc_pty)
 
 
 def dnc_banner(face: DncFace) -> list[str]:
     line = face.spec.line
     where = [u for u in (face.socket_url, face.rfc2217_url, face.pty_path) if u]
-    return [
+    lines = [
         f"  DNC      {', '.join(where)}",
         (
             f"           {line.baud} baud {line.format} {line.handshake}, {face.controller.mode.value} mode, "
-            f"buffer {face.spec.buffer_size} bytes"
+            f"buffer {face.spec.buffer_size} bytes, feed override {face.machine.override} %"
         ),
     ]
+    if face.socket_url:
+        lines.append(f"           raw TCP: {_KIND_BANNER[face.device_server]}")
+    return lines
+
+
+_KIND_BANNER = {
+    DeviceServer.SEVEN_BIT: "a 7-bit device server (its UART does the parity: no software_parity)",
+    DeviceServer.TRANSPARENT: "a transparent 8-bit port (the parity bit as bit 7: software_parity: true)",
+}

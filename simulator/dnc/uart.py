@@ -8,10 +8,17 @@ bits. A wrong baud rate gives the familiar junk and framing errors, a wrong
 parity gives parity errors, exactly as on a real line. Pure.
 
 `Coupling` is one connection's path between the controller and the sender:
-- raw TCP (a device server in transparent mode) and pseudo-terminals carry 8-bit
-  bytes and no parity, so a 7E/7O line's parity bit travels as bit 7 (the
-  gateway's `software_parity`); a pseudo-terminal also knows the baud rate its
-  user set, and a different one is resampled;
+- a raw-TCP device server of kind `7bit` (the default; a Moxa NPort or Lantronix
+  in TCP-server mode with its port set 7E2, as a Fanuc wants it): its UART does
+  the parity. Towards the controller it sends the low 7 bits of each TCP byte
+  with the right parity bit, whatever bit 7 was; towards TCP it hands on the
+  controller's characters as 7-bit bytes (bit 7 = 0), also a character its UART
+  received with a parity or framing error (counted);
+- a raw-TCP device server of kind `transparent` (its port set 8N1/8N2) and a
+  pseudo-terminal carry 8-bit bytes and no parity, so on a 7E/7O line the parity
+  bit travels as bit 7 (the sender's software parity; without it the controller
+  sees parity errors); a pseudo-terminal also knows the baud rate its user set,
+  and a different one is resampled;
 - RFC 2217 carries the sender's settings (baud, data bits, parity, stop bits):
   the device server's UART uses them, and any difference is resampled.
 """
@@ -20,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 
 from gateway.codecs.dnc import LineSettings
 
@@ -110,18 +118,39 @@ def resample(data: bytes, sender: Frame, receiver: Frame) -> tuple[bytes, int]:
 PeerFrame = Callable[[], "Frame | None"]
 
 
-class Coupling:
-    """One connection between the controller's UART (its `line`) and a sender's port."""
+class DeviceServer(StrEnum):
+    """What a raw-TCP device server's port does with the characters (see the module's docstring)."""
 
-    def __init__(self, line: LineSettings, kind: str, peer: PeerFrame | None = None) -> None:
-        if kind not in ("tcp", "rfc2217", "pty"):
-            raise ValueError(f"unknown link kind {kind!r}")
+    SEVEN_BIT = "7bit"  # its UART runs the controller's format and does the parity
+    TRANSPARENT = "transparent"  # 8-bit bytes pass as they are; the sender does the parity
+
+
+KINDS = ("7bit", "transparent", "rfc2217", "pty")
+#: A UART's data bits of a byte, by how many it has (bytes.translate tables).
+_DATA_BITS = {7: bytes(i & 0x7F for i in range(256)), 8: bytes(range(256))}
+
+
+class Coupling:
+    """One connection between the controller's UART (its `line`) and a sender's port.
+
+    `kind` is one of KINDS: a raw-TCP device server's kind (DeviceServer), rfc2217 or pty. `uart` is a
+    7-bit device server's own UART setting when it differs from the controller's (a misconfigured
+    device server: its characters are resampled as a real UART would read them)."""
+
+    def __init__(
+        self, line: LineSettings, kind: str, peer: PeerFrame | None = None, *, uart: Frame | None = None
+    ) -> None:
+        if kind not in KINDS:
+            raise ValueError(f"unknown link kind {kind!r} (one of {', '.join(KINDS)})")
+        if uart is not None and (kind != "7bit" or uart.data_bits not in _DATA_BITS):
+            raise ValueError("uart: a 7bit device server's own 7- or 8-bit setting")
         self.line = line
         self.kind = kind
         self._peer = peer
         self._own = Frame.of(line)
+        self._uart = uart or self._own
         # On transparent links a 7-bit line with parity puts its parity bit in bit 7.
-        self._emulate = kind != "rfc2217" and line.data_bits == 7 and line.parity != "N"
+        self._emulate = kind in ("transparent", "pty") and line.data_bits == 7 and line.parity != "N"
         self._parity_line = LineSettings(
             baud=line.baud, data_bits=7, parity=line.parity if line.parity != "N" else "E",
             stop_bits=line.stop_bits, software_parity=True,
@@ -132,6 +161,8 @@ class Coupling:
         peer = self._peer() if self._peer is not None else None
         if self.kind == "rfc2217":
             return (peer or self._own), self._own
+        if self.kind == "7bit":
+            return self._uart, self._own
         own = self._own.transparent()
         if peer is None:
             return own, own
@@ -140,18 +171,24 @@ class Coupling:
     def to_controller(self, data: bytes) -> tuple[bytes, int]:
         """Bytes from the sender -> (characters the controller reads, parity/framing errors)."""
         sender, own = self._frames()
+        if self.kind == "7bit":
+            # The device server's UART sends the data bits of each byte with its own parity bit.
+            return resample(data.translate(_DATA_BITS[sender.data_bits]), sender, own)
         chars, errors = resample(data, sender, own)
         if self._emulate:
             chars, bad = self._parity_line.decode(chars)
             errors += bad
         elif self.line.data_bits == 7:
-            chars = bytes(c & 0x7F for c in chars)
+            chars = chars.translate(_DATA_BITS[7])
         return chars, errors
 
-    def to_sender(self, chars: bytes) -> bytes:
-        """Characters the controller sends -> the bytes the sender's port reads."""
+    def to_sender(self, chars: bytes) -> tuple[bytes, int]:
+        """Characters the controller sends -> (the bytes the sender's port reads, how many of them the
+        device server's UART received with a parity or framing error and handed on all the same)."""
         if self._emulate:
             chars = self._parity_line.encode(chars)
         sender, own = self._frames()
-        out, _errors = resample(chars, own, sender)
-        return out
+        out, errors = resample(chars, own, sender)
+        if self.kind == "7bit":
+            return out.translate(_DATA_BITS[sender.data_bits]), errors
+        return out, 0

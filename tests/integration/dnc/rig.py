@@ -4,6 +4,11 @@ The simulator's line runs at `SIM_BAUD` times its speed factor; over socket:// (
 raw TCP device server, which carries no line settings) the gateway paces at that
 effective rate, so its `baud` is `SIM_BAUD * SPEED`. The pseudo-terminal tests
 run the simulator at speed 1, where the pty's baud rate must match the line's.
+
+The device server is a `transparent` 8-bit port unless a test asks for the `7bit`
+kind (as a device server set 7E2 is, the simulator's default), and the gateway is
+configured for it as a user would (`AS_A_USER`): `software_parity: true` on a
+transparent port, the defaults on a 7-bit one.
 """
 
 from __future__ import annotations
@@ -14,11 +19,14 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.jobs.delivery.transport import Program, Progress
 from gateway.jobs.delivery.transports.serial import SerialTransport
-from simulator.dnc import DncFace, DncOptions, DncSpec, Mode
+from simulator.dnc import DeviceServer, DncFace, DncOptions, DncSpec, Mode
+from simulator.machine import RAPID
 from simulator.runner import Simulator
 from tests.waiting import free_port
 
@@ -47,13 +55,30 @@ def load_program(blocks: int = 60) -> bytes:
     )
 
 
+#: The gateway's settings for a line through each kind of device server, as the README has a user set it.
+AS_A_USER: dict[DeviceServer, dict[str, Any]] = {
+    DeviceServer.SEVEN_BIT: {},
+    DeviceServer.TRANSPARENT: {"software_parity": True},
+}
+
+
 @asynccontextmanager
 async def simulator(
-    tmp_path: Path, *, speed: float = SPEED, pty: bool = False, **spec: Any
+    tmp_path: Path,
+    *,
+    speed: float = SPEED,
+    pty: bool = False,
+    device_server: DeviceServer = DeviceServer.TRANSPARENT,
+    override: int | None = None,
+    baud: int = SIM_BAUD,
+    **spec: Any,
 ) -> AsyncIterator[Simulator]:
-    line = LineSettings(baud=SIM_BAUD)
+    line = LineSettings(baud=baud)
     spec = {**ROOMY, **spec}
-    options = DncOptions(DncSpec(line=line, **spec), tcp_port=0, rfc2217_port=None, pty=pty)
+    options = DncOptions(
+        DncSpec(line=line, **spec), tcp_port=0, rfc2217_port=None, pty=pty, device_server=device_server,
+        override=override,
+    )  # fmt: skip
     async with Simulator(
         opcua_port=free_port(), ftp_port=free_port(), speed=speed, store=tmp_path / "sim", dnc=options
     ) as sim:
@@ -65,8 +90,75 @@ def face(sim: Simulator) -> DncFace:
     return sim.dnc
 
 
-def settings(where: str, *, baud: float = SIM_BAUD * SPEED, **more: Any) -> ControllerSerial:
-    return ControllerSerial.model_validate({"type": "serial", "where": where, "baud": int(baud), **more})
+def settings(
+    where: str,
+    *,
+    baud: float = SIM_BAUD * SPEED,
+    device_server: DeviceServer = DeviceServer.TRANSPARENT,
+    **more: Any,
+) -> ControllerSerial:
+    """A serial line's settings: `more` over what a user sets for a socket:// line through `device_server`."""
+    kind = AS_A_USER[device_server] if where.startswith("socket://") else {}
+    return ControllerSerial.model_validate(
+        {"type": "serial", "where": where, "baud": int(baud), **kind, **more}
+    )
+
+
+def user_mapping(
+    where: str,
+    device_server: DeviceServer,
+    *,
+    baud: int,
+    mode: str = "drip",
+    punch: dict[str, Any] | None = None,
+    **controller: Any,
+) -> str:
+    """A serial machine's mapping as a user writes it from the README for a line through `device_server`
+    (`software_parity: true` only for a transparent port): `controller` adds keys (buffer, ...)."""
+    serial = {"type": "serial", "where": where, "baud": baud, "mode": mode}
+    serial |= AS_A_USER[device_server] | controller
+    jobs: dict[str, Any] = {"controller": serial, "validation": {"dialect": "laser-sim"}, "max_attempts": 1}
+    if punch is not None:
+        jobs["punch"] = punch
+    return yaml.safe_dump(
+        {
+            "machine": "lathe",
+            "driver": {
+                "endpoint": f"opc.tcp://127.0.0.1:{free_port()}",
+                "reconnect": {"initial": 0.2, "max": 1},
+            },
+            "variables": [
+                {"path": "Machine/State", "source": "ns=2;s=::AsGlobalPV:gMachine.State", "type": "Int16"}
+            ],
+            "jobs": jobs,
+        },
+        sort_keys=False,
+    )
+
+
+def paced_program(size: int, *, factor: float, rate: float, speed: float, feed: int = 600) -> bytes:
+    """A drip program of about `size` bytes that a machine cutting `factor` times faster than the gateway's
+    run-time estimate (a feed override of 100 * factor %) consumes at `rate` characters per real second
+    when the simulator runs at `speed`: feed moves of equal length and size back and forth along X, each
+    estimated (gateway/codecs/dnc/runtime.py, length / F) at `block * factor * speed / rate` seconds."""
+    if feed * factor > RAPID:
+        raise ValueError(f"F{feed} at {factor:g}x would be capped at the simulator's rapid, {RAPID:g} mm/min")
+    block = len(f"G1 X{0.0:08.3f} Y20 F{feed}\n")
+    step = block * factor * speed / rate * feed / 60.0  # mm
+    if step > 2000:
+        raise ValueError(f"{step:.0f} mm moves do not fit the table: a lower feed")
+    head = f"%\nO0042 (PACED {factor:g}X)\nG21 G90\nG0 X100 Y20\n".encode()
+    out, x, sign = [head], 100.0, 1.0
+    length = len(head)
+    while length < size:
+        if not 50.0 <= x + sign * step <= 2900.0:
+            sign = -sign
+        x += sign * step
+        line = f"G1 X{x:08.3f} Y20 F{feed}\n".encode()
+        out.append(line)
+        length += len(line)
+    out.append(b"M30\n%\n")
+    return b"".join(out)
 
 
 def program_file(tmp_path: Path, data: bytes, name: str = "part.nc") -> Program:

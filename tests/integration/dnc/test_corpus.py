@@ -11,6 +11,7 @@ import pytest
 import yaml
 
 from gateway.errors import DeliveryError
+from simulator.dnc import DeviceServer
 from tests.integration.dnc.rig import Progresses, drip_program, program_file, transport
 
 CORPUS = Path(__file__).resolve().parents[2] / "corpus" / "dnc" / "controller.yaml"
@@ -68,7 +69,10 @@ async def test_a_misbehaving_controller_gets_a_clear_failure(case: dict[str, Any
     port = server.sockets[0].getsockname()[1]
     expect = case["expect"]
     try:
-        line = transport(f"socket://127.0.0.1:{port}", tmp_path, baud=9600, **case.get("settings", {}))
+        kind = DeviceServer(case.get("device_server", "transparent"))
+        line = transport(
+            f"socket://127.0.0.1:{port}", tmp_path, baud=9600, device_server=kind, **case.get("settings", {})
+        )
         with pytest.raises(DeliveryError) as failed:
             await line.deliver(program_file(tmp_path, drip_program(100)), Progresses())
     finally:

@@ -22,6 +22,7 @@ from gateway.jobs.dnc.fleet import DripFleet
 from simulator.dnc.controller import DncSpec
 from simulator.dnc.face import DncFace
 from simulator.dnc.links import Link
+from simulator.dnc.uart import DeviceServer
 from simulator.machine import Machine
 from simulator.store import MemoryStore
 from tests.integration.dnc.rig import (
@@ -54,7 +55,14 @@ class CountingFace(DncFace):
 async def controllers(count: int) -> AsyncIterator[list[CountingFace]]:
     spec = DncSpec(line=LineSettings(baud=SIM_BAUD), mode=Mode.DRIP, **ROOMY)
     faces = [
-        CountingFace(spec, Machine(MemoryStore()), MemoryStore(), tcp_port=0, speed=SPEED)
+        CountingFace(
+            spec,
+            Machine(MemoryStore()),
+            MemoryStore(),
+            tcp_port=0,
+            speed=SPEED,
+            device_server=DeviceServer.TRANSPARENT,  # as the rig's: `settings` sets software_parity
+        )
         for _ in range(count)
     ]
     async with contextlib.AsyncExitStack() as stack:

@@ -48,6 +48,7 @@ jobs:
     type: serial
     where: "{where}"
     baud: {int(SIM_BAUD * SPEED)}
+    software_parity: true  # the rig's device server is a transparent port
     mode: {mode}
     buffer: {GATEWAY_BUFFER}{alarm}
   validation: {{dialect: laser-sim}}

@@ -28,7 +28,8 @@ driver: {{endpoint: "opc.tcp://127.0.0.1:{free_port()}", reconnect: {{initial: 0
 variables:
   - {{path: Machine/State, source: "ns=2;s=::AsGlobalPV:gMachine.State", type: Int16}}
 jobs:
-  controller: {{type: serial, where: "{where}", baud: {int(SIM_BAUD * SPEED)}, mode: load}}
+  controller: {{type: serial, where: "{where}", baud: {int(SIM_BAUD * SPEED)}, mode: load,
+                software_parity: true}}  # the rig's device server is a transparent port
   validation: {{dialect: laser-sim}}
   punch:
     validate: true

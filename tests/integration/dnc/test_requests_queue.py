@@ -36,7 +36,7 @@ variables:
   - {{path: Machine/State, source: "ns=2;s=::AsGlobalPV:gMachine.State", type: Int16}}
 jobs:
   controller: {{type: serial, where: "{where}", baud: {int(SIM_BAUD * SPEED)}, mode: {mode},
-                buffer: {GATEWAY_BUFFER}}}
+                buffer: {GATEWAY_BUFFER}, software_parity: true}}  # the rig's transparent port
   validation: {{dialect: laser-sim}}
   punch:
     requests: {requests}

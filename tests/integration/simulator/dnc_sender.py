@@ -39,6 +39,7 @@ class Sent:
     dc3_seen: int
     dc1_seen: int
     closed_early: bool
+    heard: bytes = b""  # every byte the port read from the controller, as it came
 
 
 def send(
@@ -76,11 +77,14 @@ def _send(
     tokens = float(lead)
     last = time.monotonic()
     dc3 = dc1 = 0
+    heard = bytearray()
     while not sender.done:
         now = time.monotonic()
         if now > deadline:
             raise AssertionError(f"sending took over {timeout}s ({sender.offset} of {sender.total} bytes)")
-        for event in sender.feed(port.read(4096)):
+        data = port.read(4096)
+        heard += data
+        for event in sender.feed(data):
             name = type(event).__name__
             dc3 += name == "Pause"
             dc1 += name == "Resume"
@@ -89,7 +93,7 @@ def _send(
         budget = int(tokens)
         if stop_after is not None:
             if sender.offset >= stop_after:
-                return Sent(sender, dc3, dc1, closed_early=True)
+                return Sent(sender, dc3, dc1, closed_early=True, heard=bytes(heard))
             budget = min(budget, stop_after - sender.offset)
         if ignore_dc3 and not sender.waiting_for_dc1:
             chunk = wire[sender.offset : sender.offset + budget]
@@ -105,7 +109,7 @@ def _send(
         else:
             time.sleep(0.0005)
     port.flush()
-    return Sent(sender, dc3, dc1, closed_early=False)
+    return Sent(sender, dc3, dc1, closed_early=False, heard=bytes(heard))
 
 
 def receive(

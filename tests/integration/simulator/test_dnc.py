@@ -27,7 +27,7 @@ from gateway.codecs.dnc import (
     parse_request,
 )
 from simulator.alarms import DNC_BUFFER_OVERFLOW, DNC_COMMUNICATION, DNC_LINE_DROPPED
-from simulator.dnc import DncOptions, DncSpec, Mode
+from simulator.dnc import DeviceServer, DncOptions, DncSpec, Mode
 from simulator.machine import MachineState
 from simulator.runner import Simulator
 from tests.integration.simulator.dnc_sender import receive, send
@@ -35,7 +35,7 @@ from tests.waiting import free_port, wait_until
 
 SPEED = 4.0
 LINE = LineSettings(baud=9600)  # 7E2
-SOFT = dataclasses.replace(LINE, software_parity=True)  # raw TCP and ptys carry the parity bit as bit 7
+SOFT = dataclasses.replace(LINE, software_parity=True)  # a transparent port and a pty: parity as bit 7
 RATE = LINE.bytes_per_second * SPEED  # characters per real second
 ROOMY = {"buffer_size": 1024, "high_water": 256, "low_water": 64}  # room for any scheduling hiccup
 D = "ns=2;s=::DNC:"
@@ -53,8 +53,18 @@ def drip_program(blocks: int, step: float, feed: int) -> bytes:
 
 
 @asynccontextmanager
-async def simulator(tmp_path: Path, **spec: object) -> AsyncIterator[Simulator]:
-    options = DncOptions(DncSpec(line=LINE, **spec), tcp_port=0, rfc2217_port=0, pty=True)  # type: ignore[arg-type]
+async def simulator(
+    tmp_path: Path, device_server: DeviceServer = DeviceServer.TRANSPARENT, **spec: object
+) -> AsyncIterator[Simulator]:
+    """The tests below send with software parity (SOFT) on raw TCP: a transparent port, said so; the 7-bit
+    device server has its own tests (test_dnc_device_servers.py)."""
+    options = DncOptions(
+        DncSpec(line=LINE, **spec),
+        tcp_port=0,
+        rfc2217_port=0,
+        pty=True,
+        device_server=device_server,  # type: ignore[arg-type]
+    )
     async with Simulator(
         opcua_port=free_port(), ftp_port=free_port(), speed=SPEED, store=tmp_path, dnc=options
     ) as sim:
@@ -253,5 +263,5 @@ async def test_cnc_simulator_serves_dnc_on_the_ports_it_is_given(tmp_path: Path)
             proc.kill()
             await proc.wait()
     assert proc.returncode == 0 and "Traceback" not in err.decode()
-    assert f"socket://127.0.0.1:{dnc}" in out.decode()
+    assert f"socket://127.0.0.1:{dnc}" in out.decode() and "a 7-bit device server" in out.decode()
     assert "rfc2217://" not in out.decode()  # the test suite turns the default 4002 off

@@ -13,7 +13,7 @@ from simulator.machine import Machine, MachineState
 from simulator.store import MemoryStore
 
 LINE = LineSettings(baud=9600)  # 7E2: 872.7 characters per second
-SOFT = dataclasses.replace(LINE, software_parity=True)  # what an honest sender uses on raw TCP
+SOFT = dataclasses.replace(LINE, software_parity=True)  # what an honest sender uses on a transparent port
 PROGRAM = b"%\nO4711 (PART)\nG21 G90\nG0 X10 Y10\nG1 X20 F600\nM30\n%\n"
 LONG = b"%\nO4711 (PART)\n" + b"".join(b"G1 X%d F600\n" % i for i in range(20)) + b"M30\n%\n"  # 263 bytes
 
@@ -22,7 +22,7 @@ def controller(mode: Mode = Mode.LOAD, **spec: object) -> tuple[DncController, M
     store = MemoryStore({"demo.nc": "%\nO12 (DEMO)\nG0 X1\nM30\n%\n"})
     machine = Machine(store)
     c = DncController(DncSpec(line=LINE, mode=mode, **spec), machine, store)  # type: ignore[arg-type]
-    assert c.connect(Coupling(LINE, "tcp"), "test", 0.0)
+    assert c.connect(Coupling(LINE, "transparent"), "test", 0.0)
     return c, machine, store
 
 
@@ -49,7 +49,7 @@ def test_connect_arms_a_read_with_dc1_and_a_second_link_is_refused() -> None:
     c, _, _ = controller()
     assert c.stage is Stage.READING
     assert c.take_output() == bytes([DC1])
-    assert not c.connect(Coupling(LINE, "tcp"), "other", 0.0)
+    assert not c.connect(Coupling(LINE, "transparent"), "other", 0.0)
 
 
 def test_load_stores_the_program_under_its_o_number_at_line_speed() -> None:
@@ -137,6 +137,18 @@ def test_a_complete_load_then_a_closed_connection_is_no_alarm() -> None:
     assert store.exists("O4711") and not machine.alarms and c.stage is Stage.OFFLINE
 
 
+def test_a_slow_memory_takes_a_whole_program_from_its_buffer_after_the_line_closed() -> None:
+    c, machine, store = controller(load_rate=100.0)  # 54 bytes take half a second to store
+    c.take_output()
+    c.feed(wire(), 0.0)
+    c.disconnect(0.0)
+    run_line(c, 0.1)  # the line carried it all into the 256-byte buffer, then closed
+    assert not c.connected and not store.exists("O4711")
+    run_line(c, 1.0, start=0.1)
+    assert store.exists("O4711") and not machine.alarms and c.stats.line_drops == 0
+    assert c.stage is Stage.OFFLINE and c.buffer_level == 0
+
+
 def test_drip_runs_blocks_as_they_arrive_and_counts_starvation() -> None:
     program = b"%\nO7\nG21 G90\n" + b"".join(b"G1 X%d F60000\n" % (i + 1) for i in range(30)) + b"M30\n%\n"
     c, machine, _ = controller(Mode.DRIP, buffer_size=64, high_water=48, low_water=16)
@@ -205,11 +217,58 @@ def test_a_wrong_baud_rate_gives_garbage_and_framing_errors() -> None:
 
 
 def test_couplings_emulate_parity_on_transparent_links_and_resample_on_rfc2217() -> None:
-    raw = Coupling(LINE, "tcp")
+    raw = Coupling(LINE, "transparent")
     assert raw.to_controller(SOFT.encode(b"G0\n")) == (b"G0\n", 0)
-    assert raw.to_sender(bytes([DC3])) == bytes([0x93])  # DC3 with its even parity bit
+    assert raw.to_sender(bytes([DC3])) == (bytes([0x93]), 0)  # DC3 with its even parity bit
     peer = Frame(9600, 8, "N", 1)
     rfc = Coupling(LINE, "rfc2217", lambda: peer)
     chars, errors = rfc.to_controller(b"G1\n")
     assert chars == b"G1\n" and errors == 1  # same rate: the data arrives; "1" (0x31) has odd weight
     assert Coupling(LINE, "rfc2217", lambda: Frame.of(LINE)).to_controller(b"G1\n") == (b"G1\n", 0)
+
+
+def test_a_7bit_device_server_hands_dc1_and_dc3_on_as_0x11_and_0x13() -> None:
+    seven = Coupling(LINE, "7bit")
+    assert seven.to_sender(bytes([DC1, DC3])) == (b"\x11\x13", 0)  # its UART took the parity bit off
+
+
+def test_a_7bit_device_server_sends_the_low_7_bits_whatever_bit_7_was() -> None:
+    seven = Coupling(LINE, "7bit")
+    text = b"G01 X10 Y20\n"
+    assert seven.to_controller(SOFT.encode(text)) == (text, 0)  # software parity: bit 7 dropped, no error
+    assert seven.to_controller(text) == (text, 0)  # plain 7-bit characters: the UART adds the parity bit
+    assert seven.to_controller(bytes(c | 0x80 for c in text)) == (text, 0)  # bit 7 set everywhere
+
+
+def test_a_transparent_port_without_software_parity_gives_the_controller_parity_errors() -> None:
+    raw = Coupling(LINE, "transparent")
+    text = b"G01 X10 Y20\n"
+    chars, errors = raw.to_controller(text)
+    assert chars == text and errors == sum(1 for c in text if c.bit_count() % 2)  # odd weight: bit 7 wrong
+    assert raw.to_sender(bytes([DC3])) == (b"\x93", 0)  # and its DC3 comes with the parity bit as bit 7
+
+
+def test_a_7bit_device_server_set_to_another_parity_hands_on_what_it_read_and_counts_the_errors() -> None:
+    odd = Frame(9600, 7, "O", 2)  # the device server's port set 7O2, the controller's line 7E2
+    seven = Coupling(LINE, "7bit", uart=odd)
+    out, errors = seven.to_sender(bytes([DC1, DC3, ord("%")]))
+    assert out == b"\x11\x13%"  # the 7 data bits all the same, bit 7 = 0
+    assert errors == 3  # every character had the "wrong" parity bit for 7O2
+    chars, bad = seven.to_controller(b"G1\n")
+    assert chars == b"G1\n" and bad == 3  # and the controller sees the odd parity bits as errors
+
+
+def test_a_7bit_device_server_counts_what_it_passes_on_with_an_error() -> None:
+    c, _, _ = controller()
+    c.disconnect(0.0)
+    c.advance(0.0)
+    assert c.connect(Coupling(LINE, "7bit", uart=Frame(9600, 7, "O", 2)), "test", 0.1)
+    assert c.take_output() == b"\x11"  # the DC1 of the new read
+    assert c.stats.device_errors == 1
+
+
+def test_unknown_link_kinds_and_a_uart_on_another_kind_are_refused() -> None:
+    with pytest.raises(ValueError, match="unknown link kind 'tcp'"):
+        Coupling(LINE, "tcp")
+    with pytest.raises(ValueError, match="uart"):
+        Coupling(LINE, "transparent", uart=Frame(9600, 7, "O", 2))

@@ -5,8 +5,10 @@ from __future__ import annotations
 import pytest
 
 from simulator import cli
-from simulator.dnc import Mode
+from simulator.dnc import DeviceServer, DncFace, Mode
 from simulator.dnc import options as dnc_options
+from simulator.machine import Machine
+from simulator.store import MemoryStore
 
 
 def parse(*argv: str) -> object:
@@ -58,3 +60,37 @@ def test_a_port_that_is_not_a_number_is_a_usage_error(capsys: pytest.CaptureFixt
     with pytest.raises(SystemExit):
         cli.build_parser().parse_args(["--dnc-port", "modem"])
     assert "not a port number" in capsys.readouterr().err
+
+
+def test_the_raw_tcp_port_is_a_7bit_device_server_unless_told_otherwise() -> None:
+    options = parse("--dnc-port", "0")
+    assert options is not None and options.device_server is DeviceServer.SEVEN_BIT  # type: ignore[attr-defined]
+    assert options.override is None  # type: ignore[attr-defined]
+    options = parse("--dnc-port", "0", "--dnc-device-server", "transparent", "--dnc-override", "800")
+    assert options is not None and options.device_server is DeviceServer.TRANSPARENT  # type: ignore[attr-defined]
+    assert options.override == 800  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("override", ["0", "1001", "-5"])
+def test_an_override_outside_1_to_1000_is_refused(override: str) -> None:
+    with pytest.raises(ValueError, match=f"feed override {override} % is outside 1..1000"):
+        parse("--dnc-port", "0", "--dnc-override", override)
+
+
+def test_an_unknown_device_server_kind_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        cli.build_parser().parse_args(["--dnc-device-server", "8bit"])
+    assert "invalid choice: '8bit'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("kind", "words"), [("7bit", "no software_parity"), ("transparent", "software_parity: true")]
+)
+def test_the_banner_says_the_kind_and_the_override(kind: str, words: str) -> None:
+    options = parse("--dnc-port", "0", "--dnc-device-server", kind, "--dnc-override", "150")
+    assert options is not None
+    machine = Machine(MemoryStore())
+    face = DncFace(options.spec, machine, MemoryStore(), tcp_port=0, device_server=options.device_server,  # type: ignore[attr-defined]
+                   override=options.override)  # type: ignore[attr-defined]  # fmt: skip
+    text = "\n".join(dnc_options.dnc_banner(face))
+    assert words in text and "feed override 150 %" in text and machine.override == 150

@@ -6,7 +6,7 @@ import pytest
 
 from gateway.errors import InvalidArgument, InvalidState, OutOfRange
 from simulator.alarms import PROGRAM_ERROR, PROGRAM_NOT_FOUND, SOFT_LIMIT
-from simulator.machine import AMBIENT, GAS_ON, Machine, MachineState, Mode
+from simulator.machine import AMBIENT, GAS_ON, OVERRIDE_LIMIT, RAPID, Machine, MachineState, Mode
 from simulator.store import MemoryStore
 
 Idle, Running, Paused, Alarm = (
@@ -140,6 +140,23 @@ def test_override_scales_feed_but_not_rapids(override: int, seconds: float) -> N
     assert m.feed_rate == pytest.approx(600 * override / 100)
     run_to_end(m, dt=0.01)
     assert m.program.run_time == pytest.approx(rapid + seconds)
+
+
+def test_an_override_beyond_the_knob_cuts_up_to_the_rapid() -> None:
+    m = machine_with("G1 X100 F600\nM30\n")  # 10 s at F600
+    with pytest.raises(OutOfRange, match=r"outside 0\.\.200"):
+        m.set_override(800)  # the panel's knob
+    m.set_override(800, limit=OVERRIDE_LIMIT)  # cnc-simulator --dnc-override 800
+    m.start()
+    run_to_end(m, dt=0.01)
+    assert m.program.run_time == pytest.approx(10.0 / 8)
+    fast = machine_with("G1 X100 F6000\nM30\n")  # 1 s at F6000; 8x would be 48,000 mm/min
+    fast.set_override(800, limit=OVERRIDE_LIMIT)
+    fast.start()
+    fast.step(0.05)
+    assert fast.feed_rate == pytest.approx(RAPID)  # capped at the rapid, 30,000 mm/min
+    with pytest.raises(OutOfRange, match=r"outside 0\.\.1000"):
+        m.set_override(1001, limit=OVERRIDE_LIMIT)
 
 
 def test_override_zero_holds_the_path_while_running() -> None:
