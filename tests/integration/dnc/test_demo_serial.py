@@ -30,7 +30,7 @@ async def test_the_demos_serial_store_holds_one_punched_program_from_the_start(t
     base = load([find_mapping(None, "laser-dnc.yaml")], environ={})
     mapping = point_at(base.machines[0], opcua_port=args.sim_dnc_opcua_port, dnc_port=args.sim_dnc_port)
     assert mapping.jobs is not None and isinstance(mapping.jobs.controller, ControllerSerial)
-    assert mapping.jobs.controller.software_parity is None  # the mapping leaves it at its default
+    assert mapping.jobs.controller.software_parity is False  # the mapping leaves it at its default (off)
     state = tmp_path / "state"
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{free_port()}/cnc-gateway"),
