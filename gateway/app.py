@@ -46,7 +46,9 @@ def configure_access(config: Config, tree: VariableTree) -> None:
         gw.roles,
         enabled=access.checks_roles(),  # with or without users: anonymous OPC UA clients get their role
         default_write_role=access.default_write_role,
-        origin_roles={"jobs": door(access.jobs_role), "copydata": door(access.copydata_role)},
+        # COPYDATA has no login and no door role of its own: only the one the gateway file names (the loader
+        # refuses a target that accepts writes without it), never the highest for want of users.
+        origin_roles={"jobs": door(access.jobs_role), "copydata": access.copydata_role},
         mqtt_roles={
             m.machine: door(m.mqtt.writer_role if m.mqtt and m.mqtt.writer_role else access.mqtt_writer_role)
             for m in config.machines
@@ -66,9 +68,10 @@ def configure_access(config: Config, tree: VariableTree) -> None:
     else:
         log.info(
             "no users: OPC UA clients are anonymous, with role %s (access.anonymous); writes and commands "
-            "that mappings open to MQTT or COPYDATA act as %s",
+            "that mappings open to MQTT act as %s; COPYDATA writes as %s (access.copydata_role)",
             access.anonymous,
             gw.roles[-1],
+            access.copydata_role or "nobody: refused",
         )
 
 

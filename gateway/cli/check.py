@@ -49,7 +49,8 @@ def print_config(config: Config, out: TextIO) -> None:
     for mapping in config.machines:
         print_tree(mapping, out, default_role)
         print_commands(mapping, out)
-        print_copydata(mapping, out, (gw.access.copydata_role or "none: refused") if enabled else None)
+        copydata_role = gw.access.copydata_role or "none: refused"  # never implied, users or not
+        print_copydata(mapping, out, copydata_role if gw.access.checks_roles() else None)
     print(
         f"OK: {len(config.machines)} machine(s), {sum(len(m.variables) for m in config.machines)} variables",
         file=out,
@@ -65,7 +66,8 @@ def print_config(config: Config, out: TextIO) -> None:
     else:
         print(
             f"no users: OPC UA clients are anonymous, with role {gw.access.anonymous} (access.anonymous); "
-            f"writes and commands the mappings open to MQTT or COPYDATA act as {gw.roles[-1]}",
+            f"writes and commands the mappings open to MQTT act as {gw.roles[-1]}; COPYDATA writes as "
+            f"{gw.access.copydata_role or 'nobody: refused'} (access.copydata_role)",
             file=out,
         )
 
@@ -157,7 +159,8 @@ def _label(cond: Condition, value: Any) -> str:
 def print_copydata(mapping: MachineMapping, out: TextIO, writer: str | None = None) -> None:
     """One line per COPYDATA target: where it sends, the variable ids it gets (the tree shows their names).
 
-    `writer` is the role writes from a target act with, while access control is on.
+    `writer` is the role writes from a target act with (the gateway file's access.copydata_role), while
+    roles are checked.
     """
     if mapping.copydata is None:
         return

@@ -217,12 +217,17 @@ def demo_access() -> dict[str, Any]:
 
 
 def demo_copydata(mapping: MachineMapping, args: argparse.Namespace) -> MachineMapping:
-    """The COPYDATA tcp-server target listens on the port the demo was given."""
+    """The COPYDATA tcp-server target listens on the port the demo was given. The shipped mapping's also
+    takes writes back (its `accept_writes` is off, for a mapping run on its own): the demo names their
+    role (demo_access: operator), and the target listens where the mapping binds it (127.0.0.1 unless
+    LASER_SIM_COPYDATA_BIND says otherwise); a mapping of one's own (--mapping) keeps its setting."""
     if mapping.copydata is None:
         return mapping
+    update: dict[str, Any] = {"port": args.copydata_port}
+    if args.mapping is None:
+        update["accept_writes"] = True
     targets = [
-        t.model_copy(update={"port": args.copydata_port}) if t.transport == "tcp-server" else t
-        for t in mapping.copydata.targets
+        t.model_copy(update=update) if t.transport == "tcp-server" else t for t in mapping.copydata.targets
     ]
     return mapping.model_copy(update={"copydata": mapping.copydata.model_copy(update={"targets": targets})})
 

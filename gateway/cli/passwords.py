@@ -6,6 +6,7 @@ import argparse
 import getpass
 import sys
 
+from gateway.auth.known_passwords import is_known
 from gateway.auth.passwords import hash_password
 
 
@@ -29,6 +30,13 @@ def handle(args: argparse.Namespace) -> int:
             return 1
     if not password:
         print("error: empty password", file=sys.stderr)
+        return 1
+    if is_known(password):
+        print(
+            f"error: {password!r} is published in cnc-gateway's docs and examples; the gateway refuses it at "
+            "start-up: choose another",
+            file=sys.stderr,
+        )
         return 1
     print(hash_password(password))
     return 0

@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from gateway.auth.known_passwords import is_known, known_passwords_of
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.alarms import SOURCE_TAGS
@@ -258,6 +259,12 @@ def load_mapping(
 ) -> MachineMapping:
     """One mapping file. `roles` are the gateway file's (default: viewer, operator, engineer, admin);
     every role the mapping names must be one of them."""
+    return _read_mapping(path, environ, roles)[0]
+
+
+def _read_mapping(
+    path: Path, environ: Mapping[str, str] | None, roles: Sequence[str] | None
+) -> tuple[MachineMapping, Located]:
     located = read_yaml(path, environ)
     if not isinstance(located.data, dict):
         raise ConfigError(
@@ -275,7 +282,7 @@ def load_mapping(
         issues.sort(key=lambda i: (i.line or 0, i.key))
         raise ConfigError(issues)
     assert mapping is not None
-    return mapping
+    return mapping, located
 
 
 def _role_issues(located: Located, roles: Sequence[str]) -> list[ConfigIssue]:
@@ -360,6 +367,7 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
         raise ConfigError([ConfigIssue("<command line>", None, "", "no configuration file given")])
     issues: list[ConfigIssue] = []
     gateway = GatewayConfig()
+    gateway_file: Path | None = None
     base_dir = Path.cwd()
     mapping_files: list[Path] = []
     for path in paths:
@@ -377,6 +385,10 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
             except ConfigError as exc:
                 raise ConfigError(exc.issues) from None
             base_dir = path.parent.resolve()
+            gateway_file = path
+            issues.extend(
+                _known_password_issues(located, gateway, os.environ if environ is None else environ)
+            )
             if not gateway.machines:
                 issues.append(
                     ConfigIssue(str(path), located.line(("machines",)), "machines", "lists no mapping files")
@@ -388,10 +400,11 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     seen: dict[str, Path] = {}
     for file in mapping_files:
         try:
-            mapping = load_mapping(file, environ, gateway.roles)
+            mapping, located = _read_mapping(file, environ, gateway.roles)
         except ConfigError as exc:
             issues.extend(exc.issues)
             continue
+        issues.extend(_copydata_role_issues(located, mapping, gateway.access.copydata_role, gateway_file))
         if mapping.machine in seen:
             issues.append(
                 ConfigIssue(
@@ -408,6 +421,67 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     if issues:
         raise ConfigError(issues)
     return Config(gateway, tuple(machines), base_dir, tuple(mapping_files))
+
+
+def _known_password_issues(
+    located: Located, gateway: GatewayConfig, env: Mapping[str, str]
+) -> list[ConfigIssue]:
+    """Logins whose password is one cnc-gateway publishes (gateway/auth/known_passwords.py): refused, as
+    good as none. Hashes are checked by scrypt; `password_env` by the value it names, if it is set."""
+    hashes: dict[Loc, str] = {
+        ("users", i, "password_hash"): u.password_hash for i, u in enumerate(gateway.users)
+    }
+    plain: dict[Loc, tuple[str, str]] = {}
+    for index, account in enumerate(gateway.inbox.accounts):
+        if account.password_hash is not None:
+            hashes[("inbox", "accounts", index, "password_hash")] = account.password_hash
+        if account.password_env is not None and account.password_env in env:
+            plain[("inbox", "accounts", index, "password_env")] = (
+                account.password_env,
+                env[account.password_env],
+            )
+    found = known_passwords_of(hashes.values())
+    problems = {loc: f"this is the hash of {found[h]!r}" for loc, h in hashes.items() if h in found}
+    for loc, (name, value) in plain.items():
+        if is_known(value):
+            problems[loc] = f"environment variable {name} holds {value!r}"
+    return [
+        ConfigIssue(
+            located.file,
+            located.line(loc),
+            format_loc(loc),
+            f"{problem}, a password published in cnc-gateway's docs and examples, as good as none: choose "
+            "another (a hash from `cnc-gateway hash-password`, or a password from the environment)",
+        )
+        for loc, problem in sorted(problems.items(), key=lambda item: located.line(item[0]) or 0)
+    ]
+
+
+def _copydata_role_issues(
+    located: Located, mapping: MachineMapping, role: str | None, gateway_file: Path | None
+) -> list[ConfigIssue]:
+    """COPYDATA has no login: whoever reaches a target that accepts writes writes with the role the
+    gateway file gives them (access.copydata_role). Without one the mapping is refused, never run with an
+    implied role (before, the highest, admin, while no users were configured)."""
+    if role is not None or mapping.copydata is None:
+        return []
+    where = (
+        f"in the gateway file {gateway_file}"
+        if gateway_file is not None
+        else "in a gateway file (this mapping runs on its own, without one)"
+    )
+    issues = []
+    for index, target in enumerate(mapping.copydata.targets):
+        if not target.accept_writes:
+            continue
+        loc: Loc = ("copydata", "targets", index, "accept_writes")
+        message = (
+            f"target {target.name!r} accepts writes, but COPYDATA has no login: name the role its writes "
+            f"act with, access.copydata_role {where} (every frame sent back through {target.describe()} "
+            "writes with it), or set accept_writes: false"
+        )
+        issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
+    return issues
 
 
 def _shared_links(machines: Sequence[MachineMapping], files: Mapping[str, Path]) -> list[ConfigIssue]:

@@ -12,6 +12,7 @@ import re
 from typing import Annotated, Any, Literal
 
 from pydantic import (
+    AfterValidator,
     BeforeValidator,
     Field,
     SecretStr,
@@ -26,6 +27,8 @@ QoS = Literal[0, 1, 2]
 PayloadMode = Literal["json", "raw"]
 
 _TOPIC_FORBIDDEN = re.compile(r"[+#\x00]")
+MIB = 1024 * 1024
+MAX_PACKET_SIZE = 268_435_455  # the largest packet MQTT can encode (a 4-byte remaining length)
 
 
 def check_topic_part(text: str, what: str) -> str:
@@ -41,6 +44,26 @@ def check_topic_part(text: str, what: str) -> str:
     if len(text.encode("utf-8")) > 32_000:
         raise ValueError(f"{what} is too long")
     return text
+
+
+def check_topic_filter(text: str, what: str) -> str:
+    """A topic filter: levels joined by '/', `+` a whole level, `#` the whole last level; no NUL."""
+    if not text:
+        raise ValueError(f"{what} must not be empty")
+    if "\x00" in text or len(text.encode("utf-8")) > 32_000:
+        raise ValueError(f"{what} {text!r} must be shorter than 32,000 bytes, without NUL characters")
+    levels = text.split("/")
+    for index, level in enumerate(levels):
+        if ("+" in level and level != "+") or ("#" in level and (level != "#" or index != len(levels) - 1)):
+            raise ValueError(
+                f"{what} {text!r}: '+' must be a whole level and '#' the whole last level (MQTT topic filter)"
+            )
+    if text.startswith("$"):
+        raise ValueError(f"{what} {text!r} must not start with '$' (brokers reserve such topics)")
+    return text
+
+
+TopicFilter = Annotated[str, AfterValidator(lambda text: check_topic_filter(text, "topic filter"))]
 
 
 def _protocol(value: Any) -> Any:
@@ -128,6 +151,22 @@ class MqttConfig(Strict):
         default=200, ge=1, le=65000, description="QoS 1/2 messages awaiting the broker's ack"
     )
     max_set_payload: int = Field(default=65536, ge=16, description="Largest accepted /set payload, in bytes")
+    max_packet_size: int = Field(
+        default=MIB,
+        ge=1024,
+        le=MAX_PACKET_SIZE,
+        description="Largest MQTT packet the gateway takes from the broker, in bytes. MQTT 5: sent as the "
+        "CONNECT's Maximum Packet Size, so the broker drops a larger message for the gateway instead of "
+        "sending it. MQTT 3.1.1 has no such field: a larger packet ends the connection as soon as its header "
+        "arrives (set the broker's own limit: mosquitto's message_size_limit / max_packet_size)",
+    )
+    response_topics: list[TopicFilter] = Field(
+        default_factory=list,
+        description="MQTT 5 response topics (topic filters, + and # allowed) that /set and command "
+        "requests may have their answers published to, besides the gateway's own result topics under "
+        "`prefix`. A request asking for any other is refused (BadRequestNotAllowed), answered on its own "
+        "result topic, and nothing is published where it asked",
+    )
     max_pending_writes: int = Field(
         default=64, ge=1, le=100_000, description="Queued /set writes per machine"
     )
@@ -145,6 +184,16 @@ class MqttConfig(Strict):
         if _TOPIC_FORBIDDEN.search(value) or any(ch.isspace() for ch in value):
             raise ValueError(f"client_id {value!r} must not contain spaces, '+', '#' or NUL")
         return value
+
+    @model_validator(mode="after")
+    def _room_for_requests(self) -> MqttConfig:
+        """A request the payload check would answer (too large) must fit in a packet the gateway takes."""
+        if self.max_packet_size < self.max_set_payload + 1024:
+            raise ValueError(
+                f"max_packet_size ({self.max_packet_size}) must leave room for max_set_payload "
+                f"({self.max_set_payload}) and a topic: at least {self.max_set_payload + 1024}"
+            )
+        return self
 
 
 class MachineMqtt(Strict):

@@ -20,8 +20,9 @@ from pydantic import BeforeValidator, Field, SecretStr, field_validator
 
 from gateway.codecs.sparkplug.errors import SparkplugError
 from gateway.codecs.sparkplug.topics import check_id
+from gateway.codecs.sparkplug.wire import MAX_PAYLOAD
 from gateway.config.base import Strict
-from gateway.config.mqtt import MqttConfig, MqttReconnect, MqttTls
+from gateway.config.mqtt import MAX_PACKET_SIZE, MIB, MqttConfig, MqttReconnect, MqttTls
 
 SUFFIX = "-sparkplug"  # appended to the mqtt: section's client id
 
@@ -121,6 +122,14 @@ class SparkplugConfig(Strict):
     buffer: SparkplugBuffer = SparkplugBuffer()
     max_pending_writes: int = Field(
         default=64, ge=1, le=100_000, description="DCMD writes (and commands) queued per machine"
+    )
+    max_packet_size: int = Field(
+        default=2 * MIB,
+        ge=MAX_PAYLOAD + 1024,
+        le=MAX_PACKET_SIZE,
+        description="Largest MQTT packet the edge node takes from its broker (NCMD, DCMD, STATE), in bytes; "
+        f"above the {MAX_PAYLOAD} bytes of payload it decodes, so that a payload a little over is refused "
+        "with its reason. As mqtt.max_packet_size: MQTT 5 tells the broker; MQTT 3.1.1 ends the connection",
     )
 
     @field_validator("group_id")

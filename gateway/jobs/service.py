@@ -321,9 +321,24 @@ class JobService:
                 tg.create_task(self._shell_commands(), name="jobs:dnc-control")
 
     async def _shell_commands(self) -> None:
-        """`cnc-gateway jobs pause|resume|abort MACHINE` (gateway/jobs/dnc/control.py), until cancelled."""
+        """`cnc-gateway jobs pause|resume|abort MACHINE` (gateway/jobs/dnc/control.py), until cancelled.
+        Nothing is taken from a control folder that is not the gateway's own; why is logged once."""
         state = self.config.state_dir
+        try:
+            await asyncio.to_thread(control.make_control_dir, state)
+        except OSError as exc:
+            log.warning("cannot make %s: %s", control.control_dir(state), exc.strerror or exc)
+        said: str | None = None
         while True:
+            problem = await asyncio.to_thread(control.folder_problem, state)
+            if problem != said:
+                if problem is not None:
+                    log.error("drip-feed commands from the shell (jobs pause|resume|abort) are refused: %s",
+                              problem)  # fmt: skip
+                else:
+                    log.info("drip-feed commands from the shell are taken again: %s is the gateway's own",
+                             control.control_dir(state))  # fmt: skip
+                said = problem
             for request in await asyncio.to_thread(control.take_requests, state):
                 reply = await self.shell_command(request)
                 try:

@@ -127,7 +127,8 @@ async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_
     assert "copydata 6" in override and "role" not in override  # no users: roles are not shown on variables
     assert lines[-1] == (
         "no users: OPC UA clients are anonymous, with role viewer (access.anonymous); "
-        "writes and commands the mappings open to MQTT or COPYDATA act as admin"
+        "writes and commands the mappings open to MQTT act as admin; COPYDATA writes as nobody: refused "
+        "(access.copydata_role)"
     )
     command = next(line for line in lines if line.strip().startswith("select-program"))
     assert command.split() == [
@@ -148,7 +149,7 @@ async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_
     ]
     nesting = next(line for line in lines if line.strip().startswith("nesting"))
     assert nesting.split()[1] == "tcp-server" and "ids 1-11, 14-16 (14 variables)" in nesting
-    assert "connected 100" in nesting and "accepts writes" in nesting
+    assert "connected 100" in nesting and "accepts writes" not in nesting  # on with a copydata_role only
 
 
 async def test_demo_runs_the_simulator_and_keeps_a_program_running(

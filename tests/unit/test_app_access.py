@@ -57,8 +57,15 @@ def test_without_users_roles_are_checked_and_the_mappings_own_doors_act_with_the
     access = tree.access
     assert access.enabled
     assert access.mqtt_role(MACHINE) == "admin"
-    assert access.role_of(WriteContext("copydata")) == "admin"
     assert access.role_of(WriteContext("jobs")) == "operator"  # access.jobs_role, as with users
+
+
+def test_copydata_writes_never_get_an_implied_role_only_the_one_the_gateway_file_names() -> None:
+    """Issue 23: without users, COPYDATA replies used to act as admin; now as access.copydata_role only."""
+    tree, _ = tree_for()
+    assert tree.access.role_of(WriteContext("copydata")) is None
+    named, _ = tree_for({"access": {"copydata_role": "operator"}})
+    assert named.access.role_of(WriteContext("copydata")) == "operator"
 
 
 def test_with_users_a_door_without_a_role_is_refused_and_access_off_checks_nothing() -> None:

@@ -29,12 +29,21 @@ How paho meets asyncio here:
   used: `take_back()` empties paho's unacknowledged messages when the
   connection drops, and the sink re-sends them from its own backlog, so that
   there is one place that knows what the broker has not confirmed.
+* **No packet larger than `max_packet_size`.** paho reads a whole packet into
+  memory before anything can look at it (with one `recv` of its full length),
+  so a 120 MB PUBLISH to a `/set` topic cost 120 MB and more before the payload
+  check refused it (two raised the gateway from 97 to 468 MB). With MQTT 5 the
+  CONNECT says the limit (Maximum Packet Size) and the broker drops a larger
+  message for us; with either version `_LimitedClient` ends the connection as
+  soon as a packet's fixed header announces more (MQTT 3.1.1 has no way to
+  tell the broker: its own limit must be set), and says so.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import socket
 import ssl
@@ -83,6 +92,24 @@ def _shared_success_acks() -> None:
     _packet.decode_puback = decode_puback
 
 
+class _LimitedClient(paho.Client):
+    """paho's client, refusing an incoming packet larger than `max_packet_size` once its fixed header says
+    so, before any of its body is read (paho would read it whole: one `recv` of its full length)."""
+
+    max_packet_size: int | None = None
+    oversized: int | None = None  # the size of the packet that ended the connection, until it is reported
+
+    def _sock_recv(self, bufsize: int) -> bytes:
+        packet = self._in_packet
+        limit = self.max_packet_size
+        if limit is not None and packet["have_remaining"]:
+            size = 1 + len(packet["remaining_count"]) + packet["remaining_length"]  # fixed header + the rest
+            if size > limit:
+                self.oversized = size
+                raise OSError(errno.EMSGSIZE, f"a packet of {size} bytes, more than max_packet_size {limit}")
+        return super()._sock_recv(bufsize)
+
+
 @dataclass(frozen=True, slots=True)
 class Will:
     topic: str
@@ -107,6 +134,7 @@ class BrokerSettings:
     no_delay: bool = (
         False  # TCP_NODELAY: small packets (a fence after a publish) go out at once, not after an ACK
     )
+    max_packet_size: int | None = None  # bytes taken from the broker at most (MQTT 5: told in the CONNECT)
 
     @property
     def address(self) -> str:
@@ -179,13 +207,15 @@ class MqttClient:
         self.v5 = settings.protocol == "5"
         protocol = MQTTProtocolVersion.MQTTv5 if self.v5 else MQTTProtocolVersion.MQTTv311
         kwargs: dict[str, Any] = {} if self.v5 else {"clean_session": True}
-        client = paho.Client(
+        client = _LimitedClient(
             CallbackAPIVersion.VERSION2,
             client_id=settings.client_id,
             protocol=protocol,
             reconnect_on_failure=False,  # also stops paho reconnecting (blocking) on its own
             **kwargs,
         )
+        client.max_packet_size = settings.max_packet_size
+        self.oversized_packets = 0  # packets over max_packet_size that ended a connection
         _shared_success_acks()
         client.suppress_exceptions = True
         client.max_inflight_messages_set(0)  # the sink keeps its own window
@@ -210,7 +240,7 @@ class MqttClient:
         client.on_message = self._paho_message
         client.on_subscribe = self._paho_subscribe
         client.on_unsubscribe = self._paho_unsubscribe
-        self._client = client
+        self._client: _LimitedClient = client
         self._configured = False
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread = 0
@@ -254,6 +284,10 @@ class MqttClient:
             kwargs: dict[str, Any] = {}
             if self.v5:
                 kwargs["clean_start"] = True
+                if s.max_packet_size is not None:
+                    props = _properties(PacketTypes.CONNECT)
+                    props.MaximumPacketSize = s.max_packet_size
+                    kwargs["properties"] = props
             client.connect_async(s.host, s.port, s.keepalive, **kwargs)
             self._configured = True
         opened: asyncio.Future[BaseException | None] = loop.create_future()
@@ -399,6 +433,20 @@ class MqttClient:
             self._misc.cancel()
             self._misc = None
         text = _reason_text(reason)
+        size, self._client.oversized = self._client.oversized, None
+        if size is not None:
+            self.oversized_packets += 1
+            limit = self.settings.max_packet_size
+            text = f"the broker sent a packet of {size} bytes, more than max_packet_size {limit}"
+            log.warning(
+                "MQTT %s: %s: dropped unread with the connection%s",
+                self.settings.address,
+                text,
+                ""
+                if self.v5
+                else " (MQTT 3.1.1 cannot tell the broker the limit: set the broker's own, "
+                "mosquitto's message_size_limit, or use protocol 5)",
+            )
         fut = self._connack
         if fut is not None and not fut.done():
             fut.set_exception(

@@ -44,8 +44,8 @@ from gateway.model.methods import Method
 from gateway.model.tree import Machine, VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.payloads import plain
-from gateway.sinks.mqtt.topics import clean_segment, valid_publish_topic
-from gateway.sinks.mqtt.writes import LogQuota, TooManyWrites
+from gateway.sinks.mqtt.topics import ResponseTopics, clean_segment
+from gateway.sinks.mqtt.writes import LogQuota, ResponseTopicRefused, TooManyWrites
 
 log = logging.getLogger(__name__)
 
@@ -193,7 +193,9 @@ class CommandRequests:
         }
         self.received = 0
         self.refused = 0
+        self.refused_response_topics = 0  # requests refused for their response topic (counted in `refused`)
         self._quota = LogQuota()
+        self._responses = ResponseTopics(cfg.prefix, cfg.response_topics)
 
     @property
     def filters(self) -> list[str]:
@@ -210,11 +212,17 @@ class CommandRequests:
         started = time.monotonic()
         self.received += 1
         segment, name = target
-        reply = self._reply_topic(msg.topic, msg.response_topic)
+        reply = f"{msg.topic}/{RESULT}"
         correlation: str | int | None = None
         machine = self.machines.get(segment)
         method = machine.methods.get((OBJECT, name)) if machine is not None else None
         try:
+            if msg.response_topic is not None:
+                refusal = self._responses.refusal(msg.response_topic, f"/{RESULT}")
+                if refusal is not None:  # answered on the result topic: nothing goes where it asked
+                    self.refused_response_topics += 1
+                    raise ResponseTopicRefused(refusal)
+                reply = msg.response_topic
             if msg.retain:
                 raise MalformedRequest(
                     "retained command requests are ignored: publish them without the retain flag"
@@ -257,16 +265,6 @@ class CommandRequests:
 
     def _context(self, machine: Machine) -> WriteContext:
         return WriteContext("mqtt", user=None, role=self.tree.access.mqtt_role(machine.name))
-
-    def _reply_topic(self, topic: str, requested: str | None) -> str:
-        """The v5 response topic if usable (under our prefix only a …/result topic), else `<topic>/result`."""
-        if (
-            requested
-            and valid_publish_topic(requested)
-            and (not requested.startswith(self.prefix + "/") or requested.endswith(f"/{RESULT}"))
-        ):
-            return requested
-        return f"{topic}/{RESULT}"
 
     def _refuse(
         self,

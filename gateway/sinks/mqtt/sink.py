@@ -123,6 +123,7 @@ class MqttSink:
             connect_timeout=config.connect_timeout,
             tls=tls,
             tls_verify=config.tls.verify if config.tls is not None else True,
+            max_packet_size=config.max_packet_size,
             will=Will(
                 self.routes.status_topic, gateway_offline(__version__, "connection to the gateway lost")
             ),

@@ -98,6 +98,52 @@ def valid_publish_topic(topic: str) -> bool:
     return len(topic.encode("utf-8", "surrogatepass")) <= MAX_TOPIC_BYTES
 
 
+def topic_matches(topic_filter: str, topic: str) -> bool:
+    """Whether `topic` matches an MQTT topic filter: `+` one level, `#` this level and all below (so
+    `replies/#` matches `replies` too); wildcards at the first level never match a `$` topic."""
+    if topic.startswith("$") and topic_filter[:1] in ("+", "#"):
+        return False
+    wanted, levels = topic_filter.split("/"), topic.split("/")
+    for index, level in enumerate(wanted):
+        if level == "#":
+            return True
+        if index >= len(levels) or (level != "+" and level != levels[index]):
+            return False
+    return len(wanted) == len(levels)
+
+
+class ResponseTopics:
+    """Where an MQTT 5 request may have its answer published: a result topic (`…/<result_suffix>`) under
+    the gateway's prefix, or a topic the gateway file's `mqtt.response_topics` filters allow.
+
+    The gateway publishes answers with its own broker credentials, so a topic the requester names
+    elsewhere would let anyone who may publish a request make the gateway publish anywhere its ACL
+    reaches (another edge node's command topic, say). Such a request is refused."""
+
+    def __init__(self, prefix: str, allowed: Iterable[str] = ()) -> None:
+        self.own = prefix + "/"
+        self.allowed = tuple(allowed)
+
+    def refusal(self, requested: str, result_suffix: str) -> str | None:
+        """Why `requested` may not be answered on, or None when it may."""
+        shown = requested[:200]
+        if not valid_publish_topic(requested):
+            return f"the response topic {shown!r} is not a topic one can publish to"
+        if requested.startswith(self.own):
+            if requested.endswith(result_suffix):
+                return None
+            return (
+                f"the response topic {shown!r} is under the gateway's prefix but not a result topic "
+                f"(…{result_suffix})"
+            )
+        if any(topic_matches(f, requested) for f in self.allowed):
+            return None
+        return (
+            f"the response topic {shown!r} is outside the gateway's prefix {self.own[:-1]!r} and not in "
+            "mqtt.response_topics"
+        )
+
+
 def plan_topics(
     entries: Iterable[tuple[object, str, str]], reserved: Iterable[str] = ()
 ) -> dict[object, str]:

@@ -38,7 +38,7 @@ from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.payloads import decode_set, encode_result
 from gateway.sinks.mqtt.routes import Route, Routes
-from gateway.sinks.mqtt.topics import result_topic, target_of_set, valid_publish_topic
+from gateway.sinks.mqtt.topics import RESULT, SET, ResponseTopics, result_topic, target_of_set
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +77,12 @@ Answer = Callable[[str, bytes, "bytes | None"], None]
 
 class TooManyWrites(RequestError):
     status = "BadTooManyOperations"
+
+
+class ResponseTopicRefused(RequestError):
+    """An MQTT 5 response topic the gateway will not publish to (topics.ResponseTopics)."""
+
+    status = "BadRequestNotAllowed"
 
 
 class LogQuota:
@@ -127,8 +133,9 @@ class WriteBack:
         self.received = 0
         self.accepted = 0
         self.refused = 0
+        self.refused_response_topics = 0  # requests refused for their response topic (counted in `refused`)
         self._quota = LogQuota()
-        self._own_prefix = cfg.prefix + "/"
+        self._responses = ResponseTopics(cfg.prefix, cfg.response_topics)
 
     # --- from paho, on the loop ----------------------------------------------------------------
 
@@ -140,11 +147,17 @@ class WriteBack:
         if target is None:
             return
         self.received += 1
-        reply = self._reply_topic(target, msg.response_topic)
+        reply = result_topic(target)
         corr = msg.correlation_data
         route = self.routes.by_topic.get(target)
         value: object = msg.payload[:256].decode("utf-8", "replace")  # what was asked, until it is decoded
         try:
+            if msg.response_topic is not None:
+                refusal = self._responses.refusal(msg.response_topic, f"/{SET}/{RESULT}")
+                if refusal is not None:  # answered on the result topic: nothing goes where it asked
+                    self.refused_response_topics += 1
+                    raise ResponseTopicRefused(refusal)
+                reply = msg.response_topic
             if msg.retain:
                 raise MalformedRequest(
                     "retained write requests are ignored: publish /set without the retain flag"
@@ -189,20 +202,6 @@ class WriteBack:
 
     def _context(self, machine: str) -> WriteContext:
         return WriteContext("mqtt", user=None, role=self.tree.access.mqtt_role(machine))
-
-    def _reply_topic(self, target: str, requested: str | None) -> str:
-        """The v5 response topic when it is usable, else `<target>/set/result`.
-
-        A response topic under our own prefix must be a result topic: a client may
-        not make the gateway publish onto its own value or status topics.
-        """
-        if (
-            requested
-            and valid_publish_topic(requested)
-            and (not requested.startswith(self._own_prefix) or requested.endswith("/set/result"))
-        ):
-            return requested
-        return result_topic(target)
 
     def _refuse(self, target: str, reply: str, corr: bytes | None, exc: RequestError) -> None:
         self.refused += 1

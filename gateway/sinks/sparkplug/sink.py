@@ -167,6 +167,7 @@ class SparkplugSink:
             connect_timeout=broker.connect_timeout,
             tls=tls,
             tls_verify=broker.tls.verify if broker.tls is not None else True,
+            max_packet_size=config.max_packet_size,
             no_delay=True,  # a DDATA, then its fence: neither should wait for the broker's delayed ACK
         )
         self.reconnect = broker.reconnect

@@ -103,7 +103,7 @@ async def test_commands_over_mqtt_with_answers_correlation_and_deadlines(
     tmp_path: Path, mosquitto: Mosquitto, recorders: list[Recorder]
 ) -> None:
     rec = subscriber(recorders, mosquitto.port, topics=[f"{PREFIX}/+/result", "replies/#"], v5=True)
-    mqtt = mqtt_config(mosquitto.port, protocol="5")
+    mqtt = mqtt_config(mosquitto.port, protocol="5", response_topics=["replies/#"])
     async with laser_rig(tmp_path, mqtt=mqtt, timeouts={"start": 1.0}) as rig:
         await wait_until(lambda: rig.gateway.sink("mqtt").online, message="the gateway on the broker")  # type: ignore[union-attr]
 

@@ -18,6 +18,7 @@ import pytest
 
 from gateway.app import Gateway
 from gateway.codecs.copydata import Frame, FrameDecoder, Item, Layout, VariableTable, pack_tcp
+from gateway.config.access import AccessConfig
 from gateway.config.copydata import MachineCopydata
 from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
 from gateway.config.loader import Config, load_mapping
@@ -33,6 +34,7 @@ from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]
 MACHINE = "laser-sim"
+COPYDATA_ROLE = "operator"  # the gateway file's access.copydata_role: replies write as operators
 STATE_IDLE, STATE_RUNNING = 0, 1
 
 
@@ -96,6 +98,7 @@ def make_config(tmp_path: Path, sim_port: int, opcua_port: int, copydata: Machin
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway"),
         state_dir=str(tmp_path / "state"),
+        access=AccessConfig(copydata_role=COPYDATA_ROLE),  # what targets with accept_writes need
     ).model_copy(update={"mqtt": mqtt})
     return Config(gateway, (mapping,), tmp_path, ())
 

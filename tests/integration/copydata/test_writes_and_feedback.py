@@ -42,9 +42,9 @@ async def test_writes_refusals_and_feedback_everywhere(
         mqtt=mqtt_config(mosquitto.port),
     )
     await rig.connected()
-    # No users: the replies act with the highest role, and start-up says what they may write.
+    # The replies act with access.copydata_role (never an implied one), and start-up says what they may write.
     assert any(
-        r.getMessage().startswith("copydata laser-sim/nesting: replies act as admin and may write ")
+        r.getMessage().startswith("copydata laser-sim/nesting: replies act as operator and may write ")
         for r in caplog.records
     ), "start-up says what the COPYDATA replies may write"
     mqtt = subscriber(recorders, mosquitto.port, topics=[FEEDBACK_TOPIC])

@@ -30,6 +30,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "gateway_kills": (5, 50),
     "dnc_cuts": (3, 30),  # device-server connections cut mid-drip
     "slow_consumers": (10_000, 150_000),  # changes that stream past the stalled consumers
+    "security_rounds": (1, 20),  # rounds of tests/corpus/mqtt/response_topics.yaml in the security drill
 }
 
 

@@ -2,9 +2,10 @@
 
 The machine is mappings/laser-sim.yaml pointed at an in-process simulator, with
 its jobs (delivered to the simulator's FTP store), its COPYDATA tcp-server target
-(accept_writes) and MQTT writes and commands enabled, except Machine/Mode, which
-keeps MQTT writes off, and Laser/PowerSetpoint made readwrite in the mapping
-(the simulator keeps it read-only: the controller's own refusal). Next to it, one
+(accept_writes, with access.copydata_role operator) and MQTT writes and commands
+enabled, except Machine/Mode, which keeps MQTT writes off, and Laser/PowerSetpoint
+made readwrite in the mapping (the simulator keeps it read-only: the controller's
+own refusal). Next to it, one
 jobs-only machine per set of validation rules that the G-code corpus asks for
 (`gc0`, `gc1`, …), delivering to `/DATA/<machine>` on the same store.
 """
@@ -43,7 +44,7 @@ def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
     data["jobs"]["controller"].update(host="127.0.0.1", port=ftp_port, user="cnc", password="simulator")
     data["jobs"]["retry"] = {"initial": 0.05, "max": 0.5, "factor": 2}
     target = data["copydata"]["targets"][0]
-    target.update(bind="127.0.0.1", port=0)
+    target.update(bind="127.0.0.1", port=0, accept_writes=True)  # with access.copydata_role below
     data["mqtt"] = {"writable": True, "commands": True}
     for variable in data["variables"]:
         if variable["path"] == "Machine/Mode":
@@ -137,6 +138,7 @@ async def corpus_rig(
     gateway = GatewayConfig.model_validate({
         "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}/cnc-gateway", "security": ["None"]},
         "state_dir": str(tmp_path / "state"),
+        "access": {"copydata_role": "operator"},
         "inbox": {"host": "127.0.0.1", "port": 0,
                   "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
     }).model_copy(update={"mqtt": mqtt_config(mqtt_port), "sparkplug": SparkplugConfig()})  # fmt: skip

@@ -238,7 +238,8 @@ async def test_mqtt5_response_topic_and_correlation_data_are_honoured(
     tree = make_tree()
     tree.machines["m1"].writer = _Writer()
     rec = subscriber(recorders, mosquitto.port, v5=True, topics=["replies/#", "cnc/+/+/+/set/result"])
-    async with running(tree, mqtt_config(mosquitto.port, protocol="5"), tmp_path) as sink:
+    cfg = mqtt_config(mosquitto.port, protocol="5", response_topics=["replies/#"])  # outside the prefix
+    async with running(tree, cfg, tmp_path) as sink:
         await wait_until(lambda: sink.online)
         props = Properties(PacketTypes.PUBLISH)
         props.ResponseTopic = "replies/me"

@@ -94,11 +94,17 @@ def test_without_users_no_write_roles_are_shown_and_the_summary_says_so() -> Non
     lines = check_output({})
     assert line(lines, "Override")[1:] == ["UInt16", "-", "readwrite", "copydata", "1"]
     assert line(lines, "stop")[1] == "admin"  # a command's own role is part of its definition
-    assert "accepts writes" in " ".join(line(lines, "nest")) and "role" not in " ".join(line(lines, "nest"))
+    # COPYDATA writes never get an implied role (the loader refuses such a mapping; `check` on a Config built
+    # otherwise says they are refused).
+    assert " ".join(line(lines, "nest")).endswith("accepts writes (role none: refused)")
     assert lines[-1] == (
         "no users: OPC UA clients are anonymous, with role viewer (access.anonymous); "
-        "writes and commands the mappings open to MQTT or COPYDATA act as admin"
+        "writes and commands the mappings open to MQTT act as admin; COPYDATA writes as nobody: refused "
+        "(access.copydata_role)"
     )
+    named = check_output({"access": {"copydata_role": "operator"}})
+    assert " ".join(line(named, "nest")).endswith("accepts writes (role operator)")
+    assert named[-1].endswith("COPYDATA writes as operator (access.copydata_role)")
 
 
 def test_with_access_off_the_summary_says_anonymous_clients_may_change_the_machines() -> None:

@@ -171,16 +171,39 @@ async def test_mqtt5_response_topic_and_correlation_data_are_used() -> None:
     t = tree()
     t.machines["laser-sim"].writer = Selects(t)
     answers = Answers()
-    reqs = requests(t, answers)
+    reqs = requests(t, answers, response_topics=["client/+/reply"])
     reqs.handle(
         Incoming(TOPIC, b'{"name": "a.nc"}', 1, response_topic="client/7/reply", correlation_data=b"\x01")
     )
-    reqs.handle(Incoming(TOPIC, b'{"name": "b.nc"}', 1, response_topic="cnc/laser-sim/axes/x/position"))
-    await run_worker(reqs, answers, 2)
-    assert {(topic, corr) for topic, _, corr in answers} == {
-        ("client/7/reply", b"\x01"),
-        (TOPIC + "/result", None),
-    }
+    await run_worker(reqs, answers, 1)
+    assert [(topic, doc["ok"], corr) for topic, doc, corr in answers] == [("client/7/reply", True, b"\x01")]
+    assert t.machines["laser-sim"].nodes["Program/Name"].sample.value == "a.nc"
+
+
+@pytest.mark.parametrize(
+    ("response_topic", "fragment"),
+    [
+        ("spBv1.0/cnc/NCMD/other-edge", "outside the gateway's prefix 'cnc' and not in mqtt.response_topics"),
+        ("client/7/reply/more", "outside the gateway's prefix"),  # the filter is one level deep
+        ("cnc/laser-sim/axes/x/position", "under the gateway's prefix but not a result topic"),
+        ("cnc/laser-sim/status", "not a result topic"),
+        ("replies/#", "not a topic one can publish to"),
+    ],
+)
+def test_a_response_topic_the_gateway_may_not_publish_to_refuses_the_request(
+    response_topic: str, fragment: str
+) -> None:
+    """Issue 23: a requester made the gateway publish, with its credentials, anywhere its ACL reached."""
+    t = tree()
+    t.machines["laser-sim"].writer = Selects(t)
+    answers = Answers()
+    reqs = requests(t, answers, response_topics=["client/+/reply"])
+    reqs.handle(Incoming(TOPIC, b'{"name": "b.nc"}', 1, response_topic=response_topic, correlation_data=b"c"))
+    [(topic, doc, corr)] = answers  # answered at once, on the request's own result topic
+    assert topic == TOPIC + "/result" and corr == b"c"
+    assert doc["ok"] is False and doc["status"] == "BadRequestNotAllowed" and fragment in doc["error"]
+    assert reqs.refused == reqs.refused_response_topics == 1 and reqs.queues["laser-sim"].empty()
+    assert t.machines["laser-sim"].nodes["Program/Name"].sample.value == ""  # the machine saw nothing
 
 
 async def test_a_command_that_times_out_answers_an_error_with_its_duration() -> None:

@@ -79,3 +79,38 @@ def test_settings_precedence_variable_then_machine_then_gateway() -> None:
     assert r["A"].topic == "plant/m1/a"
     assert routes.machine_status["m1"] == "plant/m1/status" and routes.status_topic == "plant/status"
     assert not any(n.path.startswith("Status/") for n in routes.by_node)
+
+
+def test_response_topics_and_max_packet_size_are_checked_with_their_line(tmp_path: Path) -> None:
+    (tmp_path / "g.yaml").write_text(
+        f"machines: [{ROOT}/mappings/laser-sim.yaml]\n"
+        "mqtt:\n"
+        "  response_topics:\n"
+        "    - replies/#\n"
+        "    - cell/7#\n"
+        "    - a/#/b\n"
+        "    - $SYS/x\n"
+    )
+    with pytest.raises(ConfigError) as info:
+        load([tmp_path / "g.yaml"], environ={})
+    found = {(i.line, i.key): i.message for i in info.value.issues}
+    assert "'+' must be a whole level and '#' the whole last level" in found[(5, "mqtt.response_topics[1]")]
+    assert "'#' the whole last level" in found[(6, "mqtt.response_topics[2]")]
+    assert "must not start with '$'" in found[(7, "mqtt.response_topics[3]")]
+    assert len(found) == 3
+    (tmp_path / "g.yaml").write_text(
+        f"machines: [{ROOT}/mappings/laser-sim.yaml]\nmqtt:\n  max_packet_size: 65536\n"
+    )
+    with pytest.raises(ConfigError, match="must leave room for max_set_payload \\(65536\\)"):
+        load([tmp_path / "g.yaml"], environ={})
+
+
+def test_max_packet_size_defaults_above_what_each_face_decodes() -> None:
+    from gateway.codecs.sparkplug.wire import MAX_PAYLOAD
+    from gateway.config.sparkplug import SparkplugConfig
+
+    cfg = MqttConfig()
+    assert cfg.max_packet_size == 1024 * 1024 > cfg.max_set_payload and cfg.response_topics == []
+    assert SparkplugConfig().max_packet_size == 2 * 1024 * 1024 > MAX_PAYLOAD
+    with pytest.raises(ValueError, match="greater than or equal to 1049600"):
+        SparkplugConfig(max_packet_size=MAX_PAYLOAD)

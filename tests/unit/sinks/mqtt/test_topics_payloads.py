@@ -221,3 +221,26 @@ def test_arbitrary_bytes_never_raise_anything_but_a_write_error(payload: bytes, 
 def test_arbitrary_json_never_raises_anything_but_a_write_error(doc: object, spec: TypeSpec) -> None:
     with contextlib.suppress(RequestError):
         decode_set(json.dumps(doc).encode(), spec)
+
+
+def test_topic_filters_match_as_mqtt_says() -> None:
+    from gateway.sinks.mqtt.topics import topic_matches
+
+    assert topic_matches("replies/#", "replies/a/b") and topic_matches("replies/#", "replies")
+    assert topic_matches("replies/+/x", "replies/7/x") and not topic_matches("replies/+/x", "replies/7/y")
+    assert not topic_matches("replies/+", "replies/7/x") and not topic_matches("replies/+", "replies")
+    assert topic_matches("#", "a") and not topic_matches("#", "$SYS/broker") and topic_matches("a", "a")
+    assert not topic_matches("a/b", "a") and not topic_matches("a", "a/b")
+
+
+def test_response_topics_only_results_under_the_prefix_or_the_allow_list() -> None:
+    from gateway.sinks.mqtt.topics import ResponseTopics
+
+    policy = ResponseTopics("cnc", ["replies/#", "cell/+/answers"])
+    suffix = "/set/result"
+    for allowed in ("cnc/m1/feed/override/set/result", "replies/me", "replies", "cell/7/answers"):
+        assert policy.refusal(allowed, suffix) is None, allowed
+    for refused in ("cnc/m1/feed/override", "spBv1.0/cnc/NCMD/other-edge", "cell/7/answers/x", "cncx/a"):
+        assert policy.refusal(refused, suffix) is not None, refused
+    assert "not a topic one can publish to" in (policy.refusal("replies/+", suffix) or "")
+    assert ResponseTopics("cnc").refusal("replies/me", suffix) is not None  # nothing allowed by default
