@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import ftplib
 import socket
+import time
 from dataclasses import dataclass
 
 VICTIM, ATTACKER = "127.0.0.1", "127.0.0.2"
@@ -106,3 +107,50 @@ def race_stor(
                 conn.close()
     finally:
         thief.close()
+
+
+def reply(ftp: ftplib.FTP, command: str) -> str:
+    """The server's reply to `command`, or the refusal's text."""
+    try:
+        return ftp.sendcmd(command)
+    except ftplib.Error as exc:
+        return str(exc)
+
+
+@dataclass(frozen=True)
+class Ended:
+    """How a session the server closed ended: its last reply (or the error), and when (time.monotonic())."""
+
+    text: str
+    at: float
+
+
+def noop_until_closed(sessions: list[ftplib.FTP], timeout: float) -> list[Ended | None]:
+    """Send NOOP on every session, again and again, until the server has closed each (None: still open
+    when `timeout` passed), as a client that keeps its sessions busy without logging in does."""
+    ends: list[Ended | None] = [None] * len(sessions)
+
+    def all_closed() -> bool:
+        for i, ftp in enumerate(sessions):
+            if ends[i] is None:
+                try:
+                    ftp.sendcmd("NOOP")
+                except (ftplib.Error, OSError, EOFError) as exc:
+                    ends[i] = Ended(str(exc) or type(exc).__name__, time.monotonic())
+        return all(e is not None for e in ends)
+
+    deadline = time.monotonic() + timeout
+    while not all_closed() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return ends
+
+
+def open_sessions(port: int, count: int, *, source: str) -> tuple[list[ftplib.FTP], list[str]]:
+    """Open `count` sessions from `source` without logging in: (the ones the server took, the refusals)."""
+    held, refused = [], []
+    for _ in range(count):
+        try:
+            held.append(connect(port, source=source))
+        except ftplib.Error as exc:
+            refused.append(str(exc))
+    return held, refused

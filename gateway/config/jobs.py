@@ -428,7 +428,10 @@ class InboxConfig(Strict):
     max_files_per_session: int = Field(default=200, ge=1, description="Uploads allowed per login session")
     max_connections: int = Field(default=32, ge=1, description="Simultaneous FTP sessions")
     max_connections_per_address: int = Field(
-        default=8, ge=1, description="Simultaneous FTP sessions from one address"
+        default=8,
+        ge=1,
+        description="Simultaneous FTP sessions from one address (never more than max_connections - 1, so "
+        "that one address cannot take every slot)",
     )
     login_timeout: float = Field(
         default=30.0, gt=0, description="Seconds a session has to log in before it is closed"

@@ -42,6 +42,7 @@ class Session:
     last_activity: float = field(default_factory=time.monotonic)
     login_by: float = float("inf")  # time.monotonic() by which it must have logged in (inbox.login_timeout)
     foreign_data: int = 0  # data connections from other addresses refused since the last transfer
+    closing: bool = False  # closed by the server (idle, no login): no further command is read
 
 
 def session_of(connection: Connection) -> Session | None:

@@ -90,6 +90,11 @@ class Inbox:
         self.swept = 0
 
     @property
+    def logins(self) -> LoginLimiter:
+        """The failed-login lockout the inbox applies (the gateway's, shared with its other doors)."""
+        return self._server.logins
+
+    @property
     def refusals(self) -> Counter[str]:
         """What the FTP server turned away, by reason: "foreign data connection", "locked out", …"""
         return self._server.refusals

@@ -201,7 +201,8 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
         connection.session = Session(
             f"{host}:{connection.client_port}", login_by=time.monotonic() + self.config.login_timeout
         )
-        cap = self.config.max_connections_per_address
+        # One address never takes every slot: at most max_connections - 1 of them, whatever the setting.
+        cap = min(self.config.max_connections_per_address, max(1, self.config.max_connections - 1))
         if sum(1 for c in self.connections.values() if same_host(c.client_host, host)) > cap:
             self.refusals["too many from one address"] += 1
             log.warning(
@@ -229,21 +230,23 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
         idle = self.config.idle_timeout
         while True:
             session = session_of(connection) if connection is not None else None
-            now = time.monotonic()
-            wait = idle - (now - session.last_activity) if session is not None else idle
-            if session is not None and session.account is None:
-                if now >= session.login_by:
-                    return NO_LOGIN, ""
-                wait = min(wait, session.login_by - now)
+            if session is not None and session.closing:  # aioftp reads on while the session ends: wait to be
+                await asyncio.get_running_loop().create_future()  # cancelled, so that it ends only once
+            ending = self._ending(session)
+            if ending is not None:
+                return ending, ""
+            wait = idle
+            if session is not None:
+                now = time.monotonic()
+                if not session.busy:
+                    wait = idle - (now - session.last_activity)
+                if session.account is None:
+                    wait = min(wait, session.login_by - now)
             try:
                 async with asyncio.timeout(max(wait, 0.05)):
                     line = await stream.reader.readline()
             except TimeoutError:
-                if session is not None and session.account is None and time.monotonic() >= session.login_by:
-                    return NO_LOGIN, ""
-                if session is not None and (session.busy or time.monotonic() - session.last_activity < idle):
-                    continue
-                return IDLE, ""
+                continue
             except (OSError, ValueError, asyncio.IncompleteReadError):
                 return GONE, ""
             break
@@ -255,6 +258,20 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
         cmd, _, rest = text.partition(" ")
         log.debug("%s %s", cmd, "***" if cmd.lower() in censor_commands else rest)
         return cmd.lower(), rest
+
+    def _ending(self, session: Session | None) -> str | None:
+        """NO_LOGIN (not logged in within login_timeout), IDLE (no command and no transfer for idle_timeout)
+        or None; a session that ends is marked as closing."""
+        if session is None:
+            return None
+        now = time.monotonic()
+        if session.account is None and now >= session.login_by:
+            session.closing = True
+            return NO_LOGIN
+        if not session.busy and now - session.last_activity >= self.config.idle_timeout:
+            session.closing = True
+            return IDLE
+        return None
 
     async def response_writer(self, stream: aioftp.StreamIO, response_queue: asyncio.Queue[Any]) -> None:
         """aioftp's, except that a client gone away is not an error (the reader ends the session)."""

@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from gateway.jobs.queue.store import JobState
-from tests.ftp_attacks import ATTACKER, VICTIM, connect, login, race_stor
+from tests.ftp_attacks import ATTACKER, VICTIM, connect, login, noop_until_closed, open_sessions, race_stor
 from tests.integration.jobs.conftest import PASSWORD, USER, Store, in_thread, mapping_text, program
 from tests.waiting import wait_until, wait_until_sync
 
@@ -146,45 +146,33 @@ async def test_sessions_that_never_log_in_cannot_keep_the_real_client_out(store:
     turns two away at once, the pre-login timeout closes the others; the real client gets in throughout."""
     limits = {"max_connections": 4, "max_connections_per_address": 2, "login_timeout": 1}
     async with harness([mapping_text("laser", store.port)], **limits) as h:
-
-        def hold() -> tuple[list[str], list[ftplib.FTP]]:
-            refused, held = [], []
-            for _ in range(4):
-                try:
-                    held.append(connect(h.port, source=ATTACKER))
-                except ftplib.Error as exc:
-                    refused.append(str(exc))
-            return refused, held
-
-        refused, held = await in_thread(hold)
+        held, refused = await in_thread(lambda: open_sessions(h.port, 4, source=ATTACKER))
         try:
             assert len(refused) == 2 and all(
                 r.startswith("421") and "from your address" in r for r in refused
             ), refused
             assert (await h.stor("laser", "part.nc", program("real"))).startswith("226 J000001")
 
-            def noop_until_closed() -> list[str]:
-                ends: list[str | None] = [None] * len(held)
-
-                def closed() -> bool:
-                    for i, ftp in enumerate(held):
-                        if ends[i] is None:
-                            try:
-                                ftp.sendcmd("NOOP")
-                            except (ftplib.Error, OSError, EOFError) as exc:
-                                ends[i] = str(exc)
-                    return all(e is not None for e in ends)
-
-                wait_until_sync(closed, timeout=15, interval=0.2, message="the held sessions closed")
-                return [e or "" for e in ends]
-
-            ends = await in_thread(noop_until_closed)
+            ends = [e.text if e else "" for e in await in_thread(noop_until_closed, held, 15)]
             assert all("not logged in within 1 s" in e for e in ends), ends
         finally:
             for ftp in held:
                 ftp.close()
         assert h.service.inbox.refusals["too many from one address"] == 2
         assert h.service.inbox.refusals["no login in time"] == 2
+
+
+async def test_one_address_never_takes_every_slot(store: Store, harness) -> None:
+    """The issue's repro with the default per-address cap (8): max_connections 4, four sessions from one
+    address that only send NOOP. The fourth is turned away; the real client gets in at once."""
+    async with harness([mapping_text("laser", store.port)], max_connections=4) as h:
+        held, refused = await in_thread(lambda: open_sessions(h.port, 4, source=ATTACKER))
+        try:
+            assert refused == ["421 too many connections from your address (at most 3)"], refused
+            assert (await h.stor("laser", "part.nc", program("real"))).startswith("226 J000001")
+        finally:
+            for ftp in held:
+                ftp.close()
 
 
 async def test_slots_held_from_many_addresses_are_freed_by_the_login_timeout(store: Store, harness) -> None:
