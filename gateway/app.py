@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar, overload
 
 from gateway.audit.store import audit_path
 from gateway.audit.trail import AuditTrail
+from gateway.auth.ratelimit import LoginLimiter
 from gateway.commands.runner import install_commands
 from gateway.config.loader import Config
 from gateway.model.tree import VariableTree
@@ -75,7 +76,9 @@ def configure_access(config: Config, tree: VariableTree) -> None:
         )
 
 
-def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None = None) -> list[Sink]:
+def build_sinks(
+    config: Config, tree: VariableTree, alarms: AlarmService | None = None, logins: LoginLimiter | None = None
+) -> list[Sink]:
     from gateway.sinks.opcua.port import ServerExtension
     from gateway.sinks.opcua.server import OpcUaSink
 
@@ -86,7 +89,7 @@ def build_sinks(config: Config, tree: VariableTree, alarms: AlarmService | None 
 
         extensions.append(OpcUaAlarms(alarms))
     sinks: list[Sink] = [
-        OpcUaSink(tree, gw.opcua, config.state_dir, users=gw.user_directory(), extensions=extensions)
+        OpcUaSink(tree, gw.opcua, config.state_dir, users=gw.user_directory(logins), extensions=extensions)
     ]
     if config.gateway.mqtt is not None:  # no `mqtt:` in the gateway file: no broker to reach
         from gateway.sinks.mqtt.sink import MqttSink
@@ -141,16 +144,16 @@ def build_web(
         audit=audit,
         trust=TrustList(pki) if pki is not None else None,
     )
-    return WebSink(gateway.tree, config, http, ports)
+    return WebSink(gateway.tree, config, http, ports, logins=gateway.logins)
 
 
-def build_jobs(config: Config, tree: VariableTree) -> JobService | None:
+def build_jobs(config: Config, tree: VariableTree, logins: LoginLimiter | None = None) -> JobService | None:
     """The FTP job queue, when some machine has a `jobs:` section (None otherwise)."""
     if not any(m.jobs is not None for m in config.machines):
         return None
     from gateway.jobs.service import JobService
 
-    return JobService(config, tree)
+    return JobService(config, tree, logins=logins)
 
 
 def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
@@ -176,10 +179,13 @@ class Gateway:
         mappings = config.mappings
         install_commands(self.tree, mappings)  # the commands as Commands/ methods, before the sinks see them
         self.alarms = build_alarms(config, self.tree)
+        # One failed-login lockout for every door that checks passwords (OPC UA, web, FTP inbox): guesses
+        # on one door count against the others from the same address.
+        self.logins = config.gateway.login_limiter()
         # Before the sinks are built: the job service adds Jobs/ variables and methods (Programs, and a
         # serial machine's Commands/Drip*, which the MQTT sink's command requests list when built).
-        self.jobs = build_jobs(config, self.tree)
-        self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms)
+        self.jobs = build_jobs(config, self.tree, self.logins)
+        self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms, self.logins)
         self.sources: list[Source] = [create_source(m, mappings[n]) for n, m in self.tree.machines.items()]
         web = build_web(config, self, self.jobs, self.alarms, self.audit, self.sinks)
         if web is not None:  # after the job service: the console submits through it

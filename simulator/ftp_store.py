@@ -4,7 +4,10 @@ aioftp's server lacks SIZE and NLST and refuses RNTO onto an existing file;
 `ProgramFtpServer` adds SIZE and NLST and lets a rename replace a file (POSIX
 rename semantics, as vsftpd and many controller FTP servers do, so an upload
 to a temporary name followed by RNFR/RNTO replaces a program atomically).
-There is one user and no anonymous access.
+There is one user and no anonymous access, and a passive data connection is taken only
+from the address of the session's control connection (`PeerCheckedServer`, as the gateway's
+inbox does): the gateway delivers jobs here, and a host that raced it to the passive port
+would otherwise have its own program stored in their place.
 
 Two aioftp habits would put tracebacks in the log for ordinary events: it logs
 every client that disconnects without QUIT as an exception, and closing the
@@ -30,6 +33,7 @@ from gateway.shims.aioftp_server import (
     LOGIN_REQUIRED,
     PASSIVE_SERVER_STARTED,
     RENAME_FROM_REQUIRED,
+    PeerCheckedServer,
     close_server,
     connection_conditions,
     path_conditions,
@@ -55,7 +59,9 @@ def _install_filter() -> None:
         logger.addFilter(_QuietDisconnects())
 
 
-class ProgramFtpServer(aioftp.Server):
+class ProgramFtpServer(PeerCheckedServer):
+    log = log  # refused data connections are logged as the store's
+
     def __init__(self, root: Path, user: str, password: str) -> None:
         account = aioftp.User(
             login=user,
@@ -147,6 +153,11 @@ class FtpStore:
         self._started = True
         self.port = self._server.address[1]
         return self
+
+    @property
+    def foreign_data_connections(self) -> int:
+        """Data connections refused because they came from another address than their session's."""
+        return self._server.foreign_data_connections
 
     async def __aexit__(self, *exc_info: object) -> None:
         if not self._started:

@@ -11,7 +11,8 @@ user manager (gateway/sinks/opcua/identity.py).
   much scrypt work as a known one, so timing does not tell which names exist.
 - After `lockout.failures` refusals from one address within `lockout.window`
   seconds, that address is refused for `lockout.duration` seconds without any
-  check (gateway/auth/ratelimit.py).
+  check (gateway/auth/ratelimit.py). The limiter is the gateway's one, shared
+  with every other door that checks passwords (gateway/auth/lockout.py).
 - Anonymous logins get `access.anonymous` as their role, or are refused.
 
 Every refusal is logged with the address, never with the password.
@@ -24,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 
+from gateway.auth.lockout import locked_out, login_failed
 from gateway.auth.passwords import hash_password, verify_password
 from gateway.auth.ratelimit import LoginLimiter
 
@@ -75,35 +77,14 @@ class UserDirectory:
 
     def authenticate(self, name: str, password: str, address: str, via: str = "OPC UA") -> Identity | None:
         """The user's identity, or None (refused). Blocking: one scrypt check (~50 ms) unless locked out."""
-        wait = self.limiter.locked(address)
-        if wait > 0:
-            log.info(
-                "%s: login as %r from %s refused unchecked: locked out for %.0f s more",
-                via,
-                name[:64],
-                address,
-                wait,
-            )
+        if locked_out(self.limiter, name, address, via):
             return None
         known = self._users.get(name)
         encoded, role = known if known is not None else (_dummy_hash(), None)
         if verify_password(password, encoded) and known is not None:
             log.info("%s: %s logged in from %s as %s", via, name, address, role)
             return Identity(name, role)
-        why = "wrong password" if known is not None else "unknown user"
-        if self.limiter.failed(address):
-            log.warning(
-                "%s: login as %r from %s refused (%s); %d failures within %.0f s: "
-                "refusing every login from %s for %.0f s",
-                via,
-                name[:64],
-                address,
-                why,
-                self.limiter.failures,
-                self.limiter.window,
-                address,
-                self.limiter.lockout,
-            )
-        else:
-            log.warning("%s: login as %r from %s refused (%s)", via, name[:64], address, why)
+        login_failed(
+            self.limiter, name, address, via, "wrong password" if known is not None else "unknown user"
+        )
         return None

@@ -89,7 +89,8 @@ class UserConfig(Strict):
 
 class LoginLockout(Strict):
     """Repeated wrong passwords from one address: after `failures` within `window` seconds,
-    that address's logins are refused, unchecked, for `duration` seconds."""
+    that address's logins are refused, unchecked, for `duration` seconds. One count per address
+    for every door that checks passwords: OPC UA, the web console and REST API, the FTP inbox."""
 
     failures: int = Field(default=5, ge=1, le=1000)
     window: float = Field(default=60.0, gt=0, description="Seconds")
@@ -126,7 +127,11 @@ class AccessConfig(Strict):
     jobs_role: str | None = Field(
         default="operator", description="Role of the job queue's auto-start writes (select, start)"
     )
-    lockout: LoginLockout = LoginLockout()
+    lockout: LoginLockout = Field(
+        default_factory=LoginLockout,
+        description="Failed logins per address, counted across every door (OPC UA, web, FTP inbox): "
+        "after `failures` within `window` s, every login from that address is refused for `duration` s",
+    )
     audit_retention: int = Field(
         default=365, ge=0, description="Days the audit table keeps its entries; 0 keeps them for ever"
     )

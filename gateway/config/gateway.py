@@ -140,14 +140,21 @@ class GatewayConfig(Strict):
                 raise ValueError(f"http.{key}: {problem}")
         return http
 
-    def user_directory(self) -> UserDirectory:
-        """The users, the anonymous role and the lockout, as gateway/auth/users.py checks logins."""
+    def login_limiter(self) -> LoginLimiter:
+        """A new failed-login lockout (`access.lockout`). The gateway builds one and gives it to every door
+        that checks passwords (gateway/auth/lockout.py): a lockout is per address, not per door."""
+        lockout = self.access.lockout
+        return LoginLimiter(lockout.failures, lockout.window, lockout.duration)
+
+    def user_directory(self, limiter: LoginLimiter | None = None) -> UserDirectory:
+        """The users, the anonymous role and the lockout, as gateway/auth/users.py checks logins.
+
+        `limiter`: the gateway's shared lockout; without one, a new one (a door on its own)."""
         access = self.access
-        lockout = access.lockout
         refuse = access.anonymous == REFUSE
         return UserDirectory(
             {u.name: (u.password_hash, u.role) for u in self.users},
             anonymous_role=None if refuse else access.anonymous,
             anonymous_allowed=not refuse,
-            limiter=LoginLimiter(lockout.failures, lockout.window, lockout.duration),
+            limiter=limiter if limiter is not None else self.login_limiter(),
         )

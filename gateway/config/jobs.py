@@ -420,6 +420,11 @@ class InboxConfig(Strict):
     passive_address: str | None = Field(
         default=None, description="IPv4 address announced in PASV replies, when clients reach us through NAT"
     )
+    pasv_promiscuous: bool = Field(
+        default=False,
+        description="Take a passive data connection from any address (vsftpd's option); false: only from "
+        "the address of the session's control connection, so nobody else can slip their bytes into an upload",
+    )
     accounts: list[FtpAccount] = Field(default_factory=list)
     anonymous: bool = Field(default=False, description="Allow the anonymous login (any password)")
     anonymous_machines: list[str] = Field(
@@ -428,6 +433,15 @@ class InboxConfig(Strict):
     max_file_size: Size = Field(default=ByteSize(64 * 1024 * 1024), description="Largest program accepted")
     max_files_per_session: int = Field(default=200, ge=1, description="Uploads allowed per login session")
     max_connections: int = Field(default=32, ge=1, description="Simultaneous FTP sessions")
+    max_connections_per_address: int = Field(
+        default=8,
+        ge=1,
+        description="Simultaneous FTP sessions from one address (never more than max_connections - 1, so "
+        "that one address cannot take every slot)",
+    )
+    login_timeout: float = Field(
+        default=30.0, gt=0, description="Seconds a session has to log in before it is closed"
+    )
     idle_timeout: float = Field(
         default=300.0, gt=0, description="Seconds without a command before a session is closed"
     )
@@ -436,6 +450,11 @@ class InboxConfig(Strict):
         default_factory=lambda: [".part", ".tmp", ".filepart"],
         description="Uploads with these suffixes (or in a machine's tmp/ folder) wait for a rename "
         "to become jobs",
+    )
+    temp_max_age: float = Field(
+        default=3600.0,
+        gt=0,
+        description="Seconds after its last write that a temporary upload nobody renamed is deleted",
     )
     reply_within: float = Field(
         default=10.0,

@@ -36,6 +36,7 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
+from gateway.auth.ratelimit import LoginLimiter
 from gateway.config.jobs import AlarmWhen, ControllerFtp, ControllerSerial, JobsConfig
 from gateway.config.loader import Config
 from gateway.errors import (
@@ -133,11 +134,18 @@ class JobService:
     """The job queue of every machine that has a `jobs:` section."""
 
     def __init__(
-        self, config: Config, tree: VariableTree, *, environ: Mapping[str, str] | None = None
+        self,
+        config: Config,
+        tree: VariableTree,
+        *,
+        environ: Mapping[str, str] | None = None,
+        logins: LoginLimiter | None = None,
     ) -> None:
         self.config = config
         self.tree = tree
         self.environ = environ
+        # The gateway's failed-login lockout, shared with its other doors; on its own, one of its own.
+        self.logins = logins if logins is not None else config.gateway.login_limiter()
         self.machines: dict[str, JobsConfig] = {
             m.machine: m.jobs for m in config.machines if m.jobs is not None
         }
@@ -294,6 +302,7 @@ class JobService:
             root=self.inbox_root,
             machines=self.machines,
             accounts=accounts,
+            logins=self.logins,
             submit=self.submit,
             tls=tls,
             jobs_coming=functools.partial(self.threads.warm, ready),

@@ -6,15 +6,24 @@ program store), which aioftp calls with that subclass, do not fit them under myp
 decorators here are aioftp's own, typed to give back the handler they were given.
 
 `close_server` is how every aioftp server here stops (the inbox, the simulator's program store).
+
+`PeerCheckedServer` is the server every FTP server here is built on: aioftp hands the first TCP
+connection to a passive port to the session, whoever made it, so anyone who can reach the port could
+send the bytes of someone else's upload (or read their download). Like vsftpd (`pasv_promiscuous=NO`)
+and ProFTPD (`AllowForeignAddress off`), it takes a data connection only from the control
+connection's host.
 """
 
 from __future__ import annotations
 
 import asyncio
+import ipaddress
+import logging
 from collections.abc import Awaitable, Callable
 from typing import TypeVar, cast
 
 import aioftp
+from aioftp.common import Connection
 from aioftp.server import ConnectionConditions, PathConditions, PathPermissions
 from aioftp.server import worker as _worker
 
@@ -69,3 +78,61 @@ async def close_server(server: aioftp.Server, grace: float = CLOSE_GRACE) -> Non
     if dispatchers:
         await asyncio.wait(dispatchers, timeout=grace)
     await server.close()
+
+
+DataHandler = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
+
+
+def same_host(a: str, b: str) -> bool:
+    """Whether two peer addresses are one host (an IPv4-mapped IPv6 address is its IPv4 address)."""
+    return _canonical(a) == _canonical(b)
+
+
+def _canonical(address: str) -> str:
+    try:
+        ip = ipaddress.ip_address(address.split("%", 1)[0])
+    except ValueError:
+        return address
+    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+        return str(ip.ipv4_mapped)
+    return str(ip)
+
+
+class PeerCheckedServer(aioftp.Server):
+    """aioftp's server, taking a passive data connection only from the host of the session's control
+    connection. A connection from elsewhere is closed at once (reset, nothing read from it), counted in
+    `foreign_data_connections` and logged; the session keeps waiting for its own, and a transfer that
+    does not get one fails with 425 as any transfer without a data connection does.
+
+    `pasv_promiscuous = True` turns the check off (vsftpd's option of that name), for the rare client
+    whose data connections come from another address than its control connection.
+    """
+
+    pasv_promiscuous = False
+    foreign_data_connections = 0
+    log = logging.getLogger("gateway.shims.aioftp_server")
+
+    async def _start_passive_server(
+        self, connection: Connection, handler_callback: DataHandler
+    ) -> asyncio.Server:
+        async def checked(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            peer = writer.get_extra_info("peername")
+            host = str(peer[0]) if isinstance(peer, (tuple, list)) and peer else ""
+            if self.pasv_promiscuous or same_host(host, connection.client_host):
+                await handler_callback(reader, writer)
+                return
+            writer.transport.abort()  # a reset: the sender learns nothing, and nothing it sent is read
+            self.foreign_data_connections += 1
+            self.refused_data_connection(connection, host)
+
+        return await super()._start_passive_server(connection, checked)
+
+    def refused_data_connection(self, connection: Connection, host: str) -> None:
+        """Called for each data connection refused (already closed); logs it."""
+        self.log.warning(
+            "refused a data connection from %s to the passive port of the session of %s:%s: "
+            "data connections are taken only from the session's own address",
+            host,
+            connection.client_host,
+            connection.client_port,
+        )

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 @dataclass
 class Session:
-    client: str
+    client: str  # host:port
     account: Account | None = None
     login: str = ""
     files: int = 0
@@ -40,6 +40,9 @@ class Session:
     failures: int = 0
     priority: int = 0
     last_activity: float = field(default_factory=time.monotonic)
+    login_by: float = float("inf")  # time.monotonic() by which it must have logged in (inbox.login_timeout)
+    foreign_data: int = 0  # data connections from other addresses refused since the last transfer
+    closing: bool = False  # closed by the server (idle, no login): no further command is read
 
 
 def session_of(connection: Connection) -> Session | None:
@@ -110,12 +113,26 @@ class BrowseCommands:
         return out
 
     async def _data_connection(self, connection: Connection) -> aioftp.ThrottleStreamIO | None:
+        """The session's data connection, once its client has made it; None (425 answered) if none came
+        from the session's own address in time (aioftp's PASV and the peer check of PeerCheckedServer)."""
+        session = session_of(connection)
         try:
             async with asyncio.timeout(self.wait_future_timeout):
                 await asyncio.shield(connection.future.data_connection)
         except TimeoutError:
-            connection.response("425", "can't open data connection")
+            refused = session.foreign_data if session is not None else 0
+            if refused:
+                connection.response(
+                    "425",
+                    f"can't open data connection: {refused} from another address than this session's "
+                    "refused (inbox.pasv_promiscuous)",
+                )
+            else:
+                connection.response("425", "can't open data connection")
             return None
+        finally:
+            if session is not None:
+                session.foreign_data = 0
         stream: aioftp.ThrottleStreamIO = connection.data_connection  # what aioftp's PASV made
         del connection.data_connection
         return stream

@@ -15,7 +15,9 @@ connection, so a client that dies mid-STOR looks like one that finished. So:
 
 A committed upload is handed to `submit` (the JobService), whose verdict is the
 FTP reply: `226 J000042 queued` or `550 J000043 rejected: …`. Nothing is kept
-in a machine's folder after that: the folder is a drop box, not a store.
+in a machine's folder after that: the folder is a drop box, not a store. A
+temporary upload nobody renames is deleted after `temp_max_age` (sweep.py), at
+start and while the inbox runs.
 
 aioftp lacks SIZE, MDTM, FEAT, NOOP, OPTS, ALLO, MODE, STRU, NLST and SITE; they
 are added there. Its idle timeout would also cut long uploads (it times the
@@ -24,14 +26,20 @@ control connection alone), so idle sessions are closed by the inbox instead.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import ssl
+import time
+from collections import Counter
 from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Self
 
+from gateway.auth.ratelimit import LoginLimiter
 from gateway.config.jobs import InboxConfig, machines_allowed
 from gateway.errors import SinkError
+from gateway.jobs.inbox import sweep
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.paths import TMP
 from gateway.jobs.inbox.server import (
@@ -69,13 +77,27 @@ class Inbox:
         tls: ssl.SSLContext | None = None,
         jobs_coming: Callable[[], None] | None = None,
         check_upload: CheckUpload | None = None,
+        logins: LoginLimiter | None = None,
     ) -> None:
         self.config = config
         self.root = root
         self.machines = sorted(machines)
         self.port = config.port
-        self._server = InboxServer(config, root, accounts, submit, tls, jobs_coming, check_upload)
+        self._server = InboxServer(config, root, accounts, submit, tls, jobs_coming, check_upload, logins)
         self._started = False
+        self._sweeping: asyncio.Task[None] | None = None
+        #: Stale temporary uploads deleted so far (at start and while running).
+        self.swept = 0
+
+    @property
+    def logins(self) -> LoginLimiter:
+        """The failed-login lockout the inbox applies (the gateway's, shared with its other doors)."""
+        return self._server.logins
+
+    @property
+    def refusals(self) -> Counter[str]:
+        """What the FTP server turned away, by reason: "foreign data connection", "locked out", …"""
+        return self._server.refusals
 
     @property
     def url(self) -> str:
@@ -93,7 +115,36 @@ class Inbox:
             discarded.append(leftover.name)
         for machine in self.machines:
             (self.root / machine / TMP).mkdir(parents=True, exist_ok=True)
+        self.sweep()
         return discarded
+
+    def sweep(self) -> list[Path]:
+        """Delete temporary uploads untouched for `temp_max_age` seconds; the ones deleted. Blocking."""
+        server = self._server
+        old = sweep.stale(
+            self.root,
+            self.machines,
+            self.config.temp_suffixes,
+            time.time() - self.config.temp_max_age,
+            busy=server.receiving,
+        )
+        gone = sweep.delete(old)
+        for path in gone:
+            server.forget(path)
+            log.info(
+                "inbox: deleted %s: a temporary upload untouched for %g s (inbox.temp_max_age)",
+                path.relative_to(self.root),
+                self.config.temp_max_age,
+            )
+        self.swept += len(gone)
+        return gone
+
+    async def _sweep_while_running(self) -> None:
+        """In the loop, not a thread: the uploads in progress cannot change while it looks (a few folders)."""
+        every = sweep.every(self.config.temp_max_age)
+        while True:
+            await asyncio.sleep(every)
+            self.sweep()
 
     async def __aenter__(self) -> Self:
         discarded = self.prepare()
@@ -107,6 +158,7 @@ class Inbox:
             ) from None
         self._started = True
         self.port = self._server.address[1]
+        self._sweeping = asyncio.create_task(self._sweep_while_running(), name="inbox:sweep")
         log.info("FTP inbox listening on %s (folders: %s)", self.url, ", ".join(self.machines))
         if self.config.anonymous:  # an explicit setting; say what it opens
             open_to = [m for m in self.machines if machines_allowed(self.config.anonymous_machines, m)]
@@ -121,4 +173,9 @@ class Inbox:
         if not self._started:
             return
         self._started = False
+        if self._sweeping is not None:
+            self._sweeping.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._sweeping
+            self._sweeping = None
         await close_server(self._server)

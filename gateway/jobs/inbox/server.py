@@ -6,8 +6,15 @@ mixin, so that gateway.jobs.inbox.paths decides what a client may see and write 
 nothing is resolved by aioftp's own path logic. See gateway/jobs/inbox/inbox.py for
 how an upload is judged complete.
 
-aioftp's handler decorators and its graceful stop come from gateway/shims/aioftp_server.py
-(the simulator's program store uses them too).
+aioftp's handler decorators, its graceful stop and the check that a passive data connection
+comes from the session's own address come from gateway/shims/aioftp_server.py (the simulator's
+program store uses them too).
+
+What an attacker on the network meets before it can upload anything: a passive port that takes
+only the session's own address (`pasv_promiscuous`), a session cap per address
+(`max_connections_per_address`), `login_timeout` seconds to log in, and the gateway's failed-login
+lockout (`access.lockout`, shared with OPC UA and the web console: gateway/auth/lockout.py).
+Each refusal is logged and counted in `InboxServer.refusals`.
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ import os
 import ssl
 import time
 import uuid
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -29,6 +36,8 @@ import aioftp
 from aioftp.common import Connection
 from aioftp.server import AbstractUserManager
 
+from gateway.auth.lockout import locked_out, login_failed
+from gateway.auth.ratelimit import LoginLimiter
 from gateway.config.jobs import InboxConfig
 from gateway.errors import PathRefused
 from gateway.jobs.inbox.accounts import Accounts
@@ -39,7 +48,9 @@ from gateway.shims.aioftp_server import (
     PASSIVE_SERVER_STARTED,
     RENAME_FROM_REQUIRED,
     USER_REQUIRED,
+    PeerCheckedServer,
     connection_conditions,
+    same_host,
 )
 
 # Only named here; the job service makes them.
@@ -53,7 +64,7 @@ COMMIT_GRACE = 0.25  # s the control connection must outlive the data connection
 LOGIN_FAILURE_DELAY = 0.5  # s before a wrong password is answered
 MAX_LOGIN_FAILURES = 3  # then the session is closed
 STAGING = ".staging"  # under the inbox root: plain STORs in progress; not visible to clients
-IDLE, GONE = "\x00idle", "\x00gone"  # pseudo-commands from parse_command
+IDLE, GONE, NO_LOGIN = "\x00idle", "\x00gone", "\x00no-login"  # pseudo-commands from parse_command
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,7 +134,7 @@ class _Users(AbstractUserManager):
         return False
 
 
-class InboxServer(BrowseCommands, aioftp.Server):
+class InboxServer(BrowseCommands, PeerCheckedServer):
     def __init__(
         self,
         config: InboxConfig,
@@ -133,6 +144,7 @@ class InboxServer(BrowseCommands, aioftp.Server):
         tls: ssl.SSLContext | None,
         jobs_coming: Callable[[], None] | None = None,
         check_upload: CheckUpload | None = None,
+        logins: LoginLimiter | None = None,
     ) -> None:
         super().__init__(
             _Users(root),
@@ -150,6 +162,13 @@ class InboxServer(BrowseCommands, aioftp.Server):
         self.root = root
         self.accounts = accounts
         self.submit = submit
+        self.pasv_promiscuous = config.pasv_promiscuous
+        #: The failed-login lockout: the gateway's, shared with its other doors (gateway/auth/lockout.py).
+        self.logins = logins if logins is not None else LoginLimiter()
+        #: What was turned away, by reason (for the log's reader, the tests and the drills).
+        self.refusals: Counter[str] = Counter()
+        #: Files an upload is writing to right now (the sweep of stale temporary files leaves them).
+        self.receiving: set[Path] = set()
         #: Called when a client logs in: the job service gets its validation process ready (starting
         #: one takes a few tenths of a second; idempotent, and a process that died is started anew).
         self.jobs_coming = jobs_coming
@@ -170,31 +189,64 @@ class InboxServer(BrowseCommands, aioftp.Server):
                 "xpwd": self.pwd,
                 IDLE: self._idle,
                 GONE: self._gone,
+                NO_LOGIN: self._no_login,
             }
         )
 
     # --- the control connection ------------------------------------------------------------------
 
     async def greeting(self, connection: Connection, rest: str | PurePosixPath) -> bool:
-        connection.session = Session(f"{connection.client_host}:{connection.client_port}")
+        """A new session: turned away (421) when its address has too many already, or the server has."""
+        host = connection.client_host
+        connection.session = Session(
+            f"{host}:{connection.client_port}", login_by=time.monotonic() + self.config.login_timeout
+        )
+        # One address never takes every slot: at most max_connections - 1 of them, whatever the setting.
+        cap = min(self.config.max_connections_per_address, max(1, self.config.max_connections - 1))
+        if sum(1 for c in self.connections.values() if same_host(c.client_host, host)) > cap:
+            self.refusals["too many from one address"] += 1
+            log.warning(
+                "inbox: refused a session from %s: it has %d already (inbox.max_connections_per_address)",
+                host,
+                cap,
+            )
+            connection.response("421", f"too many connections from your address (at most {cap})")
+            return False
+        if self.available_connections.locked():
+            self.refusals["too many connections"] += 1
+            log.warning(
+                "inbox: refused a session from %s: %d sessions open (inbox.max_connections)",
+                host,
+                self.config.max_connections,
+            )
         return await super().greeting(connection, rest)
 
     async def parse_command(
         self, stream: aioftp.StreamIO, censor_commands: tuple[str] = ("pass",)
     ) -> tuple[str, str]:
-        """Read one command. Idle sessions (no command, no transfer) end; a vanished client ends quietly."""
+        """Read one command. Idle sessions (no command, no transfer) end, and so do sessions not logged in
+        within `login_timeout` (whatever they send meanwhile); a vanished client ends quietly."""
         connection = self.connections.get(stream)
         idle = self.config.idle_timeout
         while True:
             session = session_of(connection) if connection is not None else None
-            quiet = time.monotonic() - session.last_activity if session is not None else 0.0
+            if session is not None and session.closing:  # aioftp reads on while the session ends: wait to be
+                await asyncio.get_running_loop().create_future()  # cancelled, so that it ends only once
+            ending = self._ending(session)
+            if ending is not None:
+                return ending, ""
+            wait = idle
+            if session is not None:
+                now = time.monotonic()
+                if not session.busy:
+                    wait = idle - (now - session.last_activity)
+                if session.account is None:
+                    wait = min(wait, session.login_by - now)
             try:
-                async with asyncio.timeout(max(idle - quiet, 0.05)):
+                async with asyncio.timeout(max(wait, 0.05)):
                     line = await stream.reader.readline()
             except TimeoutError:
-                if session is not None and (session.busy or time.monotonic() - session.last_activity < idle):
-                    continue
-                return IDLE, ""
+                continue
             except (OSError, ValueError, asyncio.IncompleteReadError):
                 return GONE, ""
             break
@@ -206,6 +258,20 @@ class InboxServer(BrowseCommands, aioftp.Server):
         cmd, _, rest = text.partition(" ")
         log.debug("%s %s", cmd, "***" if cmd.lower() in censor_commands else rest)
         return cmd.lower(), rest
+
+    def _ending(self, session: Session | None) -> str | None:
+        """NO_LOGIN (not logged in within login_timeout), IDLE (no command and no transfer for idle_timeout)
+        or None; a session that ends is marked as closing."""
+        if session is None:
+            return None
+        now = time.monotonic()
+        if session.account is None and now >= session.login_by:
+            session.closing = True
+            return NO_LOGIN
+        if not session.busy and now - session.last_activity >= self.config.idle_timeout:
+            session.closing = True
+            return IDLE
+        return None
 
     async def response_writer(self, stream: aioftp.StreamIO, response_queue: asyncio.Queue[Any]) -> None:
         """aioftp's, except that a client gone away is not an error (the reader ends the session)."""
@@ -225,9 +291,24 @@ class InboxServer(BrowseCommands, aioftp.Server):
     async def _gone(self, connection: Connection, rest: str) -> bool:
         return False
 
+    async def _no_login(self, connection: Connection, rest: str) -> bool:
+        session = session_of(connection)
+        self.refusals["no login in time"] += 1
+        log.info(
+            "inbox: closed the session of %s: not logged in within %g s (inbox.login_timeout)",
+            session.client if session is not None else connection.client_host,
+            self.config.login_timeout,
+        )
+        connection.response(
+            "421", f"not logged in within {self.config.login_timeout:g} s: closing the session"
+        )
+        return False
+
     async def user(self, connection: Connection, rest: str) -> bool:
         session = session_of(connection)
         if session is not None:
+            if session.account is not None:  # logging in anew: the time to do it starts now
+                session.login_by = time.monotonic() + self.config.login_timeout
             session.login = rest.strip()
             session.account = None
         return await super().user(connection, rest)
@@ -239,11 +320,19 @@ class InboxServer(BrowseCommands, aioftp.Server):
         if connection.future.logged.done():
             connection.response("503", "already logged in")
             return True
-        login = session.login
+        login, address = session.login, connection.client_host
+        wait = locked_out(self.logins, login, address, "FTP")
+        if wait:  # refused unchecked: no scrypt work for the guesser's passwords
+            self.refusals["locked out"] += 1
+            connection.response(
+                "530", f"login refused: too many failed logins from your address; try again in {wait:.0f} s"
+            )
+            return False
         account = await asyncio.to_thread(self.accounts.authenticate, login, rest)
         if account is None:
             session.failures += 1
-            log.warning("inbox: failed login as %r from %s", login, session.client)
+            self.refusals["wrong password"] += 1
+            login_failed(self.logins, login, address, "FTP", "wrong password or unknown user")
             await asyncio.sleep(LOGIN_FAILURE_DELAY)
             connection.response("530", "login incorrect")
             return session.failures < MAX_LOGIN_FAILURES
@@ -256,6 +345,23 @@ class InboxServer(BrowseCommands, aioftp.Server):
             self.jobs_coming()
         connection.response("230", f"logged in; machine folders: {folders}")
         return True
+
+    # --- passive data connections ----------------------------------------------------------------
+
+    def refused_data_connection(self, connection: Connection, host: str) -> None:
+        session = session_of(connection)
+        if session is not None:
+            session.foreign_data += 1
+        self.refusals["foreign data connection"] += 1
+        log.warning(
+            "inbox: refused a data connection from %s to the passive port of %s (%s): only the session's "
+            "own address may connect (inbox.pasv_promiscuous)",
+            host,
+            session.client if session is not None else connection.client_host,
+            (session.account.user if session.account else session.login or "not logged in")
+            if session is not None
+            else "?",
+        )
 
     # --- paths -----------------------------------------------------------------------------------
 
@@ -365,12 +471,19 @@ class InboxServer(BrowseCommands, aioftp.Server):
             return True
         if offset and (not real.is_file() or offset > real.stat().st_size):
             raise PathRefused(f"cannot resume {place.virtual} at byte {offset}", "554")
+        # Where the new bytes start: REST's offset, the end of the file for APPE, else 0. The size limit
+        # counts the whole file, so appends cannot grow a temporary file past max_file_size.
+        start = offset if offset or mode != "ab" or not real.is_file() else real.stat().st_size
+        if start and start >= self.config.max_file_size:
+            raise PathRefused(
+                f"{place.name} already has the {int(self.config.max_file_size)} bytes allowed", "552"
+            )
         session.files += 1
         target = real if temporary else self._staging()
         if temporary:
             real.parent.mkdir(exist_ok=True)
         task = asyncio.create_task(
-            self._receive(connection, session, place, target, temporary, mode, offset), name="inbox:stor"
+            self._receive(connection, session, place, target, temporary, mode, start), name="inbox:stor"
         )
         connection.extra_workers.add(task)
         connection.response("150", "ready to receive")
@@ -387,23 +500,22 @@ class InboxServer(BrowseCommands, aioftp.Server):
         target: Path,
         temporary: bool,
         mode: str,
-        offset: int,
+        start: int,
     ) -> bool:
-        """The data side of STOR/APPE; answers the client itself and never raises."""
+        """The data side of STOR/APPE (new bytes from `start`); answers the client itself, never raises."""
         assert place.machine is not None  # a file's place (`_file`) names its machine
         handed_over = False
         session.busy += 1
+        self.receiving.add(target)
         try:
             stream = await self._data_connection(connection)
             if stream is None:
                 return True
             self._waiting.pop(target, None)  # a new upload, an append or a resume: an earlier check is void
             check = (
-                self.check_upload(place.machine)
-                if self.check_upload and not offset and mode == "wb"
-                else None
+                self.check_upload(place.machine) if self.check_upload and not start and mode == "wb" else None
             )
-            size, digest = await self._copy(stream, place, target, mode, offset, check)
+            size, digest = await self._copy(stream, place, target, mode, start, check)
             if temporary:
                 if check is not None:
                     self._wait(target, _Checked(place.machine, size, digest, _stamp(target), check))
@@ -444,8 +556,13 @@ class InboxServer(BrowseCommands, aioftp.Server):
         finally:
             session.busy -= 1
             session.last_activity = time.monotonic()
+            self.receiving.discard(target)
             if not handed_over and not temporary:
                 target.unlink(missing_ok=True)  # noqa: ASYNC240 - one unlink of a failed upload's file
+
+    def forget(self, path: Path) -> None:
+        """`path` was deleted (a stale temporary upload): a check kept for its rename is void."""
+        self._waiting.pop(path, None)
 
     def _wait(self, path: Path, checked: _Checked) -> None:
         """Keep the check of an upload to a temporary name for its rename (the oldest go beyond a few)."""
@@ -459,23 +576,25 @@ class InboxServer(BrowseCommands, aioftp.Server):
         place: InboxPath,
         target: Path,
         mode: str,
-        offset: int,
+        start: int,
         check: UploadCheck | None = None,
     ) -> tuple[int, str]:
-        """Data connection to file, within the size limit, fed to `check` too; (size, SHA-256) of it."""
+        """Data connection to file from byte `start`, the whole file within the size limit, fed to `check`
+        too; (size, SHA-256) of what arrived. Too large: the file is cut back to `start` bytes."""
         digest = hashlib.sha256()
         limit = int(self.config.max_file_size)
-        size = offset
+        size = start
         # The blocks go to the page cache as they arrive, in the loop (a thread hop per block costs more than
         # the write); the one fsync at the end blocks the loop for as long as the disk takes.
-        with open(target, "r+b" if offset else mode) as out:  # noqa: ASYNC230 - see above
-            if offset:
-                out.seek(offset)
+        with open(target, "r+b" if start else mode) as out:  # noqa: ASYNC230 - see above
+            if start:
+                out.seek(start)
                 out.truncate()
             async with stream:
                 async for block in stream.iter_by_block(BLOCK):
                     size += len(block)
                     if size > limit:
+                        out.truncate(start)
                         raise _TooLarge
                     out.write(block)
                     digest.update(block)

@@ -25,6 +25,7 @@ from typing import Any, Self
 from urllib.parse import quote, urlsplit
 
 from gateway import __version__
+from gateway.auth.ratelimit import LoginLimiter
 from gateway.auth.tokens import TokenStore, tokens_path
 from gateway.config.http import HttpConfig
 from gateway.config.loader import Config
@@ -59,14 +60,24 @@ LIVE_PATH = "/api/live"
 class WebSink:
     name = "web"
 
-    def __init__(self, tree: VariableTree, config: Config, http: HttpConfig, ports: Ports) -> None:
+    def __init__(
+        self,
+        tree: VariableTree,
+        config: Config,
+        http: HttpConfig,
+        ports: Ports,
+        *,
+        logins: LoginLimiter | None = None,  # the gateway's shared lockout (gateway/auth/lockout.py)
+    ) -> None:
         self.tree = tree
         self.config = config
         self.http = http
         self.ports = ports
         self.started = time.monotonic()
         self.sessions = Sessions(
-            config.gateway.user_directory(), TokenStore(tokens_path(config.state_dir)), idle=http.session_idle
+            config.gateway.user_directory(logins),
+            TokenStore(tokens_path(config.state_dir)),
+            idle=http.session_idle,
         )
         self.latest_jobs: dict[str, Mapping[str, Any]] = {}  # machine -> latest job record (for drip-feed)
         self.api = Api(tree, config, http, ports, started=self.started)

@@ -9,9 +9,10 @@ shows progress), and again in a "reliability drills" section at the end.
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
@@ -31,6 +32,9 @@ COUNTS: dict[str, tuple[int, int]] = {
     "dnc_cuts": (3, 30),  # device-server connections cut mid-drip
     "slow_consumers": (10_000, 150_000),  # changes that stream past the stalled consumers
     "security_rounds": (1, 20),  # rounds of tests/corpus/mqtt/response_topics.yaml in the security drill
+    "ftp_races": (6, 200),  # uploads whose passive port another host connects to first (test_security_ftp)
+    "held_addresses": (2, 20),  # addresses that hold inbox sessions open without logging in
+    "guessing_addresses": (2, 30),  # addresses that guess passwords on the web console and the FTP inbox
 }
 
 
@@ -41,6 +45,30 @@ def count(drill: str) -> int:
         return int(override)
     small, soak = COUNTS[drill]
     return soak if SCALE == "soak" else small
+
+
+class Records(logging.Handler):
+    """Every log record of a run, from every logger (the gateway's, and the libraries' under it)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+@pytest.fixture
+def records() -> Iterator[Records]:
+    """The run's log records, INFO and up (the root logger set to INFO meanwhile)."""
+    handler = Records()
+    root = logging.getLogger()
+    old = root.level
+    root.setLevel(logging.INFO)
+    root.addHandler(handler)
+    yield handler
+    root.removeHandler(handler)
+    root.setLevel(old)
 
 
 _LINES: list[str] = []

@@ -35,6 +35,10 @@ from tests.integration.mqtt.conftest import mqtt_config
 from tests.waiting import free_port
 
 MACHINE = "laser-sim"
+# Inbox limits small enough for tests/corpus/ftp/attacks.yaml to reach quickly: appends past max_file_size,
+# sessions held until login_timeout, a transfer that waits for a data connection from its own address.
+ATTACK_LIMITS = {"max_file_size": "1MiB", "login_timeout": 3, "max_connections_per_address": 4,
+                 "transfer_timeout": 5}  # fmt: skip
 
 
 def laser_sim_mapping(sim_port: int, ftp_port: int) -> dict[str, Any]:
@@ -104,6 +108,10 @@ class CorpusRig:
         return self.gateway.jobs.inbox.port  # type: ignore[no-any-return]
 
     @property
+    def inbox(self) -> Any:
+        return self.gateway.jobs.inbox
+
+    @property
     def queue(self) -> Any:
         return self.gateway.jobs.queue
 
@@ -140,7 +148,7 @@ async def corpus_rig(
         "state_dir": str(tmp_path / "state"),
         "access": {"copydata_role": "operator"},
         "inbox": {"host": "127.0.0.1", "port": 0,
-                  "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}]},
+                  "accounts": [{"user": USER, "password_hash": PASSWORD_HASH}], **ATTACK_LIMITS},
     }).model_copy(update={"mqtt": mqtt_config(mqtt_port), "sparkplug": SparkplugConfig()})  # fmt: skip
     async with Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=20.0, store=store) as sim:
         for name in machines.values():

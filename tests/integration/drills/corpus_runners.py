@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import ftplib
+import hashlib
 import io
 import json
 import logging
@@ -21,11 +22,14 @@ import yaml
 
 from gateway.config.validation import ValidationRules
 from gateway.errors import ConfigError
+from gateway.jobs.inbox.inbox import Inbox
 from gateway.jobs.queue.store import JobState
 from gateway.jobs.validation.pipeline import validate_program
+from tests import ftp_attacks as attacks
+from tests.ftp_attacks import Race
 from tests.integration.drills.corpus_rig import MACHINE, CorpusRig
 from tests.integration.drills.processes import BIN, ROOT, clean_env
-from tests.integration.jobs.conftest import PASSWORD, USER, in_thread
+from tests.integration.jobs.conftest import PASSWORD, USER, in_thread, program
 from tests.integration.mqtt.conftest import Recorder
 from tests.unit.config.test_corpus import CASES as MAPPING_CASES
 from tests.unit.config.test_corpus import expectations
@@ -265,13 +269,14 @@ def ftp_case(port: int, case: dict[str, Any], program: bytes) -> list[str]:
         ftp.cwd(case.get("cwd", f"/{MACHINE}"))
         for command in case["commands"]:
             verb = command.split(" ", 1)[0].upper()
+            if verb not in ("STOR", "STOU", "APPE", "RETR"):
+                replies.append(attacks.reply(ftp, command))
+                continue
             try:
-                if verb in ("STOR", "STOU", "APPE"):
-                    replies.append(ftp.storbinary(command, io.BytesIO(program)))
-                elif verb == "RETR":
+                if verb == "RETR":
                     replies.append(ftp.retrbinary(command, lambda _: None))
                 else:
-                    replies.append(ftp.sendcmd(command))
+                    replies.append(ftp.storbinary(command, io.BytesIO(program)))
             except ftplib.Error as exc:
                 replies.append(str(exc))
     finally:
@@ -300,6 +305,156 @@ async def run_ftp(
                  if "escape" in j.filename and j.state is not JobState.REJECTED]  # fmt: skip
     kept_out = not stray and not delivered and outside.read_bytes() == program
     out.append(Outcome("ftp", "nothing escaped", kept_out, f"stray files {stray}, jobs {delivered}"))
+    return out
+
+
+# --- attacks on the inbox's sessions and data connections (tests/corpus/ftp/attacks.yaml) ---------------
+
+
+NO_ATTACKER_JOB = "no job of an attacker's program"  # the summary outcome of run_ftp_attacks
+
+
+def filler(size: int) -> bytes:
+    """`size` bytes of G-code lines, for appends."""
+    line = b"G1 X1 Y1 F1200\n"
+    return (line * (size // len(line) + 1))[:size]
+
+
+def _append(ftp: ftplib.FTP, name: str, data: bytes) -> str:
+    try:
+        return ftp.storbinary(f"APPE {name}", io.BytesIO(data))
+    except ftplib.Error as exc:
+        return str(exc)
+    except OSError:  # the server cut the data connection: its reason follows on the control connection
+        try:
+            return ftp.getresp()
+        except ftplib.Error as exc:
+            return str(exc)
+
+
+def attack_race(port: int, case: dict[str, Any], victim: bytes, attacker: bytes) -> Race:
+    ftp = attacks.login(port, USER, PASSWORD)
+    try:
+        ftp.cwd(f"/{MACHINE}")
+        return attacks.race_stor(ftp, case["file"], victim, attacker, verb=case.get("verb", "PASV"),
+                                 victim_connects=case.get("victim_connects", True),
+                                 attacker_source=case["attacker"])  # fmt: skip
+    finally:
+        ftp.close()
+
+
+def attack_before_login(port: int, case: dict[str, Any]) -> list[str]:
+    ftp = attacks.connect(port, source=case["source"])
+    try:
+        return [attacks.reply(ftp, command) for command in case["commands"]]
+    finally:
+        ftp.close()
+
+
+def attack_hold(
+    port: int, case: dict[str, Any], cap: int, login_timeout: float
+) -> tuple[list[str], list[str]]:
+    """(the refusals of the sessions past the cap, how each held session ended)"""
+    held, refused = attacks.open_sessions(port, cap + case["extra"], source=case["source"])
+    try:
+        ends = attacks.noop_until_closed(held, login_timeout + 20)
+        return refused, [e.text if e is not None else "still open" for e in ends]
+    finally:
+        for ftp in held:
+            ftp.close()
+
+
+def attack_guess(port: int, case: dict[str, Any], failures: int) -> tuple[list[str], list[str]]:
+    """(the answers to the wrong passwords, the answers to two right ones after them)"""
+    user = USER if case["user"] == "account" else case["user"]
+    guesses: list[str] = []
+    while len(guesses) < failures:
+        ftp = attacks.connect(port, source=case["source"])
+        try:
+            for _ in range(min(3, failures - len(guesses))):  # the inbox ends a session after 3 failures
+                try:
+                    ftp.login(user, f"guess-{len(guesses)}")
+                    guesses.append("230 logged in")
+                except ftplib.Error as exc:
+                    guesses.append(str(exc))
+        finally:
+            ftp.close()
+    right = []
+    for _ in range(2):
+        try:
+            attacks.login(port, USER, PASSWORD, source=case["source"]).close()
+            right.append("230 logged in")
+        except ftplib.Error as exc:
+            right.append(str(exc))
+    return guesses, right
+
+
+def attack_appe(port: int, case: dict[str, Any], limit: int) -> tuple[list[str], list[int]]:
+    """(each APPE's answer, the file's size after each)"""
+    ftp = attacks.login(port, USER, PASSWORD)
+    replies, sizes = [], []
+    try:
+        ftp.cwd(f"/{MACHINE}")
+        for fraction in case["sizes"]:
+            replies.append(_append(ftp, case["file"], filler(int(fraction * limit))))
+            sizes.append(ftp.size(case["file"]) or 0)
+    finally:
+        ftp.close()
+    return replies, sizes
+
+
+def _matches(reply: str, expect: dict[str, Any]) -> bool:
+    return reply.startswith(expect["code"]) and expect.get("fragment", "") in reply
+
+
+async def run_ftp_attacks(inbox: Inbox, queue: Any, cases: list[dict[str, Any]]) -> list[Outcome]:
+    """Each attack against the running `inbox` (jobs in `queue`); the last outcome: no job ever held an
+    attacker's program."""
+    out = []
+    config = inbox.config
+    limit, cap = int(config.max_file_size), config.max_connections_per_address
+    theirs: set[str] = set()
+    for case in cases:
+        kind, expect = case["kind"], case["expect"]
+        if kind == "race":
+            victim, attacker = program(f"victim {case['name']}"), program(f"attacker {case['name']}")
+            theirs.add(hashlib.sha256(attacker).hexdigest())
+            before = inbox.refusals["foreign data connection"]
+            race = await in_thread(attack_race, inbox.port, case, victim, attacker)
+            ok = _matches(race.final, expect) and inbox.refusals["foreign data connection"] == before + 1
+            if ok and race.final.startswith("226 J"):
+                job = queue.get(int(race.final.split()[1][1:]))
+                ok = job.sha256 == hashlib.sha256(victim).hexdigest() and job.user == USER
+            out.append(Outcome("ftp-attack", case["name"], ok, f"{race}"[:300]))
+        elif kind == "before-login":
+            replies = await in_thread(attack_before_login, inbox.port, case)
+            wrong = [r for r in replies if not _matches(r, expect)]
+            out.append(
+                Outcome("ftp-attack", case["name"], not wrong, f"not refused as expected: {wrong}"[:300])
+            )
+        elif kind == "hold":
+            refused, ends = await in_thread(attack_hold, inbox.port, case, cap, config.login_timeout)
+            ok = (len(refused) == case["extra"] and all(_matches(r, expect) for r in refused)
+                  and len(ends) == cap and all("not logged in within" in e for e in ends))  # fmt: skip
+            out.append(Outcome("ftp-attack", case["name"], ok, f"refused {refused}, held ended {ends}"[:300]))
+        elif kind == "guess":
+            guesses, right = await in_thread(attack_guess, inbox.port, case, inbox.logins.failures)
+            ok = all(g.startswith("530 login incorrect") for g in guesses) and all(
+                _matches(r, expect) for r in right
+            )
+            out.append(Outcome("ftp-attack", case["name"], ok, f"guesses {guesses}, then {right}"[:300]))
+        elif kind == "appe":
+            replies, sizes = await in_thread(attack_appe, inbox.port, case, limit)
+            kept = sum(
+                int(f * limit) for f, r in zip(case["sizes"], replies, strict=True) if r.startswith("226")
+            )
+            ok = ([r[:3] for r in replies] == expect["codes"] and max(sizes) <= limit
+                  and sizes[-1] == kept)  # fmt: skip
+            out.append(Outcome("ftp-attack", case["name"], ok, f"replies {replies}, sizes {sizes}"[:300]))
+        else:
+            out.append(Outcome("ftp-attack", case["name"], False, f"unknown kind {kind!r}"))
+    leaked = [j.id for j in queue.list(limit=10_000) if j.sha256 in theirs]
+    out.append(Outcome("ftp-attack", NO_ATTACKER_JOB, not leaked, f"jobs {leaked}"))
     return out
 
 

@@ -4,8 +4,10 @@ gateway serves on afterwards.
 tests/corpus/ holds the inputs and, beside each, the answer it must get:
 mappings/ (`# expect:` headers; through the loader and one `cnc-gateway check`), gcode/ (`(expect: …)`
 headers; uploaded to the FTP inbox), mqtt/set.yaml and mqtt/commands.yaml (published with paho; answered on
-`…/result`), ftp/paths.yaml (ftplib sessions), copydata/frames.yaml (TCP connections to the COPYDATA target),
-sparkplug/commands.yaml (NCMD and DCMD published with paho to the gateway's edge node; each counted by kind).
+`…/result`), ftp/paths.yaml (ftplib sessions), ftp/attacks.yaml (passive-port races from a second loopback
+address, commands before a login, held sessions, password guesses, appends past the limit),
+copydata/frames.yaml (TCP connections to the COPYDATA target), sparkplug/commands.yaml (NCMD and DCMD
+published with paho to the gateway's edge node; each counted by kind).
 The gateway (corpus_rig.py) runs the whole time, with the simulator and a real Mosquitto. At the end it must
 still serve: OPC UA values Good, an MQTT write carried out and mirrored, a valid job delivered, a valid
 COPYDATA frame written; and its log must hold no error and no traceback.
@@ -24,36 +26,13 @@ from asyncua import Client
 
 from gateway.jobs.queue.store import JobState
 from tests.integration.drills import corpus_runners as runners
-from tests.integration.drills.conftest import Report
+from tests.integration.drills.conftest import Records, Report
 from tests.integration.drills.corpus_rig import MACHINE, CorpusRig, corpus_rig
 from tests.integration.jobs.conftest import GOOD, in_thread
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
 from tests.waiting import wait_until
 
 OVERRIDE_ID = 6  # Feed/Override's COPYDATA id in mappings/laser-sim.yaml
-
-
-class Records(logging.Handler):
-    """Every log record of the run, from every logger (the gateway's, and the libraries' under it)."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.INFO)
-        self.records: list[logging.LogRecord] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.records.append(record)
-
-
-@pytest.fixture
-def records() -> Records:
-    handler = Records()
-    root = logging.getLogger()
-    old = root.level
-    root.setLevel(logging.INFO)
-    root.addHandler(handler)
-    yield handler
-    root.removeHandler(handler)
-    root.setLevel(old)
 
 
 @pytest.mark.timeout(240)
@@ -80,6 +59,7 @@ async def test_every_bad_input_gets_its_clear_error_and_the_gateway_serves_on(
         outcomes += await runners.run_mqtt(mqtt, "mqtt-set", set_cases)
         outcomes += await runners.run_mqtt(mqtt, "mqtt-command", commands)
         outcomes += await runners.run_ftp(rig, runners.load("ftp/paths.yaml"), GOOD, secret)
+        outcomes += await runners.run_ftp_attacks(rig.inbox, rig.queue, runners.load("ftp/attacks.yaml"))
         outcomes += await runners.run_gcode(rig)
         outcomes += await runners.run_copydata(
             rig, runners.load("copydata/frames.yaml"), mqtt, records.records
@@ -90,7 +70,8 @@ async def test_every_bad_input_gets_its_clear_error_and_the_gateway_serves_on(
         assert not rig.run.done(), "the gateway stopped"
 
     failed = [o for o in outcomes if not o.ok]
-    kinds = Counter(o.kind for o in outcomes if "(all files)" not in o.name and o.name != "nothing escaped")
+    summaries = ("nothing escaped", runners.NO_ATTACKER_JOB)
+    kinds = Counter(o.kind for o in outcomes if "(all files)" not in o.name and o.name not in summaries)
     controls = sum(1 for o in outcomes if o.kind == "gcode" and "valid control" in o.detail)
     errors = [r for r in records.records if r.levelno >= logging.ERROR or r.exc_info]
     drill_report(

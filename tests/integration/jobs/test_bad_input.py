@@ -54,8 +54,8 @@ async def test_wrong_passwords_are_refused_and_a_third_ends_the_session(
             except (EOFError, OSError, ftplib.Error) as exc:
                 out.append(type(exc).__name__)
             for user, password in (("nobody", PASSWORD), ("anonymous", "me@example.com")):
-                ftp = ftplib.FTP()
-                ftp.connect("127.0.0.1", h.port, timeout=20)
+                ftp = ftplib.FTP()  # from another address: five failures from one would lock it out
+                ftp.connect("127.0.0.1", h.port, timeout=20, source_address=("127.0.0.2", 0))
                 try:
                     ftp.login(user, password)
                 except ftplib.error_perm as exc:

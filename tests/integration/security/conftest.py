@@ -36,17 +36,19 @@ def users_config() -> list[dict[str, str]]:
     ]
 
 
-def laser_mapping(sim_port: int, ftp_port: int, **update: Any) -> MachineMapping:
+def laser_mapping(
+    sim_port: int, ftp_port: int, *, jobs: dict[str, Any] | None = None, **update: Any
+) -> MachineMapping:
+    """mappings/laser-sim.yaml against a simulator on these ports; `jobs` updates its jobs section."""
     mapping = load_mapping(
         ROOT / "mappings" / "laser-sim.yaml",
         environ={"LASER_SIM_ENDPOINT": f"opc.tcp://127.0.0.1:{sim_port}", "LASER_SIM_COPYDATA_PORT": "0"},
     )
     driver = mapping.driver.model_copy(update={"watchdog_interval": 0.5})
     assert mapping.jobs is not None
-    jobs = mapping.jobs.model_copy(
-        update={"controller": mapping.jobs.controller.model_copy(update={"port": ftp_port})}
-    )
-    return mapping.model_copy(update={"driver": driver, "jobs": jobs, **update})
+    controller = mapping.jobs.controller.model_copy(update={"port": ftp_port})
+    section = mapping.jobs.model_copy(update={"controller": controller, **(jobs or {})})
+    return mapping.model_copy(update={"driver": driver, "jobs": section, **update})
 
 
 @dataclass
@@ -76,9 +78,11 @@ async def secure_gateway(
     gateway: dict[str, Any] | None = None,
     mapping: dict[str, Any] | None = None,
     opcua: dict[str, Any] | None = None,
+    jobs: dict[str, Any] | None = None,
 ) -> AsyncIterator[Rig]:
     """The gateway (users configured, so access control is on), and the simulator unless told otherwise.
-    `opcua` replaces the OPC UA security settings (default: the None endpoint only, no certificate)."""
+    `opcua` replaces the OPC UA security settings (default: the None endpoint only, no certificate);
+    `jobs` updates the machine's jobs section."""
     sim_port, ftp_port, port = free_port(), free_port(), free_port()
     state = tmp_path / "state"
     settings: dict[str, Any] = {
@@ -90,7 +94,7 @@ async def secure_gateway(
     settings.update(gateway or {})
     config = Config(
         GatewayConfig.model_validate(settings),
-        (laser_mapping(sim_port, ftp_port, **(mapping or {})),),
+        (laser_mapping(sim_port, ftp_port, jobs=jobs, **(mapping or {})),),
         tmp_path,
     )
     sim = None

@@ -14,6 +14,7 @@ import pytest
 
 from simulator.ftp_store import FtpStore
 from simulator.store import DirectoryStore
+from tests.ftp_attacks import ATTACKER, login, race_stor
 from tests.waiting import free_port
 
 USER, PASSWORD = "cnc", "s3cret"
@@ -117,3 +118,24 @@ async def test_closing_with_a_client_still_connected_is_quiet(
         await asyncio.to_thread(client.pwd)
     client.close()
     assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")]
+
+
+@pytest.mark.parametrize("verb", ["PASV", "EPSV"])
+async def test_a_data_connection_from_another_address_is_refused(
+    store: tuple[FtpStore, DirectoryStore], verb: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The gateway delivers jobs to this store: a host that races it to the passive port must not get
+    its own program stored in their place (the demo publishes the store's port)."""
+    ftp, programs = store
+    ours, theirs = b"G0 X1\nM30\n", b"G0 X999\nM30\n"
+
+    def run() -> object:
+        with login(ftp.port, USER, PASSWORD) as c:
+            c.cwd("/DATA/Programs")
+            return race_stor(c, "part.nc", ours, theirs, verb=verb)
+
+    race = await asyncio.to_thread(run)
+    assert race.final.startswith("226"), race
+    assert programs.read("part.nc") == ours.decode()
+    assert ftp.foreign_data_connections == 1
+    assert f"refused a data connection from {ATTACKER}" in caplog.text
