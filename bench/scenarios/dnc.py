@@ -53,11 +53,13 @@ figures and targets carry the label.
 from __future__ import annotations
 
 import statistics
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bench.agents.protocol import percentiles
 from bench.context import Context
+from bench.gcode_gen import laser_program, paced_program
 from bench.procs import ROOT, Agent
 
 SECTION = "Serial DNC: the gateway's serial lines → simulated device servers"
@@ -75,8 +77,6 @@ SINGLE_SHARE = 0.6  # of the line, what a single line's machine really consumes
 FLEET_RATE = 1000.0  # characters per second each fleet machine really consumes
 AFTER_DC3_FACTOR = 0.5  # the after-DC3 drips' machine, relative to the estimate
 AFTER_DC3_RATE = 6400.0  # characters per second it consumes (61 % of 115,200 baud)
-FEED = 600  # mm/min of the paced programs' moves: F600 x 8 = 4,800 mm/min, below the simulator's rapid
-RAPID = 30_000.0  # mm/min, the simulator's (simulator/machine.py): any feed is capped there
 
 
 def line_rate(baud: float) -> float:
@@ -98,32 +98,6 @@ def drip_program(size: int, *, number: int, move: float, feed: int, pad: int) ->
         block = f"G1 X{x:.3f} Y100 F{feed} ({filler})\n".encode()
         out.append(block)
         length += len(block)
-    out.append(b"M30\n%\n")
-    return b"".join(out)
-
-
-def paced_program(size: int, *, number: int, factor: float, rate: float, pad: int = 48) -> bytes:
-    """About `size` bytes of equal feed moves at F600 that a machine at `factor` times the estimate (feed
-    override 100 x factor) consumes at `rate` characters per second in real time: each block of `pad`
-    bytes is estimated at pad * factor / rate seconds (length / F), and runs `factor` times faster."""
-    if FEED * factor > RAPID:
-        raise ValueError(f"F{FEED} at {factor:g}x would be capped at the simulator's rapid")
-    block = len(f"G1 X{0.0:09.3f} Y100 F{FEED} ()\n")
-    filler = "P" * max(0, pad - block)
-    pad = block + len(filler)
-    move = pad * factor / rate * FEED / 60.0  # mm
-    if move > 2000.0:
-        raise ValueError(f"{move:.0f} mm moves do not fit the table")
-    head = f"%\nO{number:04d} (BENCH PACED {factor:g}X)\nG21 G90 G17\nG0 X100 Y100\n".encode()
-    out, length = [head], len(head)
-    x, sign = 100.0, 1.0
-    while length < size:
-        if not 50.0 <= x + sign * move <= 2900.0:
-            sign = -sign
-        x += sign * move
-        line = f"G1 X{x:09.3f} Y100 F{FEED} ({filler})\n".encode()
-        out.append(line)
-        length += len(line)
     out.append(b"M30\n%\n")
     return b"".join(out)
 
@@ -156,38 +130,53 @@ async def _run_one(ctx: Context, label: str, source: str | None, runs: dict[str,
         "this_checkout": str(ROOT),
     }
     runs[label] = details
-    tag = Tag(label, gw.ready.get("commit") or "")
-    ctx.log(f"{tag.say}gateway from {details['gateway']} ({details['commit'] or 'no git'})")
+    run = Run(ctx, sim, gw, folder, details, label, gw.ready.get("commit") or "")
+    run.log(f"gateway from {details['gateway']} ({details['commit'] or 'no git'})")
     try:
-        await _load(ctx, tag, sim, gw, folder, details, size=40_000 if quick else 1_000_000)
+        await _load(run, size=40_000 if quick else 1_000_000)
         details["after_dc3"] = {}
         for kind in KINDS:
-            await _after_dc3(ctx, tag, sim, gw, folder, details, kind, size=40_000 if quick else 5_000_000)
+            await _after_dc3(run, kind, size=40_000 if quick else 5_000_000)
         details["single"] = {}
         for factor in FACTORS:
-            await _single(ctx, tag, sim, gw, folder, details, factor, seconds=8.0 if quick else 60.0)
-        await _fleet(ctx, tag, sim, gw, folder, details, seconds=10.0 if quick else 60.0)
-        await _restart(ctx, tag, sim, gw, folder, details, repeats=3 if quick else 5)
+            await _single(run, factor, seconds=8.0 if quick else 60.0)
+        await _fleet(run, seconds=10.0 if quick else 60.0)
+        await _restart(run, repeats=3 if quick else 5)
     finally:
         await gw.stop()
         await sim.stop()
 
 
-class Tag:
-    """A run's label in figure keys, sections and log lines (nothing when there is one run)."""
+@dataclass
+class Run:
+    """One run of the scenario (one per --dnc-gateway): its agents, folder and details, and its label in
+    figure keys, sections and log lines (nothing when there is one run)."""
 
-    def __init__(self, label: str, commit: str) -> None:
-        self.label = label
-        self.key = f"dnc.{label}." if label else "dnc."
-        self.section = f"{SECTION} [{label}: {commit}]" if label else SECTION
-        self.say = f"[{label}] " if label else ""
+    ctx: Context
+    sim: Agent
+    gw: Agent
+    folder: Path
+    details: dict[str, Any]
+    label: str = ""
+    commit: str = ""
+
+    @property
+    def key(self) -> str:
+        return f"dnc.{self.label}." if self.label else "dnc."
+
+    @property
+    def section(self) -> str:
+        return f"{SECTION} [{self.label}: {self.commit}]" if self.label else SECTION
+
+    def log(self, text: str) -> None:
+        self.ctx.log(f"[{self.label}] {text}" if self.label else text)
+
+    def add(self, key: str, label: str, value: float | None, unit: str, **more: Any) -> None:
+        self.ctx.results.add(self.key + key, self.section, label, value, unit, **more)
 
 
-async def _load(
-    ctx: Context, tag: Tag, sim: Agent, gw: Agent, folder: Path, details: dict[str, Any], *, size: int
-) -> None:
-    from bench.gcode_gen import laser_program
-
+async def _load(run: Run, *, size: int) -> None:
+    sim, gw, folder, details = run.sim, run.gw, run.folder, run.details
     path = folder / "load.nc"
     path.write_bytes(laser_program(size, number=4711))
     rate = line_rate(BAUD)
@@ -200,14 +189,10 @@ async def _load(
         share = (chars - 1) / (last - first) / rate if chars > 1 and last > first else None
         seconds = answer["seconds"]
         out[who] = {"share": share, "chars": chars, "seconds": seconds, "loaded": face["last_loaded"]}
-        ctx.log(
-            f"{tag.say}load {who}: {chars:,} chars, {share or 0:.1%} of the line rate "
-            f"({answer['seconds']:.1f} s)"
-        )
+        run.log(f"load {who}: {chars:,} chars, {share or 0:.1%} of the line rate ({answer['seconds']:.1f} s)")
     details["load"] = out
-    ctx.results.add(
-        tag.key + "load.share",
-        tag.section,
+    run.add(
+        "load.share",
         f"load mode, {out['size'] / 1e6:.2f} MB at 115,200 baud 7E2: share of the line rate",
         _pct(out["gateway"]["share"]),
         "%",
@@ -217,21 +202,12 @@ async def _load(
     )
 
 
-async def _after_dc3(
-    ctx: Context,
-    tag: Tag,
-    sim: Agent,
-    gw: Agent,
-    folder: Path,
-    details: dict[str, Any],
-    kind: str,
-    *,
-    size: int,
-) -> None:
+async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
+    sim, gw, folder, details = run.sim, run.gw, run.folder, run.details
     path = folder / f"after-dc3-{kind}.nc"
     # 64-byte blocks the machine cuts at half the estimate, 6,400 bytes/s (61 % of the line's pace): the
     # estimate (12,800 bytes/s) is more than the line carries, so the buffer fills and DC3/DC1 cycle.
-    path.write_bytes(paced_program(size, number=42, factor=AFTER_DC3_FACTOR, rate=AFTER_DC3_RATE, pad=64))
+    path.write_bytes(paced_program(size, factor=AFTER_DC3_FACTOR, rate=AFTER_DC3_RATE, pad=64, number=42))
     setup = {
         "count": 1,
         "baud": BAUD,
@@ -285,8 +261,8 @@ async def _after_dc3(
         "parity_errors": face["parity_errors"],
     }
     details["after_dc3"][kind] = out
-    ctx.log(
-        f"{tag.say}after DC3, {kind} device server: {face['dc3_sent']:,} DC3s in {answer['seconds']:.0f} s "
+    run.log(
+        f"after DC3, {kind} device server: {face['dc3_sent']:,} DC3s in {answer['seconds']:.0f} s "
         f"(the job's record: {job['dc3']} DC3); sent after DC3 p50 {sent['p50']} p99 {sent['p99']} max "
         f"{sent['max']} ({timed['writes']:,} writes; the stamps' widest span: p99 {upper['p99']} max "
         f"{upper['max']}); reached the device server after DC3 p99 {arrived['p99']} max {arrived['max']}; "
@@ -294,36 +270,32 @@ async def _after_dc3(
         f"level {face['highest']:,}); failures {answer['failures']}"
     )
     note = f"{out['size'] / 1e6:.2f} MB drip at 115,200 baud, {sent['n']:,} DC3s, a {kind} device server"
-    key = f"{tag.key}dc3.{kind}."
-    ctx.results.add(
+    key = f"dc3.{kind}."
+    run.add(
         key + "p99",
-        tag.section,
         f"characters sent after the controller's DC3, p99 ({kind})",
         sent["p99"],
         "chars",
         note=note,
     )
-    ctx.results.add(
+    run.add(
         key + "max",
-        tag.section,
         f"characters sent after the controller's DC3, max ({kind})",
         sent["max"],
         "chars",
         note=f"p50 {sent['p50']}; with the simulator's stamps' widest span, p99 {upper['p99']} max "
         f"{upper['max']}",
     )
-    ctx.results.add(
+    run.add(
         key + "received_p99",
-        tag.section,
         f"characters the controller received after its DC3, p99 ({kind})",
         got["p99"],
         "chars",
         note=f"max {got['max']}; reached the device server after it p99 "
         f"{arrived['p99']} max {arrived['max']} (the controller's counts: a busy simulator's lateness adds)",
     )
-    ctx.results.add(
+    run.add(
         key + "overruns",
-        tag.section,
         f"buffer overruns (alarm 087) over the drip ({kind})",
         face["overruns"],
         "",
@@ -332,20 +304,11 @@ async def _after_dc3(
     )
 
 
-async def _single(
-    ctx: Context,
-    tag: Tag,
-    sim: Agent,
-    gw: Agent,
-    folder: Path,
-    details: dict[str, Any],
-    factor: float,
-    *,
-    seconds: float,
-) -> None:
+async def _single(run: Run, factor: float, *, seconds: float) -> None:
+    sim, gw, folder, details = run.sim, run.gw, run.folder, run.details
     rate = SINGLE_SHARE * line_rate(SINGLE_BAUD)
     path = folder / f"single-{factor:g}x.nc"
-    path.write_bytes(paced_program(int(rate * seconds), number=300, factor=factor, rate=rate))
+    path.write_bytes(paced_program(int(rate * seconds), factor=factor, rate=rate, pad=48, number=300))
     override = round(100 * factor)
     setup = {"count": 1, "baud": SINGLE_BAUD, "mode": "drip", "overrides": override, **LEVELS}
     (url,) = (await sim.ask("setup", **setup))["urls"]
@@ -377,14 +340,13 @@ async def _single(
     }
     details["single"][f"{factor:g}"] = out
     end = "stopped unfinished" if out["unfinished"] else "ended"
-    ctx.log(
-        f"{tag.say}one line, machine at {factor:g}x the estimate ({rate:,.0f} chars/s): "
+    run.log(
+        f"one line, machine at {factor:g}x the estimate ({rate:,.0f} chars/s): "
         f"{face['starvations']} starvations ({face['starved_seconds']:.2f} s), {face['overruns']} overruns, "
         f"{end} after {took:.1f} s of a nominal {seconds:g} s; failures {answer['failures']}"
     )
-    ctx.results.add(
-        f"{tag.key}single.{factor:g}x.starvations",
-        tag.section,
+    run.add(
+        f"single.{factor:g}x.starvations",
         f"one line, machine at {factor:g}x the estimate: starvation events",
         face["starvations"],
         "",
@@ -399,9 +361,8 @@ def fleet_factors(count: int) -> list[float]:
     return [0.5 * 16 ** (i / (count - 1)) for i in range(count)]
 
 
-async def _fleet(
-    ctx: Context, tag: Tag, sim: Agent, gw: Agent, folder: Path, details: dict[str, Any], *, seconds: float
-) -> None:
+async def _fleet(run: Run, *, seconds: float) -> None:
+    sim, gw, folder, details = run.sim, run.gw, run.folder, run.details
     count = 20
     factors = fleet_factors(count)
     overrides = [round(100 * f) for f in factors]
@@ -409,7 +370,7 @@ async def _fleet(
     for i, override in enumerate(overrides):
         path = folder / f"fleet-{i:02d}.nc"
         size = int(FLEET_RATE * seconds)
-        data = paced_program(size, number=100 + i, factor=override / 100, rate=FLEET_RATE)
+        data = paced_program(size, factor=override / 100, rate=FLEET_RATE, pad=48, number=100 + i)
         path.write_bytes(data)
         paths.append(str(path))
     setup = {"count": count, "baud": FLEET_BAUD, "mode": "drip", "overrides": overrides, **LEVELS}
@@ -459,8 +420,8 @@ async def _fleet(
             for o, f in zip(overrides, faces, strict=True)
         ],
     }
-    ctx.log(
-        f"{tag.say}fleet: {count} × {FLEET_BAUD} baud at 0.5x-8x the estimate, {answer['seconds']:.0f} s "
+    run.log(
+        f"fleet: {count} × {FLEET_BAUD} baud at 0.5x-8x the estimate, {answer['seconds']:.0f} s "
         f"(nominal {seconds:g} s; unfinished {len(answer['unfinished'])}): {events} starvations "
         f"({starved:.2f} s), {overruns} overruns, gateway CPU {cpu or 0:.0%} of a core "
         f"({per_1000 or 0:.2f} ms per 1,000 of the {chars:,} characters received), failures "
@@ -471,20 +432,16 @@ async def _fleet(
         f"chars/s, sharing a {link['capacity']:,} chars/s link; {answer['seconds']:.0f} s of a nominal "
         f"{seconds:g} s, {len(answer['unfinished'])} unfinished"
     )
-    ctx.results.add(
-        tag.key + "fleet.starvations", tag.section, "fleet drip: starvation events", events, "", note=note
-    )
-    ctx.results.add(
-        tag.key + "fleet.starved_seconds",
-        tag.section,
+    run.add("fleet.starvations", "fleet drip: starvation events", events, "", note=note)
+    run.add(
+        "fleet.starved_seconds",
         "fleet drip: seconds starved (all machines)",
         starved,
         "s",
         note=f"{overruns} overruns",
     )
-    ctx.results.add(
-        tag.key + "fleet.cpu",
-        tag.section,
+    run.add(
+        "fleet.cpu",
         "fleet drip: the gateway's CPU, share of one core",
         _pct(cpu),
         "%",
@@ -493,12 +450,11 @@ async def _fleet(
     )
 
 
-async def _restart(
-    ctx: Context, tag: Tag, sim: Agent, gw: Agent, folder: Path, details: dict[str, Any], *, repeats: int
-) -> None:
+async def _restart(run: Run, *, repeats: int) -> None:
+    sim, gw, folder, details = run.sim, run.gw, run.folder, run.details
     path = folder / "restart.nc"
     data = drip_program(
-        1_000_000 if not ctx.settings.quick else 200_000, number=77, move=0.6, feed=6000, pad=64
+        1_000_000 if not run.ctx.settings.quick else 200_000, number=77, move=0.6, feed=6000, pad=64
     )
     path.write_bytes(data)
     lines = data.count(b"\n")
@@ -518,13 +474,12 @@ async def _restart(
             delays.append(face["first"] - answer["commands"][0])
     details["restart"] = {"program_bytes": len(data), "line": line, "delays": delays}
     median = statistics.median(delays) if delays else None
-    ctx.log(
-        f"{tag.say}restart at line {line:,} of {lines:,}: command to first byte "
+    run.log(
+        f"restart at line {line:,} of {lines:,}: command to first byte "
         f"{', '.join(f'{d:.3f}' for d in delays)} s"
     )
-    ctx.results.add(
-        tag.key + "restart.first_byte",
-        tag.section,
+    run.add(
+        "restart.first_byte",
         "drip restart at block N: command to first byte, median",
         median,
         "s",

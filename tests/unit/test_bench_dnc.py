@@ -8,9 +8,11 @@ from pathlib import Path
 
 import pytest
 
+from bench.gcode_gen import PACED_FEED, paced_program
 from bench.run import build_parser
-from bench.scenarios.dnc import FEED, RAPID, fleet_factors, paced_program
+from bench.scenarios.dnc import fleet_factors
 from gateway.codecs.dnc import block_times
+from simulator.machine import RAPID
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.mark.parametrize("factor", [0.5, 1.0, 1.5, 8.0])
 def test_a_paced_programs_blocks_are_estimated_at_factor_times_their_real_time(factor: float) -> None:
     rate, pad = 1000.0, 48
-    data = paced_program(20_000, number=1, factor=factor, rate=rate, pad=pad)
+    data = paced_program(20_000, factor=factor, rate=rate, pad=pad)
     lines = data.decode().split("\n")
     moves = [i + 1 for i, line in enumerate(lines) if line.startswith("G1 ")]
     assert len(data) >= 20_000 and len(moves) > 300
@@ -28,7 +30,11 @@ def test_a_paced_programs_blocks_are_estimated_at_factor_times_their_real_time(f
     # The estimate per block, and what the machine at `factor` x makes of it: `rate` bytes per second.
     assert estimated == {round(pad * factor / rate, 9)}
     assert pad / (times[moves[0]] / factor) == pytest.approx(rate)
-    assert FEED * factor <= RAPID  # the simulator's machine is not capped at its rapid
+    at_speed = paced_program(2_000, factor=factor, rate=rate, speed=4.0)  # the tests' rig: no padding
+    first = next(line for line in at_speed.decode().split("\n") if line.startswith("G1 "))
+    seconds = block_times(at_speed.decode())[at_speed.decode().split("\n").index(first) + 1]
+    assert (len(first) + 1) / (seconds / factor / 4.0) == pytest.approx(rate)  # bytes per real second
+    assert PACED_FEED * factor <= RAPID  # the simulator's machine is not capped at its rapid
 
 
 def test_the_fleet_spreads_from_half_to_eight_times_the_estimate() -> None:
