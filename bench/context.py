@@ -34,6 +34,8 @@ class Settings:
     jobs_small_size: int
     jobs_large_size: int
     profile: bool = False
+    #: The dnc scenario's runs: (label, checkout whose gateway/ the gateway agent imports; None: this one).
+    dnc_gateways: list[tuple[str, str | None]] = field(default_factory=lambda: [("", None)])
 
     @classmethod
     def full(cls) -> Settings:

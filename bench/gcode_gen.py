@@ -1,4 +1,4 @@
-"""Realistic laser-cutting programs of a given size, for the job benchmarks.
+"""Realistic laser-cutting programs of a given size for the job benchmarks; paced drip programs for DNC.
 
 A nesting package writes one program per sheet: a header, then for each part a
 rapid to the pierce point, beam on, a contour of lines and arcs at a cutting
@@ -11,6 +11,8 @@ seed, until the program reaches the requested size.
 from __future__ import annotations
 
 import random
+
+from simulator.machine import RAPID
 
 SHEET_X, SHEET_Y = 3000.0, 1500.0
 
@@ -62,3 +64,36 @@ def _part(rng: random.Random) -> list[str]:
         lines.append(f"G1 X{sx + k * w * 0.05:.3f} Y{y0 + h * 0.8 + (k % 2) * h * 0.05:.3f}")
     lines.append("M5")
     return lines
+
+
+PACED_FEED = 600  # mm/min of a paced program's moves: x 8 is 4,800 mm/min, far below the simulator's rapid
+
+
+def paced_program(
+    size: int, *, factor: float, rate: float, speed: float = 1.0, pad: int | None = None, number: int = 42
+) -> bytes:
+    """About `size` bytes of equal feed moves at F600, back and forth along X, that the simulator's machine
+    at `factor` times the gateway's run-time estimate (a feed override of 100 x factor %) consumes at
+    `rate` characters per real second when the simulator runs at `speed`: each block of B bytes (`pad`,
+    with a comment to fill it, or as short as it comes) is estimated (gateway/codecs/dnc/runtime.py,
+    length / F) at B * factor * speed / rate seconds and runs `factor` times faster than that."""
+    if PACED_FEED * factor > RAPID:
+        raise ValueError(f"F{PACED_FEED} at {factor:g}x would be capped at the simulator's rapid ({RAPID:g})")
+    bare = len(f"G1 X{0.0:09.3f} Y100 F{PACED_FEED}\n")
+    filler = "" if pad is None else f" ({'P' * max(0, pad - bare - 3)})"
+    block = bare + len(filler)
+    move = block * factor * speed / rate * PACED_FEED / 60.0  # mm
+    if move > 2000.0:
+        raise ValueError(f"{move:.0f} mm moves do not fit the table")
+    head = f"%\nO{number:04d} (PACED {factor:g}X)\nG21 G90 G17\nG0 X100 Y100\n".encode()
+    out, length = [head], len(head)
+    x, sign = 100.0, 1.0
+    while length < size:
+        if not 50.0 <= x + sign * move <= 2900.0:
+            sign = -sign
+        x += sign * move
+        line = f"G1 X{x:09.3f} Y100 F{PACED_FEED}{filler}\n".encode()
+        out.append(line)
+        length += len(line)
+    out.append(b"M30\n%\n")
+    return b"".join(out)

@@ -80,6 +80,7 @@ class Results:
     targets_17: list[Target] = field(default_factory=list)  # issue 17's: MTConnect
     targets_16: list[Target] = field(default_factory=list)  # issue 16's: the web console
     targets_14: list[Target] = field(default_factory=list)  # issue 14's: serial DNC
+    targets_22: list[Target] = field(default_factory=list)  # issue 22's: serial DNC on real device servers
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -124,6 +125,7 @@ class Results:
             "targets_17": [t.as_dict() for t in self.targets_17],
             "targets_16": [t.as_dict() for t in self.targets_16],
             "targets_14": [t.as_dict() for t in self.targets_14],
+            "targets_22": [t.as_dict() for t in self.targets_22],
             "details": self.details,
             "errors": self.errors,
         }
@@ -188,6 +190,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 16)", _targets(results.targets_16)]
     if results.targets_14:
         out += ["", "Targets (issue 14)", _targets(results.targets_14)]
+    if results.targets_22:
+        out += ["", "Targets (issue 22)", _targets(results.targets_22)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -4,6 +4,7 @@
     make bench BENCH_ARGS=--quick       # a taste in about two minutes
     python -m bench.run --only mirror --quick --profile
     python -m bench.run --only peer --quick             # the gateway against Node-RED, short windows
+    python -m bench.run --only dnc --quick --dnc-gateway before=/tmp/gw-old --dnc-gateway after=.
 
 Scenarios run one after another, never side by side, each in processes of its
 own; baselines first, because the later figures are judged against them.
@@ -70,7 +71,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sources", nargs="+", choices=["opcua", "inproc"], help="mirror: sources")
     p.add_argument("--peer-rates", nargs="+", metavar="R", help="peer: changes/s per step ('max': flat out)")
     p.add_argument("--scale", type=int, nargs=2, metavar=("MACHINES", "PER_MACHINE"), help="scale: size")
+    p.add_argument(
+        "--dnc-gateway", action="append", type=_labelled, metavar="LABEL=PATH", dest="dnc_gateways",
+        help="dnc: run the scenario against the gateway/ of the checkout at PATH, its figures labelled "
+        "LABEL; repeat for a before/after table from one run (e.g. before=/tmp/gw-old after=.)",
+    )  # fmt: skip
     return p
+
+
+def _labelled(text: str) -> tuple[str, str]:
+    label, sep, path = text.partition("=")
+    if not sep or not label or not path:
+        raise argparse.ArgumentTypeError(f"{text!r} is not LABEL=PATH")
+    if not label.replace("-", "").replace("_", "").isalnum():
+        raise argparse.ArgumentTypeError(f"label {label!r}: letters, digits, - and _ only")
+    if not (Path(path) / "gateway" / "__init__.py").is_file():
+        raise argparse.ArgumentTypeError(f"{path}: no gateway/ package there (a checkout of cnc-gateway?)")
+    return label, path
 
 
 def _override(settings: Settings, args: argparse.Namespace) -> None:
@@ -88,6 +105,11 @@ def _override(settings: Settings, args: argparse.Namespace) -> None:
         settings.mirror_sources = args.sources
     if args.scale:
         settings.scale_machines, settings.scale_per_machine = args.scale
+    if args.dnc_gateways:
+        labels = [label for label, _path in args.dnc_gateways]
+        if len(set(labels)) != len(labels):
+            raise SystemExit(f"--dnc-gateway: labels must differ ({', '.join(labels)})")
+        settings.dnc_gateways = [(label, path) for label, path in args.dnc_gateways]
 
 
 async def main(args: argparse.Namespace) -> int:

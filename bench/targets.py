@@ -1,4 +1,4 @@
-"""The targets tables of issues 7, 13 and 15, judged against this run's figures (PASS/MISS for must and aim).
+"""The targets tables of issues 7, 13, 14, 15, 16, 17 and 22, judged against this run's figures (PASS/MISS).
 
 Issue 13's peer rows are judged like the raw-library ceilings: against Node-RED measured in the same run
 on the same load (bench/scenarios/peer.py), as the ratio gateway / Node-RED.
@@ -132,63 +132,99 @@ def judge(ctx: Context) -> None:
     r.targets_17 = judge_17(ctx)
     r.targets_16 = judge_16(ctx)
     r.targets_14 = judge_14(ctx)
+    r.targets_22 = judge_22(ctx)
+
+
+def _dnc_runs(ctx: Context) -> list[tuple[str, dict[str, Any]]]:
+    """The dnc scenario's runs (one per --dnc-gateway), with the suffix their target names carry."""
+    runs: dict[str, Any] = ctx.results.details.get("dnc", {}).get("runs", {})
+    return [(f" [{label}]" if label else "", run) for label, run in runs.items()]
 
 
 def judge_14(ctx: Context) -> list[Target]:
-    """Serial DNC (bench/scenarios/dnc.py): the controller's view of the gateway's serial transport."""
-    d: dict[str, Any] = ctx.results.details.get("dnc", {})
-    if not d:
-        return []
+    """Serial DNC (bench/scenarios/dnc.py), issue 14's rows that issue 22's table does not supersede."""
     targets: list[Target] = []
-    load = d.get("load", {})
-    if load:
-        gw, raw = load.get("gateway", {}), load.get("raw", {})
-        share = gw.get("share")
-        targets.append(Target(
-            f"load mode, {load['size'] / 1e6:.2f} MB at 115,200 baud: share of the line rate", 90, 97, "%",
-            value=share * 100 if share is not None else None,
-            source=f"{gw.get('chars', 0):,} chars at the controller; raw pyserial write "
-                   f"{(raw.get('share') or 0) * 100:.0f} %",
-        ))  # fmt: skip
-    over = d.get("overrun", {})
-    if over:
-        sent = over["sent_after_dc3"]
-        arrived = over.get("arrived_after_dc3") or {}
-        upper = over.get("sent_after_dc3_at_most") or {}
-        where = (
-            f"{over['size'] / 1e6:.2f} MB drip, {sent['n']:,} DC3s, "
-            "written between a DC3 and its DC1 (timed); "
-            f"between the simulator's outer stamps p99 {upper.get('p99')}, max {upper.get('max')}; "
-            f"reached the device server after it: p99 {arrived.get('p99')}, max {arrived.get('max')}"
-        )
-        targets.append(Target(
-            "characters sent after DC3, p99 (115,200 baud)", 10, 2, "chars", higher_is_better=False,
-            value=sent["p99"], source=where,
-        ))  # fmt: skip
-        targets.append(Target(
-            "characters sent after DC3, max (115,200 baud)", 16, 4, "chars", higher_is_better=False,
-            value=sent["max"], source=where,
-        ))  # fmt: skip
-    fleet = d.get("fleet", {})
-    if fleet:
-        where = f"{fleet['machines']} machines × {fleet['baud']:,} baud, {fleet['seconds']:.0f} s"
-        targets.append(Target(
-            "fleet drip: starvation events while link capacity suffices", 0, 0, "", higher_is_better=False,
-            value=fleet["starvations"], source=f"{where}; {fleet['starved_seconds']:.2f} s starved",
-        ))  # fmt: skip
-        targets.append(Target(
-            "fleet drip: gateway CPU, share of one core", 50, 15, "%", higher_is_better=False,
-            value=fleet["cpu_share"] * 100, source=f"{where}; the serial transports' process",
-        ))  # fmt: skip
-    restart = d.get("restart", {})
-    if restart:
-        delays = restart.get("delays") or []
-        targets.append(Target(
-            "drip restart at block N: command to first byte (worst of the repeats)", 2, 0.5, "s",
-            higher_is_better=False, value=max(delays) if delays else None,
-            source=f"{len(delays)} restarts, {restart['program_bytes'] / 1e6:.1f} MB program, "
-            f"line {restart['line']:,}",
-        ))  # fmt: skip
+    for suffix, d in _dnc_runs(ctx):
+        restart = d.get("restart", {})
+        if restart:
+            delays = restart.get("delays") or []
+            targets.append(Target(
+                f"drip restart at block N: command to first byte (worst of the repeats){suffix}", 2, 0.5, "s",
+                higher_is_better=False, value=max(delays) if delays else None,
+                source=f"{len(delays)} restarts, {restart['program_bytes'] / 1e6:.1f} MB program, "
+                f"line {restart['line']:,}",
+            ))  # fmt: skip
+    return targets
+
+
+def judge_22(ctx: Context) -> list[Target]:
+    """Issue 22's table (bench/scenarios/dnc.py): the controller's 256-byte buffer told truthfully, both kinds
+    of device server, machines faster and slower than the gateway's estimate. One set per run (A/B)."""
+    targets: list[Target] = []
+    for suffix, d in _dnc_runs(ctx):
+        at = f" ({d.get('commit')})" if suffix and d.get("commit") else ""
+        for kind, over in (d.get("after_dc3") or {}).items():
+            sent, upper = over["sent_after_dc3"], over.get("sent_after_dc3_at_most") or {}
+            got = over.get("received_after_dc3") or {}
+            where = (
+                f"{over['size'] / 1e6:.2f} MB drip, {sent['n']:,} DC3s, written between a DC3 and its DC1 "
+                f"(timed); the stamps' widest span p99 {upper.get('p99')}, max {upper.get('max')}; the "
+                f"controller received after it p99 {got.get('p99')}, max {got.get('max')}{at}"
+            )
+            for stat, must, aim in (("p99", 10, 2), ("max", 16, 4)):
+                targets.append(Target(
+                    f"characters after DC3, {kind} device server, {stat}{suffix}", must, aim, "chars",
+                    higher_is_better=False, value=sent[stat], source=where,
+                ))  # fmt: skip
+        runs = list((d.get("after_dc3") or {}).values())
+        if runs:
+            megabytes = sum(r["size"] for r in runs) / 1e6
+            each = "; ".join(f"{r['kind']}: {r['overruns']:,} (up to {r['highest']:,} bytes)" for r in runs)
+            targets.append(Target(
+                f"buffer overruns (alarm 087) over a {megabytes:.1f} MB drip{suffix}", 0, 0, "",
+                higher_is_better=False, value=sum(r["overruns"] for r in runs),
+                source=each,
+            ))  # fmt: skip
+        for factor, one in (d.get("single") or {}).items():
+            if float(factor) < 1.5:
+                continue  # 0.5x and 1x are figures; the table's rows: machines faster than the estimate
+            targets.append(Target(
+                f"starvations: one line, machine at {factor}x the estimate{suffix}", 0, 0, "",
+                higher_is_better=False, value=one["starvations"],
+                source=f"{one['starved_seconds']:.2f} s starved; {one['seconds']:.1f} s of a nominal "
+                f"{one['nominal_seconds']:g} s{' (stopped unfinished)' if one['unfinished'] else ''}",
+            ))  # fmt: skip
+        fleet = d.get("fleet", {})
+        if fleet:
+            where = (
+                f"{fleet['machines']} machines × {fleet['baud']:,} baud at 0.5x-8x, a link of "
+                f"{fleet['link_capacity']:,} chars/s, {fleet['seconds']:.0f} s of a nominal "
+                f"{fleet['nominal_seconds']:g} s"
+            )
+            targets.append(Target(
+                f"starvations: 20 lines sharing a link of 1.2x their consumption, 0.5x-8x{suffix}", 0, 0, "",
+                higher_is_better=False, value=fleet["starvations"],
+                source=f"{where}; {fleet['starved_seconds']:.2f} s starved; {len(fleet['unfinished'])} "
+                "unfinished",
+            ))  # fmt: skip
+            cpu = fleet.get("cpu_share")
+            per_1000 = fleet.get("cpu_ms_per_1000_chars") or 0
+            targets.append(Target(
+                f"gateway CPU, 20 lines at 38,400 baud{suffix}", 25, 10, "%", higher_is_better=False,
+                value=cpu * 100 if cpu is not None else None,
+                source=f"{where}; the job service's process, {per_1000:.2f} ms per 1,000 of the "
+                f"{fleet.get('chars', 0):,} characters received",
+            ))  # fmt: skip
+        load = d.get("load", {})
+        if load:
+            gw, raw = load.get("gateway", {}), load.get("raw", {})
+            share = gw.get("share")
+            targets.append(Target(
+                f"load mode, {load['size'] / 1e6:.2f} MB at 115,200 baud: share of line rate{suffix}", 95, 98,
+                "%", value=share * 100 if share is not None else None,
+                source=f"{gw.get('chars', 0):,} chars at the controller; raw pyserial write "
+                f"{(raw.get('share') or 0) * 100:.0f} %",
+            ))  # fmt: skip
     return targets
 
 

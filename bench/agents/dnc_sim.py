@@ -1,10 +1,16 @@
 """Simulated serial DNC controllers for the DNC benchmark: N of the simulator's DNC faces (simulator/dnc),
 each a raw TCP device server with its own machine, stepped like the simulator's runner steps its one.
 
-Commands: `setup` (count, baud, mode, speed, buffer, high, low, load_rate): start N faces, answer their URLs;
-`mark`: forget first/last receive times; `stats`: per face the controller's counters, the characters
-after each DC3, the first and last receive time (CLOCK_MONOTONIC, which every process shares), the
-machine's starvations and the seconds it spent starved; `teardown`.
+Commands: `setup` (count, baud, mode, speed, buffer, high, low, overrun_at, load_rate, device_server,
+overrides): start N faces, answer their URLs; `device_server` (7bit or transparent) and `overrides` (the
+machines' feed overrides in %, one per face or one for all) may be lists; `mark`: forget first/last
+receive times; `stats`: per face the controller's counters, the characters after each DC3, the first
+and last receive time (CLOCK_MONOTONIC, which every process shares), the machine's starvations and the
+seconds it spent starved, and its overruns; `teardown`.
+
+Overruns: a Fanuc's 256-byte buffer raises alarm 087 at its first overrun and the run would stop there.
+Here the buffer (`buffer`) has room behind the levels a 256-byte one has (DC3 at `high`, DC1 at `low`),
+and each time its level goes beyond `overrun_at` (256) counts one overrun: what 087 would have been.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from gateway.codecs.dnc import DC3, LineSettings
 from simulator.dnc.controller import DncSpec, Mode
 from simulator.dnc.face import DncFace
 from simulator.dnc.links import Link
+from simulator.dnc.uart import DeviceServer
 from simulator.machine import Machine
 from simulator.store import MemoryStore
 
@@ -46,6 +53,9 @@ class TimedFace(DncFace):
     what the sender's reaction time costs)."""
 
     timed: Timed
+    overrun_at: int | None = None
+    overruns: int = 0  # times the buffer's level went beyond overrun_at (alarm 087 on a real controller)
+    highest: int = 0  # the buffer's highest level
     in_flight: list[int]
     sent_after: list[int]
     # Per DC3, CLOCK_MONOTONIC: [just before and just after the DC3 was handed to the socket, just before and
@@ -78,6 +88,22 @@ class TimedFace(DncFace):
                     self._after = None
 
         controller._send_flow = watched  # type: ignore[method-assign]
+
+    def watch_level(self, overrun_at: int | None) -> None:
+        """Count the overruns of a buffer of `overrun_at` bytes (the controller's own `_buffer` appends)."""
+        self.overrun_at, self.overruns, self.highest = overrun_at, 0, 0
+        controller = self.controller
+        buffer = controller._buffer
+
+        def watched(chars: bytes) -> None:
+            before = len(controller.rx)
+            buffer(chars)
+            level = len(controller.rx)
+            self.highest = max(self.highest, level)
+            if self.overrun_at is not None and before <= self.overrun_at < level:
+                self.overruns += 1
+
+        controller._buffer = watched  # type: ignore[method-assign]
 
     def link_data(self, link: Link, data: bytes) -> None:
         now = time.monotonic()
@@ -128,6 +154,8 @@ async def main() -> None:
         count = int(request["count"])
         speed = float(request.get("speed", 1.0))
         line = LineSettings(baud=int(request["baud"]))
+        kinds = _each(request.get("device_server", DeviceServer.SEVEN_BIT.value), count)
+        overrides = _each(request.get("overrides"), count)
         spec = DncSpec(
             line=line,
             mode=Mode(request.get("mode", "load")),
@@ -141,10 +169,14 @@ async def main() -> None:
         await stack.__aenter__()
         fleet.stack, fleet.speed = stack, speed
         fleet.faces, fleet.starved = [], []
-        for _ in range(count):
-            face = TimedFace(spec, Machine(MemoryStore()), MemoryStore(), tcp_port=0, speed=speed)
+        for kind, override in zip(kinds, overrides, strict=True):
+            face = TimedFace(
+                spec, Machine(MemoryStore()), MemoryStore(), tcp_port=0, speed=speed,
+                device_server=DeviceServer(kind), override=None if override is None else int(override),
+            )  # fmt: skip
             face.timed = Timed()
             face.watch_dc3()
+            face.watch_level(request.get("overrun_at"))
             face.controller.episodes = deque()  # every DC3 episode, not the last 10,000
             await stack.enter_async_context(face)
             fleet.faces.append(face)
@@ -155,6 +187,7 @@ async def main() -> None:
     def mark(_request: dict[str, Any]) -> dict[str, Any]:
         for i, face in enumerate(fleet.faces):
             face.timed = Timed(rx_seen=face.controller.stats.rx_chars)
+            face.overruns = face.highest = 0
             fleet.starved[i] = 0.0
             face.machine.starvations = 0
             face.controller.episodes.clear()
@@ -183,6 +216,8 @@ async def main() -> None:
                     "rx_last": face.timed.rx_last,
                     "starved_seconds": fleet.starved[i],
                     "machine": face.machine.state.name,
+                    "overruns": face.overruns,
+                    "highest": face.highest,
                 }
             )
         return {"faces": out}
@@ -203,6 +238,15 @@ async def main() -> None:
         await serve({"setup": setup, "mark": mark, "stats": stats, "teardown": teardown})
     finally:
         await teardown({})
+
+
+def _each(value: Any, count: int) -> list[Any]:
+    """One value per face: a list as it is, anything else repeated."""
+    if isinstance(value, list):
+        if len(value) != count:
+            raise ValueError(f"{len(value)} values for {count} faces")
+        return value
+    return [value] * count
 
 
 if __name__ == "__main__":

@@ -21,12 +21,12 @@ from typing import Any
 
 import yaml
 
+from bench.gcode_gen import paced_program
 from gateway.codecs.dnc import LineSettings
 from gateway.config.jobs import ControllerSerial
 from gateway.jobs.delivery.transport import Program, Progress
 from gateway.jobs.delivery.transports.serial import SerialTransport
 from simulator.dnc import DeviceServer, DncFace, DncOptions, DncSpec, Mode
-from simulator.machine import RAPID
 from simulator.runner import Simulator
 from tests.waiting import free_port
 
@@ -136,31 +136,6 @@ def user_mapping(
     )
 
 
-def paced_program(size: int, *, factor: float, rate: float, speed: float, feed: int = 600) -> bytes:
-    """A drip program of about `size` bytes that a machine cutting `factor` times faster than the gateway's
-    run-time estimate (a feed override of 100 * factor %) consumes at `rate` characters per real second
-    when the simulator runs at `speed`: feed moves of equal length and size back and forth along X, each
-    estimated (gateway/codecs/dnc/runtime.py, length / F) at `block * factor * speed / rate` seconds."""
-    if feed * factor > RAPID:
-        raise ValueError(f"F{feed} at {factor:g}x would be capped at the simulator's rapid, {RAPID:g} mm/min")
-    block = len(f"G1 X{0.0:08.3f} Y20 F{feed}\n")
-    step = block * factor * speed / rate * feed / 60.0  # mm
-    if step > 2000:
-        raise ValueError(f"{step:.0f} mm moves do not fit the table: a lower feed")
-    head = f"%\nO0042 (PACED {factor:g}X)\nG21 G90\nG0 X100 Y20\n".encode()
-    out, x, sign = [head], 100.0, 1.0
-    length = len(head)
-    while length < size:
-        if not 50.0 <= x + sign * step <= 2900.0:
-            sign = -sign
-        x += sign * step
-        line = f"G1 X{x:08.3f} Y20 F{feed}\n".encode()
-        out.append(line)
-        length += len(line)
-    out.append(b"M30\n%\n")
-    return b"".join(out)
-
-
 def program_file(tmp_path: Path, data: bytes, name: str = "part.nc") -> Program:
     path = tmp_path / f"{name}.program"
     path.write_bytes(data)
@@ -177,7 +152,7 @@ def transport(where: str, tmp_path: Path, **more: Any) -> SerialTransport:
     return SerialTransport(settings(where, **more), machine="serial", state_dir=tmp_path / "state")
 
 
-__all__ = ["Mode"]
+__all__ = ["Mode", "paced_program"]
 
 
 def body_lines(data: bytes) -> list[bytes]:
