@@ -7,6 +7,7 @@ http:
   tls: {cert: http-cert.pem, key: http-key.pem}   # optional, relative to the state directory (as inbox.tls)
   jobs_role: operator    # submit, retry, cancel and reprioritise jobs from the console or the API
   admin_role: null       # trust OPC UA certificates, see the effective configuration (null: the highest role)
+  audit_role: null       # read the audit trail (null: admin_role)
   session_idle: 28800    # s a console session lasts without a request
 ```
 
@@ -64,8 +65,13 @@ class HttpConfig(Strict):
     max_body: Annotated[int, Field(ge=1024)] = Field(
         default=1024 * 1024, description="Largest JSON request body, in bytes (uploads: inbox.max_file_size)"
     )
+    audit_role: str | None = Field(
+        default=None,
+        description="Lowest role that may read the audit trail (/audit, /api/audit: every user's name and "
+        "change); null: the admin role",
+    )
 
-    @field_validator("jobs_role", "admin_role")
+    @field_validator("jobs_role", "admin_role", "audit_role")
     @classmethod
     def _roles(cls, value: str | None) -> str | None:
         return None if value is None else check_role_name(value)
@@ -73,6 +79,10 @@ class HttpConfig(Strict):
     def admin(self, roles: list[str]) -> str:
         """The role that administers the gateway from the console."""
         return self.admin_role or roles[-1]
+
+    def auditor(self, roles: list[str]) -> str:
+        """The role that may read the audit trail."""
+        return self.audit_role or self.admin(roles)
 
 
 SECRET_WORDS = ("password", "secret", "token", "passphrase")

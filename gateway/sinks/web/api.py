@@ -437,7 +437,15 @@ class Api:
 
     # --- audit -------------------------------------------------------------------------------------
 
+    def may_read_audit(self, caller: Caller) -> bool:
+        return self._allowed(caller, self.http.auditor(list(self.config.gateway.roles)))
+
+    def require_audit_reader(self, caller: Caller) -> None:
+        """Every user's name and every change: for `http.audit_role` (the admin role by default) only."""
+        self._require(caller, self.http.auditor(list(self.config.gateway.roles)), "read the audit trail")
+
     async def audit(self, req: HttpRequest, caller: Caller) -> HttpResponse:
+        self.require_audit_reader(caller)
         port = self.ports.audit
         since: datetime | None = None
         text = _text_arg(req, "since")
@@ -475,10 +483,18 @@ class Api:
         return json_response(self.status())
 
     def is_admin(self, caller: Caller) -> bool:
-        return self.tree.access.allows(caller.role, self.http.admin(list(self.config.gateway.roles)))
+        return self._allowed(caller, self.http.admin(list(self.config.gateway.roles)))
 
     def _admin(self, caller: Caller, what: str) -> None:
-        self.tree.access.require(caller.role, self.http.admin(list(self.config.gateway.roles)), what)
+        self._require(caller, self.http.admin(list(self.config.gateway.roles)), what)
+
+    def _allowed(self, caller: Caller, role: str) -> bool:
+        access = self.tree.access
+        return access.allows(caller.role, role) and (access.enabled or caller.user is not None)
+
+    def _require(self, caller: Caller, role: str, what: str) -> None:
+        """`role` or higher; with role checks off (access.enabled: false), a login at least."""
+        self.tree.access.require(caller.role, role, what)
         if not self.tree.access.enabled and caller.user is None:
             raise AccessDenied(f"an anonymous caller may not {what} (access.enabled is false: log in)")
 

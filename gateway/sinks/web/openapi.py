@@ -305,7 +305,7 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
     (
         "get",
         "/api/audit",
-        "The audit trail, newest first",
+        "The audit trail, newest first: for http.audit_role (default: the admin role) only",
         [
             _param("machine", "query"),
             _param("user", "query"),
@@ -317,7 +317,7 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
         None,
         200,
         OBJ,
-        [400],
+        [400, 403],
     ),
     (
         "get",
