@@ -34,7 +34,15 @@ from gateway.model.sample import quality_of
 from gateway.model.tree import VariableTree
 from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.web.api import Api
-from gateway.sinks.web.http import HttpRequest, HttpResponse, json_response, redirect, refusal, refused
+from gateway.sinks.web.http import (
+    HttpRequest,
+    HttpResponse,
+    json_response,
+    redirect,
+    refusal,
+    refused,
+    safe_path,
+)
 from gateway.sinks.web.live import Live
 from gateway.sinks.web.metrics import CONTENT_TYPE, MachineFigures, Metrics, Scrape
 from gateway.sinks.web.openapi import document
@@ -333,10 +341,8 @@ def _number(value: Any) -> float | None:
 
 
 def _next(value: str | None) -> str:
-    """Where a login goes next: a path on this site only (never `//elsewhere` or a full URL)."""
-    if not value or not value.startswith("/") or value.startswith("//") or "\\" in value or len(value) > 500:
-        return "/"
-    return value
+    """Where a login goes next: a clean path on this host, else "/" (see `safe_path`)."""
+    return safe_path(value) or "/"
 
 
 def _quote(path: str) -> str:
