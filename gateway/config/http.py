@@ -9,6 +9,7 @@ http:
   admin_role: null       # trust OPC UA certificates, see the effective configuration (null: the highest role)
   audit_role: null       # read the audit trail (null: admin_role)
   session_idle: 28800    # s a console session lasts without a request
+  connections: {max: null, per_address: 32, header_timeout: 10, keepalive: 30}   # null: from ulimit -n
 ```
 
 `http: null` turns the console, the API and the metrics off. Without the key the
@@ -41,6 +42,40 @@ class HttpTls(Strict):
     key: str = Field(default="http-key.pem", description="PEM private key, relative to the state directory")
 
 
+class ConnectionLimits(Strict):
+    """How many connections an HTTP face (the console, the MTConnect agent) holds, and how long a connection
+    may keep its place without a request. Slow-loris crowds are closed, not served, and the other doors
+    keep their descriptors."""
+
+    max: Annotated[int, Field(ge=1, le=100_000)] | None = Field(
+        default=None,
+        description="Connections at once; null: a quarter of the process's open-file limit (ulimit -n) less "
+        "32, at most 1024. A larger value is lowered to that share (warned). At the cap, the oldest "
+        "connection that waits (no request yet, or idle) makes room; when all are busy, new ones get 503",
+    )
+    per_address: int = Field(
+        default=32,
+        ge=1,
+        le=100_000,
+        description="Connections from one address at once; more are refused (503). Behind a reverse proxy "
+        "every client comes from the proxy's address: raise it",
+    )
+    header_timeout: float = Field(
+        default=10.0,
+        gt=0,
+        le=3600,
+        description="Seconds a new connection has to send its request line and headers (its TLS handshake "
+        "included); then it is closed (408)",
+    )
+    keepalive: float = Field(
+        default=30.0,
+        gt=0,
+        le=3600,
+        description="Seconds a connection stays open after a response, waiting for its next request "
+        "(headers included)",
+    )
+
+
 class HttpConfig(Strict):
     """The web console, the REST API (/api, described at /api/openapi.json) and /metrics."""
 
@@ -69,6 +104,9 @@ class HttpConfig(Strict):
         default=None,
         description="Lowest role that may read the audit trail (/audit, /api/audit: every user's name and "
         "change); null: the admin role",
+    )
+    connections: ConnectionLimits = Field(
+        default_factory=ConnectionLimits, description="Connection caps and timeouts of the console's port"
     )
 
     @field_validator("jobs_role", "admin_role", "audit_role")

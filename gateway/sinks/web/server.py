@@ -7,8 +7,10 @@ too. Kept small on purpose: one catch-all route builds an `HttpRequest`
 path upgrades to a WebSocket, handed over as a `LiveSocket`. Request bodies are
 read here, with their limits: JSON and form bodies up to `max_body`, multipart
 file parts streamed to the job inbox's staging folder up to `max_upload`.
-aiohttp's own errors (a body too large, malformed multipart, a port in use)
-become refusals or a SinkError; nothing a client sends ends in a traceback.
+Connections are capped and slow ones closed by the listener both HTTP faces
+share (gateway/sinks/http_listener.py, `http.connections`). aiohttp's own errors
+(a body too large, malformed multipart, a port in use) become refusals or a
+SinkError; nothing a client sends ends in a traceback.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from typing import Any
 from aiohttp import BodyPartReader, WSMsgType, web
 from aiohttp.web_exceptions import HTTPException
 
-from gateway.errors import MalformedRequest, SinkError
+from gateway.errors import MalformedRequest
+from gateway.sinks.http_listener import Limits, Listener
 from gateway.sinks.web.http import HttpRequest, HttpResponse, UploadedFile, refusal
 
 log = logging.getLogger("gateway.web")
@@ -89,6 +92,7 @@ class HttpServer:
         upload_dir: Callable[[], Path],
         max_body: int,
         max_upload: int,
+        limits: Limits | None = None,
         tls: ssl.SSLContext | None = None,
     ) -> None:
         self._handler = handler
@@ -98,29 +102,20 @@ class HttpServer:
         self._max_body = max_body
         self._max_upload = max_upload
         self.tls = tls
-        self.port = 0
-        self._runner: web.AppRunner | None = None
+        self.listener = Listener(name="web console", limits=limits or Limits(), tls=tls, shutdown_timeout=1.0)
+
+    @property
+    def port(self) -> int:
+        return self.listener.port
 
     async def start(self, host: str, port: int) -> None:
         app = web.Application(client_max_size=self._max_body, handler_args={"max_field_size": 16 * 1024})
         app.router.add_route("GET", self._socket_path, self._socket)
         app.router.add_route("*", "/{tail:.*}", self._dispatch)
-        runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
-        await runner.setup()
-        site = web.TCPSite(runner, host, port, ssl_context=self.tls, reuse_address=True)
-        try:
-            await site.start()
-        except OSError as exc:
-            await runner.cleanup()
-            raise SinkError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
-        self._runner = runner
-        addresses = runner.addresses
-        self.port = int(addresses[0][1]) if addresses else port
+        await self.listener.start(app, host, port)
 
     async def stop(self) -> None:
-        runner, self._runner = self._runner, None
-        if runner is not None:
-            await runner.cleanup()
+        await self.listener.stop()
 
     # --- requests -------------------------------------------------------------------------------
 

@@ -33,6 +33,7 @@ from gateway.model.events import EventSubscription
 from gateway.model.sample import quality_of
 from gateway.model.tree import VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.http_listener import Limits
 from gateway.sinks.web.api import Api
 from gateway.sinks.web.http import (
     HttpRequest,
@@ -105,6 +106,7 @@ class WebSink:
             upload_dir=jobs.staging_file if jobs is not None else self._no_uploads,
             max_body=http.max_body,
             max_upload=jobs.max_upload if jobs is not None else http.max_body,
+            limits=Limits.of(http.connections),
             tls=tls,
         )
         self.listening = False
