@@ -9,6 +9,8 @@ http:
   admin_role: null       # trust OPC UA certificates, see the effective configuration (null: the highest role)
   audit_role: null       # read the audit trail (null: admin_role)
   session_idle: 28800    # s a console session lasts without a request
+  max_uploads: 4         # job uploads received at once
+  body_timeout: 30       # s for a JSON or form body; the longest pause within an upload
   connections: {max: null, per_address: 32, header_timeout: 10, keepalive: 30}   # null: from ulimit -n
 ```
 
@@ -99,6 +101,20 @@ class HttpConfig(Strict):
     )
     max_body: Annotated[int, Field(ge=1024)] = Field(
         default=1024 * 1024, description="Largest JSON request body, in bytes (uploads: inbox.max_file_size)"
+    )
+    body_timeout: float = Field(
+        default=30.0,
+        gt=0,
+        le=3600,
+        description="Seconds a JSON or form body (at most max_body) may take to arrive, and the longest "
+        "pause within an upload; then the request is refused (408)",
+    )
+    max_uploads: int = Field(
+        default=4,
+        ge=1,
+        le=1000,
+        description="Job uploads (POST /api/jobs) received at once; more get 429. Each may write up to "
+        "inbox.max_file_size to the inbox's staging folder",
     )
     audit_role: str | None = Field(
         default=None,

@@ -156,7 +156,7 @@ class Api:
         r.add("POST", "/api/alarms/{machine}/{occurrence}/acknowledge", self.acknowledge)
         r.add("POST", "/api/alarms/{machine}/{occurrence}/confirm", self.confirm)
         r.add("GET", "/api/jobs", self.jobs)
-        r.add("POST", "/api/jobs", self.submit)
+        r.add("POST", "/api/jobs", self.submit, files=1, admit=self.may_upload)
         r.add("GET", "/api/jobs/{job}", self.job)
         r.add("POST", "/api/jobs/{job}/retry", self.retry)
         r.add("POST", "/api/jobs/{job}/cancel", self.cancel)
@@ -349,6 +349,16 @@ class Api:
         access = self.tree.access
         access.require(caller.role, self.http.jobs_role, what)
 
+    def may_upload(self, req: HttpRequest, caller: Caller) -> None:
+        """Before an upload's body is read: a job queue, and a caller who may submit jobs. The machine is
+        in the body, so a refusal is audited against the gateway."""
+        self._jobs()
+        try:
+            self._may_operate_jobs(caller, "submit jobs")
+        except AccessDenied as exc:
+            self._audit_gateway("job", "Jobs/(upload)", caller, error=exc)
+            raise
+
     async def jobs(self, req: HttpRequest, caller: Caller) -> HttpResponse:
         if self.ports.jobs is None:
             return json_response({"jobs": []})
@@ -533,23 +543,36 @@ class Api:
             error = exc
             raise
         finally:
-            self.tree.audit(
-                AuditEntry(
-                    at,
-                    action,
-                    GATEWAY,
-                    f"pki/{name[:120]}",
-                    "http",
-                    caller.user,
-                    caller.role,
-                    None,
-                    None,
-                    "Good" if error is None else error.status,
-                    "" if error is None else error.reason,
-                    time.monotonic() - started,
-                )
-            )
+            self._audit_gateway(action, f"pki/{name[:120]}", caller, error=error, at=at, started=started)
         return json_response({"ok": True, "certificate": record})
+
+    def _audit_gateway(
+        self,
+        kind: str,
+        target: str,
+        caller: Caller,
+        *,
+        error: RequestError | None,
+        at: datetime | None = None,
+        started: float | None = None,
+    ) -> None:
+        """An audit entry for a change to the gateway itself, or one refused before it named a machine."""
+        self.tree.audit(
+            AuditEntry(
+                at or utcnow(),
+                kind,
+                GATEWAY,
+                target,
+                "http",
+                caller.user,
+                caller.role,
+                None,
+                None,
+                "Good" if error is None else error.status,
+                "" if error is None else error.reason,
+                0.0 if started is None else time.monotonic() - started,
+            )
+        )
 
     async def me(self, req: HttpRequest, caller: Caller) -> HttpResponse:
         return json_response({"user": caller.user, "role": caller.role, "via": caller.via})

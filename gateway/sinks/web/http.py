@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -101,6 +101,15 @@ class HttpRequest:
         if not isinstance(data, dict):
             raise MalformedRequest("expected a JSON object")
         return data
+
+
+@dataclass(frozen=True, slots=True)
+class Admitted:
+    """A request whose route and caller passed before its body was read (issue 23): the handler to run once
+    the body is in, and how many file parts it takes (0: a file part is refused before it is written)."""
+
+    handle: Callable[[HttpRequest], Awaitable[HttpResponse]]
+    files: int = 0
 
 
 @dataclass(slots=True)
