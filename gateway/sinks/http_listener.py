@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
 import resource
+import socket
 import ssl
 import time
 from collections import Counter, OrderedDict
@@ -44,9 +46,8 @@ from gateway.errors import SinkError
 log = logging.getLogger("gateway.http")
 
 STALLED_SEND = 60.0  # s a response may wait for a client that does not read before the connection is aborted
-BACKLOG = (
-    32  # the listen queue: asyncio accepts up to this many at once, past the cap until the guard sees them
-)
+BACKLOG = 32  # asyncio accepts up to this many at once, past the cap until the guard sees them
+QUEUE = 1024  # the kernel's queue of connections not yet accepted (no descriptor of ours): absorbs bursts
 SHARE = 4  # each HTTP face holds at most 1/SHARE of the open-file limit
 MOST = 1024  # and at most this many connections when the limit is very high
 REPORT_EVERY = 60.0  # s between the log's summaries of refused and closed connections
@@ -350,6 +351,12 @@ class _Site(web.BaseSite):
         self._server = await asyncio.get_running_loop().create_server(
             self._guard.protocol(server), self._host, self._port, backlog=BACKLOG, reuse_address=True
         )
+        for listening in self._server.sockets:
+            # asyncio's backlog is both the kernel's queue and how many it accepts in one go; a longer
+            # queue, set again on the same socket, keeps a burst of connections from dropping a
+            # client's SYN (a one-second retransmit) without letting asyncio accept more at once.
+            with socket.socket(fileno=os.dup(listening.fileno())) as sock:
+                sock.listen(QUEUE)
 
 
 class Listener:
