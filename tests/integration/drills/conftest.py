@@ -30,6 +30,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "gateway_kills": (5, 50),
     "dnc_cuts": (3, 30),  # device-server connections cut mid-drip
     "slow_consumers": (10_000, 150_000),  # changes that stream past the stalled consumers
+    "slow_connections": (1000, 1000),  # per HTTP face, held open against the web console and MTConnect
 }
 
 
