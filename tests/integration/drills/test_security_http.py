@@ -199,11 +199,13 @@ async def test_slow_connections_on_the_http_faces_leave_every_other_door_answeri
         too_many = gateway.tail(10_000_000).count("Too many open files")
         staged_after = count_files(staging)
     finally:
-        siege.stop()
-        for session in sessions:
-            await session.close()
-        await asyncio.to_thread(gateway.stop)
-        await asyncio.to_thread(sim.stop)
+        try:
+            siege.stop()
+            for session in sessions:
+                await session.close()
+        finally:  # the processes go whatever happened above
+            await asyncio.to_thread(gateway.stop)
+            await asyncio.to_thread(sim.stop)
 
     bad_held = [f"{name}: {h}" for name, (h, want) in held.items() if h.status != want or h.staged]
     left = [f"{name}: {host}" for name, host in redirects.items() if host != f"127.0.0.1:{ports['http']}"]
