@@ -134,7 +134,7 @@ class GatewayConfig(Strict):
         roles = info.data.get("roles")
         if http is None or roles is None:
             return http
-        for key in ("jobs_role", "admin_role"):
+        for key in ("jobs_role", "admin_role", "audit_role"):
             problem = unknown_role(getattr(http, key), roles) if getattr(http, key) else None
             if problem:
                 raise ValueError(f"http.{key}: {problem}")

@@ -7,7 +7,11 @@ http:
   tls: {cert: http-cert.pem, key: http-key.pem}   # optional, relative to the state directory (as inbox.tls)
   jobs_role: operator    # submit, retry, cancel and reprioritise jobs from the console or the API
   admin_role: null       # trust OPC UA certificates, see the effective configuration (null: the highest role)
+  audit_role: null       # read the audit trail (null: admin_role)
   session_idle: 28800    # s a console session lasts without a request
+  max_uploads: 4         # job uploads received at once
+  body_timeout: 30       # s for a JSON or form body; the longest pause within an upload
+  connections: {max: null, per_address: 32, header_timeout: 10, keepalive: 30}   # null: from ulimit -n
 ```
 
 `http: null` turns the console, the API and the metrics off. Without the key the
@@ -40,6 +44,40 @@ class HttpTls(Strict):
     key: str = Field(default="http-key.pem", description="PEM private key, relative to the state directory")
 
 
+class ConnectionLimits(Strict):
+    """How many connections an HTTP face (the console, the MTConnect agent) holds, and how long a connection
+    may keep its place without a request. Slow-loris crowds are closed, not served, and the other doors
+    keep their descriptors."""
+
+    max: Annotated[int, Field(ge=1, le=100_000)] | None = Field(
+        default=None,
+        description="Connections at once; null: a quarter of the process's open-file limit (ulimit -n) less "
+        "32, at most 1024. A larger value is lowered to that share (warned). At the cap, the oldest "
+        "connection that waits (no request yet, or idle) makes room; when all are busy, new ones get 503",
+    )
+    per_address: int = Field(
+        default=32,
+        ge=1,
+        le=100_000,
+        description="Connections from one address at once; more are refused (503). Behind a reverse proxy "
+        "every client comes from the proxy's address: raise it",
+    )
+    header_timeout: float = Field(
+        default=10.0,
+        gt=0,
+        le=3600,
+        description="Seconds a new connection has to send its request line and headers (its TLS handshake "
+        "included); then it is closed (408)",
+    )
+    keepalive: float = Field(
+        default=30.0,
+        gt=0,
+        le=3600,
+        description="Seconds a connection stays open after a response, waiting for its next request "
+        "(headers included)",
+    )
+
+
 class HttpConfig(Strict):
     """The web console, the REST API (/api, described at /api/openapi.json) and /metrics."""
 
@@ -64,8 +102,30 @@ class HttpConfig(Strict):
     max_body: Annotated[int, Field(ge=1024)] = Field(
         default=1024 * 1024, description="Largest JSON request body, in bytes (uploads: inbox.max_file_size)"
     )
+    body_timeout: float = Field(
+        default=30.0,
+        gt=0,
+        le=3600,
+        description="Seconds a JSON or form body (at most max_body) may take to arrive, and the longest "
+        "pause within an upload; then the request is refused (408)",
+    )
+    max_uploads: int = Field(
+        default=4,
+        ge=1,
+        le=1000,
+        description="Job uploads (POST /api/jobs) received at once; more get 429. Each may write up to "
+        "inbox.max_file_size to the inbox's staging folder",
+    )
+    audit_role: str | None = Field(
+        default=None,
+        description="Lowest role that may read the audit trail (/audit, /api/audit: every user's name and "
+        "change); null: the admin role",
+    )
+    connections: ConnectionLimits = Field(
+        default_factory=ConnectionLimits, description="Connection caps and timeouts of the console's port"
+    )
 
-    @field_validator("jobs_role", "admin_role")
+    @field_validator("jobs_role", "admin_role", "audit_role")
     @classmethod
     def _roles(cls, value: str | None) -> str | None:
         return None if value is None else check_role_name(value)
@@ -73,6 +133,10 @@ class HttpConfig(Strict):
     def admin(self, roles: list[str]) -> str:
         """The role that administers the gateway from the console."""
         return self.admin_role or roles[-1]
+
+    def auditor(self, roles: list[str]) -> str:
+        """The role that may read the audit trail."""
+        return self.audit_role or self.admin(roles)
 
 
 SECRET_WORDS = ("password", "secret", "token", "passphrase")

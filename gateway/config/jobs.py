@@ -278,6 +278,26 @@ class AutoStart(Strict):
         return self
 
 
+class BackupSettings(Strict):
+    """Programs.Backup: copies of controller programs in the gateway's backups/<machine>/ folder. The method
+    needs the operator role; these bound how much one caller can make it write."""
+
+    keep: int = Field(
+        default=50,
+        ge=0,
+        le=100_000,
+        description="Newest Programs.Backup copies kept per machine (older ones are deleted); 0: no limit by "
+        "count. Punched programs filed there (punch.backup) are not counted or deleted",
+    )
+    max_age_days: float = Field(
+        default=90.0, ge=0, description="Copies older than this are deleted at the next backup; 0: never"
+    )
+    per_hour: int = Field(
+        default=30, ge=1, le=100_000,
+        description="Backup calls per machine in any hour; more are refused (BadTooManyOperations)",
+    )  # fmt: skip
+
+
 class JobsConfig(Strict):
     """The machine's job queue: its program store, checks, duplicates, retries and auto-start."""
 
@@ -297,6 +317,9 @@ class JobsConfig(Strict):
         description="After delivery, compare the size (SIZE or a listing), or download it back and hash",
     )
     auto: AutoStart | None = Field(default=None, description="Select and start the program once delivered")
+    backups: BackupSettings = Field(
+        default_factory=BackupSettings, description="Programs.Backup's retention and rate (operator role)"
+    )
     punch: PunchSettings | None = Field(
         default=None,
         description="Serial lines: store programs the operator punches, answer remote requests",

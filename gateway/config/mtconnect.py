@@ -7,6 +7,7 @@ mtconnect:
   port: 5000                 # the agent's HTTP port (0: any free one)
   buffer_size: 131072        # observations kept for /sample (the reference agent's default)
   persist: true              # keep the buffer in <state_dir>/mtconnect.sqlite3 across restarts
+  connections: {per_address: 32, header_timeout: 10, keepalive: 30}   # as http.connections
 ```
 
 Mapping file, per variable (the standard's own attribute names):
@@ -32,6 +33,7 @@ from urllib.parse import urlsplit
 from pydantic import Field, field_validator
 
 from gateway.config.base import Backoff, Strict
+from gateway.config.http import ConnectionLimits
 
 DEFAULT_AGENT_PORT = 5000
 DEFAULT_SHDR_PORT = 7878
@@ -59,6 +61,10 @@ class AgentConfig(Strict):
     sender: str | None = Field(default=None, description="The Header's sender; default: this host's name")
     max_streams: int = Field(
         default=64, ge=1, le=10_000, description="Streaming clients (interval=) served at once"
+    )
+    connections: ConnectionLimits = Field(
+        default_factory=ConnectionLimits,
+        description="Connection caps and timeouts of the agent's port (as http.connections)",
     )
     fault_severity: int = Field(
         default=500,

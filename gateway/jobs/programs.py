@@ -8,14 +8,16 @@ the queue like an inbox upload: no back door. A transport with no store (a
 serial line cannot list) leaves `Put` alone.
 
 The job service passes in what the methods use (the store, its `submit_bytes`,
-the backups folder), so this module does not import the service.
+the backups shelf), so this module does not import the service. Delete, Put and
+Backup need the operator role; Backup's copies are bounded by the shelf
+(gateway/jobs/backups.py: a rate, a retention, and a reply that names the copy,
+not the server's path).
 """
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Sequence
-from datetime import UTC, datetime
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from gateway.errors import (
@@ -28,6 +30,7 @@ from gateway.errors import (
     ProgramNotFound,
     RequestError,
 )
+from gateway.jobs.backups import BackupShelf
 from gateway.jobs.delivery.transport import OpenStore
 from gateway.jobs.inbox.inbox import UploadReply
 from gateway.jobs.inbox.paths import check_file_name
@@ -69,15 +72,15 @@ class SubmitProgram(Protocol):
 
 
 def program_methods(
-    machine: str, *, store: OpenStore | None, submit: SubmitProgram, backups: Path
+    machine: str, *, store: OpenStore | None, submit: SubmitProgram, backups: BackupShelf
 ) -> list[Method]:
     """The methods for one machine: `store` opens its program store (None: Put only), `submit` queues a
-    program, `backups` is the folder Backup copies programs into."""
+    program, `backups` is where Backup copies programs (its folder, retention and rate)."""
     methods = _store_methods(store, backups) if store is not None else []
     return [*methods, _put_method(machine, submit)]
 
 
-def _store_methods(store: OpenStore, backups: Path) -> list[Method]:
+def _store_methods(store: OpenStore, backups: BackupShelf) -> list[Method]:
     """List, Get, Backup and Delete: straight to the controller's program store."""
 
     async def listing(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
@@ -101,13 +104,9 @@ def _store_methods(store: OpenStore, backups: Path) -> list[Method]:
 
     async def backup(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
         name = _name(args[0])
+        backups.admit()
         data = await fetch(name)
-        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-        # An operator's call, at most GET_LIMIT bytes: written in the loop like the CLI's.
-        backups.mkdir(parents=True, exist_ok=True)  # noqa: ASYNC240
-        target = backups / f"{stamp}-{name}"
-        target.write_bytes(data)
-        return [str(target)]
+        return [await asyncio.to_thread(backups.store, name, data)]
 
     async def delete(ctx: WriteContext, args: Sequence[Any]) -> Sequence[Any]:
         name = _name(args[0])
@@ -131,10 +130,11 @@ def _store_methods(store: OpenStore, backups: Path) -> list[Method]:
         Method(
             OBJECT,
             "Backup",
-            "Copy a program into the gateway's backups folder; returns the file's path",
+            "Copy a program into the gateway's backups folder (backups/<machine>/); returns the copy's name",
             (NAME,),
-            (Argument("Path", STRING),),
+            (Argument("File", STRING, "The copy's file name in the backups folder"),),
             backup,
+            role="operator",
         ),
         Method(
             OBJECT, "Delete", "Delete a program from the controller", (NAME,), (), delete, role="operator"

@@ -50,6 +50,7 @@ from gateway.errors import (
     SinkError,
     StoreError,
 )
+from gateway.jobs.backups import BackupShelf
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transports import program_store_for, transport_for
 from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
@@ -167,6 +168,7 @@ class JobService:
         self.autostarters: dict[str, AutoStarter] = {}
         self.workers: dict[str, DeliveryWorker] = {}
         self.lines: dict[str, SerialTransport] = {}  # the serial DNC lines, by machine
+        self.shelves: dict[str, BackupShelf] = {}  # Programs.Backup's copies, by machine
         self.transfer_log: TransferLog | None = None  # opened with the queue when there are serial lines
         # One scheduler for every drip-feed: lines that share a device server share its capacity.
         fleet = DripFleet.for_lines(
@@ -197,8 +199,9 @@ class JobService:
                 transport.on_figures = line_status(machine)
                 for method in drip_methods(transport, functools.partial(self.restart_job, machine=name)):
                     machine.add_method(method)
+            shelf = self.shelves[name] = BackupShelf(self.backups_dir / name, jobs.backups)
             methods = program_methods(
-                name, store=program_store_for(jobs), submit=self.submit_bytes, backups=self.backups_dir / name
+                name, store=program_store_for(jobs), submit=self.submit_bytes, backups=shelf
             )
             for method in methods:
                 machine.add_method(method)

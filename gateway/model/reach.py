@@ -3,7 +3,7 @@ access policy lets it make.
 
 The doors nobody logs in at (anonymous OPC UA clients, MQTT writers, COPYDATA replies) report it
 when they start, so that an open door is never a surprise. Methods that need no role (Programs.List,
-Get, Backup) change nothing on the machine and are left out.
+Get) change nothing on the machine and are left out.
 """
 
 from __future__ import annotations

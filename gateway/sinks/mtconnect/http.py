@@ -9,7 +9,8 @@ not read yet gets an OUT_OF_RANGE MTConnectError part and the stream ends: a str
 never goes on past a gap it did not report.
 
 A client that goes away is noticed at the next part (at the latest a heartbeat later);
-stopping the agent cancels every stream.
+stopping the agent cancels every stream. Connections are capped and slow ones closed by the listener both
+HTTP faces share (gateway/sinks/http_listener.py, `mtconnect.connections`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from gateway.codecs.mtconnect.errors import ErrorCode, OutOfRange, RequestError
 from gateway.codecs.mtconnect.json_documents import streams_json
 from gateway.codecs.mtconnect.multipart import encode_part, part_head
 from gateway.codecs.mtconnect.queries import MAX_TARGET, Request
-from gateway.errors import SinkError
+from gateway.sinks.http_listener import Limits, Listener
 from gateway.sinks.mtconnect.agent import JSON, XML, Agent, Answer
 
 log = logging.getLogger("gateway.sinks.mtconnect")
@@ -41,7 +42,9 @@ MAX_LINE = MAX_TARGET + 1024  # a long request line is answered with INVALID_URI
 class AgentServer:
     """aiohttp's server around an Agent; `async with AgentServer(agent, host, port) as server:`."""
 
-    def __init__(self, agent: Agent, host: str, port: int, *, max_streams: int = 64) -> None:
+    def __init__(
+        self, agent: Agent, host: str, port: int, *, max_streams: int = 64, limits: Limits | None = None
+    ) -> None:
         self.agent = agent
         self.host = host
         self.port = port
@@ -52,7 +55,12 @@ class AgentServer:
         # The last chunks rendered, by (items, from, to, count, format): streams that follow the
         # agent together ask for the same chunk, and render it once between them.
         self.chunks: OrderedDict[tuple[object, ...], tuple[bytes, int, bool]] = OrderedDict()
-        self._runner: web.AppRunner | None = None
+        self.listener = Listener(
+            name="the MTConnect agent",
+            limits=limits or Limits(),
+            shutdown_timeout=0.5,
+            max_line_size=MAX_LINE,
+        )
 
     @property
     def url(self) -> str:
@@ -62,31 +70,14 @@ class AgentServer:
     async def __aenter__(self) -> Self:
         app = web.Application()
         app.router.add_route("*", "/{tail:.*}", self.handle)
-        runner = web.AppRunner(
-            app, access_log=None, handle_signals=False, shutdown_timeout=0.5, max_line_size=MAX_LINE
-        )
-        await runner.setup()
-        site = web.TCPSite(runner, self.host, self.port)
-        try:
-            await site.start()
-        except OSError as exc:
-            await runner.cleanup()
-            raise SinkError(
-                f"the MTConnect agent cannot listen on {self.host}:{self.port}: {exc.strerror or exc}"
-            ) from None
-        self._runner = runner
-        for address in runner.addresses:
-            if isinstance(address, tuple):
-                self.port = int(address[1])
-                break
+        await self.listener.start(app, self.host, self.port)
+        self.port = self.listener.port
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
         for task in list(self.streams):
             task.cancel()
-        runner, self._runner = self._runner, None
-        if runner is not None:
-            await runner.cleanup()
+        await self.listener.stop()
 
     async def handle(self, request: web.Request) -> web.StreamResponse:
         agent = self.agent

@@ -27,6 +27,7 @@ from gateway.errors import SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Subscription
 from gateway.model.tree import VariableNode, VariableTree
+from gateway.sinks.http_listener import Limits
 from gateway.sinks.mtconnect.agent import Agent
 from gateway.sinks.mtconnect.http import AgentServer
 from gateway.sinks.mtconnect.profile import build_profile
@@ -56,7 +57,13 @@ class MTConnectSink:
             self.agent = Agent(self.profile, config)
         except ModelError as exc:
             raise SinkError(f"the MTConnect device model is not valid: {exc}") from None
-        self.server = AgentServer(self.agent, config.host, config.port, max_streams=config.max_streams)
+        self.server = AgentServer(
+            self.agent,
+            config.host,
+            config.port,
+            max_streams=config.max_streams,
+            limits=Limits.of(config.connections),
+        )
         self.store: ObservationStore | None = None
         self._pool: ThreadPoolExecutor | None = None
         self._persisted = 0

@@ -156,7 +156,7 @@ class Api:
         r.add("POST", "/api/alarms/{machine}/{occurrence}/acknowledge", self.acknowledge)
         r.add("POST", "/api/alarms/{machine}/{occurrence}/confirm", self.confirm)
         r.add("GET", "/api/jobs", self.jobs)
-        r.add("POST", "/api/jobs", self.submit)
+        r.add("POST", "/api/jobs", self.submit, files=1, admit=self.may_upload)
         r.add("GET", "/api/jobs/{job}", self.job)
         r.add("POST", "/api/jobs/{job}/retry", self.retry)
         r.add("POST", "/api/jobs/{job}/cancel", self.cancel)
@@ -349,6 +349,16 @@ class Api:
         access = self.tree.access
         access.require(caller.role, self.http.jobs_role, what)
 
+    def may_upload(self, req: HttpRequest, caller: Caller) -> None:
+        """Before an upload's body is read: a job queue, and a caller who may submit jobs. The machine is
+        in the body, so a refusal is audited against the gateway."""
+        self._jobs()
+        try:
+            self._may_operate_jobs(caller, "submit jobs")
+        except AccessDenied as exc:
+            self._audit_gateway("job", "Jobs/(upload)", caller, error=exc)
+            raise
+
     async def jobs(self, req: HttpRequest, caller: Caller) -> HttpResponse:
         if self.ports.jobs is None:
             return json_response({"jobs": []})
@@ -437,7 +447,15 @@ class Api:
 
     # --- audit -------------------------------------------------------------------------------------
 
+    def may_read_audit(self, caller: Caller) -> bool:
+        return self._allowed(caller, self.http.auditor(list(self.config.gateway.roles)))
+
+    def require_audit_reader(self, caller: Caller) -> None:
+        """Every user's name and every change: for `http.audit_role` (the admin role by default) only."""
+        self._require(caller, self.http.auditor(list(self.config.gateway.roles)), "read the audit trail")
+
     async def audit(self, req: HttpRequest, caller: Caller) -> HttpResponse:
+        self.require_audit_reader(caller)
         port = self.ports.audit
         since: datetime | None = None
         text = _text_arg(req, "since")
@@ -475,10 +493,18 @@ class Api:
         return json_response(self.status())
 
     def is_admin(self, caller: Caller) -> bool:
-        return self.tree.access.allows(caller.role, self.http.admin(list(self.config.gateway.roles)))
+        return self._allowed(caller, self.http.admin(list(self.config.gateway.roles)))
 
     def _admin(self, caller: Caller, what: str) -> None:
-        self.tree.access.require(caller.role, self.http.admin(list(self.config.gateway.roles)), what)
+        self._require(caller, self.http.admin(list(self.config.gateway.roles)), what)
+
+    def _allowed(self, caller: Caller, role: str) -> bool:
+        access = self.tree.access
+        return access.allows(caller.role, role) and (access.enabled or caller.user is not None)
+
+    def _require(self, caller: Caller, role: str, what: str) -> None:
+        """`role` or higher; with role checks off (access.enabled: false), a login at least."""
+        self.tree.access.require(caller.role, role, what)
         if not self.tree.access.enabled and caller.user is None:
             raise AccessDenied(f"an anonymous caller may not {what} (access.enabled is false: log in)")
 
@@ -517,23 +543,36 @@ class Api:
             error = exc
             raise
         finally:
-            self.tree.audit(
-                AuditEntry(
-                    at,
-                    action,
-                    GATEWAY,
-                    f"pki/{name[:120]}",
-                    "http",
-                    caller.user,
-                    caller.role,
-                    None,
-                    None,
-                    "Good" if error is None else error.status,
-                    "" if error is None else error.reason,
-                    time.monotonic() - started,
-                )
-            )
+            self._audit_gateway(action, f"pki/{name[:120]}", caller, error=error, at=at, started=started)
         return json_response({"ok": True, "certificate": record})
+
+    def _audit_gateway(
+        self,
+        kind: str,
+        target: str,
+        caller: Caller,
+        *,
+        error: RequestError | None,
+        at: datetime | None = None,
+        started: float | None = None,
+    ) -> None:
+        """An audit entry for a change to the gateway itself, or one refused before it named a machine."""
+        self.tree.audit(
+            AuditEntry(
+                at or utcnow(),
+                kind,
+                GATEWAY,
+                target,
+                "http",
+                caller.user,
+                caller.role,
+                None,
+                None,
+                "Good" if error is None else error.status,
+                "" if error is None else error.reason,
+                0.0 if started is None else time.monotonic() - started,
+            )
+        )
 
     async def me(self, req: HttpRequest, caller: Caller) -> HttpResponse:
         return json_response({"user": caller.user, "role": caller.role, "via": caller.via})

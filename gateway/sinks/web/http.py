@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+import re
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
+from urllib.parse import quote, unquote
 
 from gateway.errors import MalformedRequest, RequestError
 
@@ -101,6 +103,15 @@ class HttpRequest:
         return data
 
 
+@dataclass(frozen=True, slots=True)
+class Admitted:
+    """A request whose route and caller passed before its body was read (issue 23): the handler to run once
+    the body is in, and how many file parts it takes (0: a file part is refused before it is written)."""
+
+    handle: Callable[[HttpRequest], Awaitable[HttpResponse]]
+    files: int = 0
+
+
 @dataclass(slots=True)
 class HttpResponse:
     status: int = 200
@@ -149,6 +160,48 @@ def refused(exc: RequestError) -> HttpResponse:
 
 def html_response(text: str, status: int = 200) -> HttpResponse:
     return HttpResponse(status, text.encode("utf-8"), "text/html; charset=utf-8")
+
+
+MAX_NEXT = 500  # characters of a path to go back to after a login
+
+
+def safe_path(value: str | None) -> str | None:
+    """`value` as a Location that stays on this host, or None when it is anything but a clean path.
+
+    A browser's URL parser drops tabs and newlines and reads `\\` as `/`, so `/\t/evil.example` is a
+    network-path reference to evil.example (issue 23). Refused: anything not starting with a single `/`,
+    control and whitespace characters, backslashes, `//` anywhere in the path, malformed `%` escapes, and
+    the same after percent-decoding (twice encoded included). Non-ASCII characters are percent-encoded.
+    """
+    if not value or len(value) > MAX_NEXT:
+        return None
+    seen = value
+    for _ in range(3):  # `%252F` is `%2F` is `/`
+        if not _clean_path(seen):
+            return None
+        try:
+            decoded = unquote(seen, errors="strict")
+        except UnicodeDecodeError:
+            return None
+        if decoded == seen:
+            return quote(value, safe="".join(chr(c) for c in range(0x21, 0x7F)))
+        seen = decoded
+    return None  # still encoded after three rounds: no console path is
+
+
+def _clean_path(text: str) -> bool:
+    path = text.split("?", 1)[0].split("#", 1)[0]
+    return (
+        text.startswith("/")
+        and "//" not in path
+        and "\\" not in text
+        and text.isprintable()
+        and not any(c.isspace() for c in text)
+        and not _BAD_ESCAPE.search(text)
+    )
+
+
+_BAD_ESCAPE = re.compile(r"%(?![0-9A-Fa-f]{2})")
 
 
 def redirect(location: str, status: int = 303) -> HttpResponse:

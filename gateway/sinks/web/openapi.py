@@ -161,7 +161,7 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
             "type": "object",
             "properties": {"ok": {"type": "boolean"}, "outputs": OBJ, "duration": {"type": "number"}},
         },
-        [400, 403, 404, 409, 422, 503, 504],
+        [400, 403, 404, 409, 422, 429, 503, 504],
     ),
     (
         "get",
@@ -223,7 +223,11 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
     (
         "post",
         "/api/jobs",
-        "Submit a program (multipart): the FTP inbox's validation and queue; 422 with the reason if rejected",
+        (
+            "Submit a program (multipart): the FTP inbox's validation and queue; 422 with the reason if "
+            "rejected. The caller and its role (http.jobs_role) are checked before the body is read; at "
+            "most http.max_uploads uploads at once (429)"
+        ),
         [],
         {
             "required": True,
@@ -254,7 +258,7 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
                 "job_id": {"type": ["string", "null"]},
             },
         },
-        [400, 403, 404, 413, 422],
+        [400, 403, 404, 408, 413, 422, 429],
     ),
     (
         "get",
@@ -305,7 +309,7 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
     (
         "get",
         "/api/audit",
-        "The audit trail, newest first",
+        "The audit trail, newest first: for http.audit_role (default: the admin role) only",
         [
             _param("machine", "query"),
             _param("user", "query"),
@@ -317,7 +321,7 @@ OPERATIONS: list[tuple[str, str, str, list[Any], Any, int, Any, list[int]]] = [
         None,
         200,
         OBJ,
-        [400],
+        [400, 403],
     ),
     (
         "get",
@@ -378,9 +382,11 @@ ERROR_TEXT = {
     403: "The role may not (BadUserAccessDenied), or a missing CSRF token",
     404: "No such machine, variable, method, alarm or job",
     405: "Read-only variable (BadNotWritable)",
+    408: "The request body stalled (BadTimeout, http.body_timeout)",
     409: "Not in a state that allows it (BadInvalidState, …)",
     413: "Too large (BadRequestTooLarge)",
     422: "Wrong type, out of range, wrong arguments, or a program validation rejected",
+    429: "Too many at once: uploads (http.max_uploads), Programs.Backup calls (jobs.backups.per_hour)",
     502: "The controller refused (its own status)",
     503: "The controller is not connected (BadNotConnected)",
     504: "No answer within the deadline (BadTimeout)",

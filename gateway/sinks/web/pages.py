@@ -128,7 +128,13 @@ class Pages:
         )
         return html_response(
             self.templates.render(
-                template, me=caller, csrf=caller.csrf, version=__version__, here=here, **context
+                template,
+                me=caller,
+                csrf=caller.csrf,
+                version=__version__,
+                here=here,
+                may_audit=self.api.may_read_audit(caller),
+                **context,
             )
         )
 
@@ -300,6 +306,7 @@ class Pages:
         return self.render(req, caller, "job.html", title=str(record["id"]), page="jobs", j=job_view(record))
 
     async def audit(self, req: HttpRequest, caller: Caller) -> HttpResponse:
+        self.api.require_audit_reader(caller)
         f = {k: (req.arg(k) or None) for k in ("machine", "user", "origin", "kind", "since")}
         message = ""
         entries: list[dict[str, Any]] = []
@@ -335,7 +342,7 @@ class Pages:
 
     async def gateway(self, req: HttpRequest, caller: Caller) -> HttpResponse:
         status = self.api.status()
-        admin = self.api.is_admin(caller) and (self.tree.access.enabled or caller.user is not None)
+        admin = self.api.is_admin(caller)
         trust = self.api.ports.trust
         return self.render(
             req,

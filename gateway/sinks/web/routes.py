@@ -2,7 +2,8 @@
 
 `{name}` matches one path segment, `{name*}` the rest of the path (a variable's
 path has slashes). `match()` answers the handler with its parameters, or the
-methods the path allows (405), or nothing (404).
+methods the path allows (405), or nothing (404). A route that takes uploads says
+how many files (`files`) and may check its caller before the body is read (`admit`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 Handler = Callable[..., Awaitable[Any]]
+Check = Callable[..., None]  # (request, caller): raises a RequestError to refuse before the body is read
 
 
 @dataclass(frozen=True, slots=True)
@@ -21,6 +23,8 @@ class Route:
     handler: Handler
     public: bool  # no caller needed (health, metrics, login, static files)
     segments: tuple[str, ...]
+    files: int = 0  # multipart file parts it takes; others are refused before they are written
+    admit: Check | None = None  # its own check of the caller, before the body is read
 
     def match(self, parts: list[str]) -> dict[str, str] | None:
         params: dict[str, str] = {}
@@ -46,8 +50,18 @@ class Router:
     def __init__(self) -> None:
         self.routes: list[Route] = []
 
-    def add(self, method: str, pattern: str, handler: Handler, *, public: bool = False) -> None:
-        self.routes.append(Route(method, pattern, handler, public, tuple(pattern.strip("/").split("/"))))
+    def add(
+        self,
+        method: str,
+        pattern: str,
+        handler: Handler,
+        *,
+        public: bool = False,
+        files: int = 0,
+        admit: Check | None = None,
+    ) -> None:
+        segments = tuple(pattern.strip("/").split("/"))
+        self.routes.append(Route(method, pattern, handler, public, segments, files, admit))
 
     def match(self, method: str, path: str) -> tuple[Route, dict[str, str]] | list[str] | None:
         parts = path.strip("/").split("/") if path.strip("/") else [""]

@@ -17,6 +17,7 @@ console meanwhile, and says so), as COPYDATA's tcp-server does.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import time
 from collections.abc import Mapping
@@ -34,14 +35,24 @@ from gateway.model.events import EventSubscription
 from gateway.model.sample import quality_of
 from gateway.model.tree import VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.http_listener import Limits
 from gateway.sinks.web.api import Api
-from gateway.sinks.web.http import HttpRequest, HttpResponse, json_response, redirect, refusal, refused
+from gateway.sinks.web.http import (
+    Admitted,
+    HttpRequest,
+    HttpResponse,
+    json_response,
+    redirect,
+    refusal,
+    refused,
+    safe_path,
+)
 from gateway.sinks.web.live import Live
 from gateway.sinks.web.metrics import CONTENT_TYPE, MachineFigures, Metrics, Scrape
 from gateway.sinks.web.openapi import document
 from gateway.sinks.web.pages import Pages, drip_of
 from gateway.sinks.web.ports import Ports
-from gateway.sinks.web.routes import Router
+from gateway.sinks.web.routes import Route, Router
 from gateway.sinks.web.server import HttpServer, LiveSocket
 from gateway.sinks.web.sessions import Caller, LoginRequired, Sessions
 from gateway.tls import server_context
@@ -102,12 +113,15 @@ class WebSink:
         )
         jobs = ports.jobs
         self.server = HttpServer(
-            handler=self.handle,
+            admit=self.admit,
             socket_handler=self._socket,
             socket_path=LIVE_PATH,
             upload_dir=jobs.staging_file if jobs is not None else self._no_uploads,
             max_body=http.max_body,
             max_upload=jobs.max_upload if jobs is not None else http.max_body,
+            max_uploads=http.max_uploads,
+            body_timeout=http.body_timeout,
+            limits=Limits.of(http.connections),
             tls=tls,
         )
         self.listening = False
@@ -197,7 +211,9 @@ class WebSink:
 
     # --- requests --------------------------------------------------------------------------------
 
-    async def handle(self, req: HttpRequest) -> HttpResponse:
+    def admit(self, req: HttpRequest) -> Admitted | HttpResponse:
+        """Before the body is read: the route (404, 405), the caller (401, or the login page), and a route's
+        own check (an upload's role and CSRF token: 403). Nothing a refused request sends is read."""
         found = self.router.match(req.method, req.path)
         if found is None:
             return refusal("BadNotFound", f"nothing at {req.path}", 404)
@@ -209,22 +225,40 @@ class WebSink:
             return response
         route, params = found
         req.params = params
-        api = req.path.startswith("/api/")
+        if route.public:
+            return Admitted(functools.partial(self._public, route), route.files)
         try:
-            if route.public:
-                return await route.handler(req)  # type: ignore[no-any-return]
-            try:
-                caller = self.sessions.caller(req)
-            except LoginRequired as exc:
-                if api:
-                    return refusal(exc.status, exc.reason, 401)
-                return redirect(f"/login?next={_quote(req.path)}")
+            caller = self.sessions.caller(req)
+        except LoginRequired as exc:
+            if req.path.startswith("/api/"):
+                return refusal(exc.status, exc.reason, 401)
+            return redirect(f"/login?next={_quote(req.path)}")
+        try:
+            if route.files:  # before an upload: its CSRF header (the form field is in the body) and role
+                self.sessions.check_csrf(req, caller)
+            if route.admit is not None:
+                route.admit(req, caller)
+        except RequestError as exc:
+            return self._refused(req, exc)
+        return Admitted(functools.partial(self._run, route, caller), route.files)
+
+    async def _public(self, route: Route, req: HttpRequest) -> HttpResponse:
+        try:
+            return await route.handler(req)  # type: ignore[no-any-return]
+        except RequestError as exc:
+            return self._refused(req, exc)
+
+    async def _run(self, route: Route, caller: Caller, req: HttpRequest) -> HttpResponse:
+        try:
             self.sessions.check_csrf(req, caller)
             return await route.handler(req, caller)  # type: ignore[no-any-return]
         except RequestError as exc:
-            if api or req.method != "GET":
-                return refused(exc)
-            return self._error_page(req, exc)
+            return self._refused(req, exc)
+
+    def _refused(self, req: HttpRequest, exc: RequestError) -> HttpResponse:
+        if req.path.startswith("/api/") or req.method != "GET":
+            return refused(exc)
+        return self._error_page(req, exc)
 
     def _error_page(self, req: HttpRequest, exc: RequestError) -> HttpResponse:
         try:
@@ -344,10 +378,8 @@ def _number(value: Any) -> float | None:
 
 
 def _next(value: str | None) -> str:
-    """Where a login goes next: a path on this site only (never `//elsewhere` or a full URL)."""
-    if not value or not value.startswith("/") or value.startswith("//") or "\\" in value or len(value) > 500:
-        return "/"
-    return value
+    """Where a login goes next: a clean path on this host, else "/" (see `safe_path`)."""
+    return safe_path(value) or "/"
 
 
 def _quote(path: str) -> str:

@@ -35,6 +35,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "ftp_races": (6, 200),  # uploads whose passive port another host connects to first (test_security_ftp)
     "held_addresses": (2, 20),  # addresses that hold inbox sessions open without logging in
     "guessing_addresses": (2, 30),  # addresses that guess passwords on the web console and the FTP inbox
+    "slow_connections": (1000, 1000),  # per HTTP face, held open against the web console and MTConnect
 }
 
 

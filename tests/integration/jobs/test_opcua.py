@@ -78,8 +78,9 @@ async def test_programs_methods_list_get_backup_and_delete(env: Env) -> None:
     files = env.store.files()
     assert names == sorted(files) and sizes == [len(files[n]) for n in names]
     assert await env.call("Get", "demo.nc") == files["demo.nc"].decode()
-    path = Path(str(await env.call("Backup", "demo.nc")))
-    assert path.parent == env.state / "backups" / "laser" and path.read_bytes() == files["demo.nc"]
+    name = str(await env.call("Backup", "demo.nc"))  # the copy's name: never the server's path
+    assert "/" not in name and name.endswith("-demo.nc")
+    assert (env.state / "backups" / "laser" / name).read_bytes() == files["demo.nc"]
     assert await env.call("Delete", "soft-limit.nc") is None  # no outputs
     assert "soft-limit.nc" not in env.store.files()
 

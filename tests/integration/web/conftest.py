@@ -105,6 +105,9 @@ async def web_gateway(tmp_path: Path, *, speed: float = 20.0, **gateway: Any) ->
         "users": users_config(),
         "http": {"host": "127.0.0.1", "port": http_port},
     }
+    if gateway.get("http") is not None:  # merged (a port given there wins); None: no console
+        gateway["http"] = {**settings["http"], **gateway["http"]}
+        http_port = gateway["http"]["port"]
     settings.update(gateway)
     mapping = laser_mapping(sim_port, ftp_port)
     assert mapping.jobs is not None

@@ -166,6 +166,9 @@ async def test_reads_writes_and_calls_by_token_are_audited_as_http(api: WebRig) 
 
     await api.gateway.audit.flush()
     async with session.get("/api/audit?origin=http&user=otto&limit=50", headers=auth) as r:
+        assert r.status == 403  # the audit trail is the admin's (http.audit_role)
+    admin = {"Authorization": f"Bearer {await _token(api, 'ada')}"}
+    async with session.get("/api/audit?origin=http&user=otto&limit=50", headers=admin) as r:
         entries = (await r.json())["entries"]
     kinds = {(e["kind"], e["target"], e["status"]) for e in entries}
     assert ("write", "Feed/Override", "Good") in kinds

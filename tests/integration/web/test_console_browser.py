@@ -104,7 +104,14 @@ async def test_live_values_writes_by_role_and_logout(rig: WebRig, browser: Any, 
     assert "needs 'operator'" in answer["body"]["error"]["reason"]
     assert rig.machine.nodes["Feed/Override"].sample.value == 60
 
-    # Both are in the audit trail with origin http, and the audit page shows them.
+    # The viewer has no audit page (nor a link to it); the admin's shows both, with origin http.
+    assert await page.locator('nav a[href="/audit"]').count() == 0
+    refused = await page.goto(f"{rig.url}/audit?origin=http&kind=write")
+    assert refused is not None and refused.status == 403
+    await expect(page.locator("main")).to_contain_text("may not read the audit trail")
+    await page.click("#logout")
+    await login(page, rig, "ada")
+    await page.click('nav a[href="/audit"]')
     await page.goto(f"{rig.url}/audit?origin=http&kind=write")
     table = page.locator("#audit")
     await expect(table).to_contain_text("vera@http/viewer")
