@@ -118,9 +118,20 @@ class WriteLog:
             log.add(now, n)
             return n
 
-        socket.socket.send = send_  # type: ignore[method-assign]
-        socket.socket.sendall = sendall_  # type: ignore[method-assign]
-        os.write = write_
+        self._patched = (send_, sendall_, write_)
+        self._originals = (send, sendall, write)
+
+    def _install(self, on: bool) -> None:
+        """The timing wrappers only while recording: at other times the gateway's process pays nothing for
+        them (the fleet's CPU figure is the gateway's own)."""
+        send, sendall, write = self._patched if on else self._originals
+        socket.socket.send = send  # type: ignore[method-assign]
+        socket.socket.sendall = sendall  # type: ignore[method-assign]
+        os.write = write
+
+    def stop(self) -> None:
+        self.on = False
+        self._install(False)
 
     def _is_ours(self, fd: int) -> bool:
         """A TCP socket to one of the device servers (not the event loop's self-pipe, not stdout)."""
@@ -141,6 +152,7 @@ class WriteLog:
 
     def start(self, ports: set[int]) -> None:
         self.times, self.counts, self.ports, self._ours, self.on = array("d"), array("q"), ports, {}, True
+        self._install(True)
 
     def within(self, holds: list[list[float | None]]) -> list[int]:
         """Characters written after each hold's DC3 and before its DC1."""
@@ -273,7 +285,7 @@ async def main(workdir: Path) -> None:
             (f"m{i:02d}", mapping(f"m{i:02d}", url, baud, kind, mode="drip", buffer=buffer, **shared))
             for i, (url, kind) in enumerate(zip(urls, kinds, strict=True))
         ]
-        log.on = False
+        log.stop()
         record = bool(request.get("record"))
         answer = await jobs(
             lines,
@@ -281,7 +293,7 @@ async def main(workdir: Path) -> None:
             float(request.get("deadline", math.inf)),
             lambda: log.start({_port_of(u) for u in urls}) if record else None,
         )
-        log.on = False
+        log.stop()
         return answer
 
     async def load(request: dict[str, Any]) -> dict[str, Any]:

@@ -58,6 +58,8 @@ SLOWER_WEIGHT = 0.25
 UNHINDERED = 0.8
 #: The smallest grant a line with flow control gets when the model thinks its buffer full.
 PROBE = 32
+#: Seconds of idle time a line or a link may make up for (see `_grant`).
+SLACK = 0.005
 
 
 @dataclass(frozen=True, slots=True)
@@ -421,9 +423,12 @@ class DripScheduler:
                 break
         rate = self._rate(line)
         arrives = now + size / rate
-        line.free_at = now + size / spec.rate
+        # Time a line or link stood idle because the caller came back late (a thread's wake-up) is
+        # credited, up to SLACK: otherwise every late wake-up would be capacity lost for good.
+        line.free_at = _resume(line.free_at, now) + size / spec.rate
         if spec.link is not None:
-            self._link_free[spec.link] = now + size / self.links[spec.link]
+            free = self._link_free.get(spec.link, -math.inf)
+            self._link_free[spec.link] = _resume(free, now) + size / self.links[spec.link]
         for block_size, block_seconds in whole:
             self._append(line, now, block_size, block_seconds, arrives)
         line.cursor += len(whole)
@@ -486,3 +491,9 @@ class DripScheduler:
                     return max(when, item.finishes)
             return None
         return when
+
+
+def _resume(free: float, now: float) -> float:
+    """When a line or link that was free at `free` starts its next piece, granted at `now`: where it would
+    have been, had the caller come back in time (up to SLACK late), else now."""
+    return free if now - SLACK <= free < now else now

@@ -545,3 +545,21 @@ def test_a_model_only_line_starves_a_machine_eight_times_faster() -> None:
     sched = DripScheduler(lead_time=30.0)
     (ctl,) = drip(sched, [DripLine("m", LINE_RATE, 256, blocks, flow_control=False)], [8.0], limit=40.0)
     assert ctl.starvations > 10
+
+
+def test_machines_that_all_take_the_same_but_are_estimated_from_half_to_eight_times_never_starve() -> None:
+    """The bench's fleet: every machine takes 1,000 chars/s, but their programs are estimated at 0.5x to 8x
+    what they really take; 48-byte blocks; a link of 1.2x their consumption. The harness comes back every
+    0.5 ms, as a thread that wakes late: link time lost to late wake-ups must be made up for, or the 20 %
+    spare capacity goes and every line runs dry at once."""
+    factors = [0.5 * 16 ** (i / 19) for i in range(20)]
+    lines = [
+        DripLine(f"m{i:02d}", LINE_RATE, 256, program(48, 0.048 * factor, 200), link="nport")
+        for i, factor in enumerate(factors)
+    ]
+    sched = DripScheduler(lead_time=30.0, links={"nport": 1.2 * 20 * 1000.0})
+    controllers = drip(sched, lines, factors, limit=40.0)
+    for line, factor, ctl in zip(lines, factors, controllers, strict=True):
+        assert ctl.finished_at is not None and ctl.overruns == 0
+        assert ctl.starvations == 0, f"{line.key} ({factor:.1f}x) starved {ctl.starvations} times"
+        assert sched.speed(line.key) == pytest.approx(factor, rel=0.1)

@@ -145,6 +145,9 @@ class SerialTransport:
         self._lock = asyncio.Lock()
         self._answers: set[asyncio.Task[None]] = set()  # answers waiting for the line (send_answer)
         self._stepping: Future[None] | None = None  # the transfer the I/O thread steps now
+        self._files = asyncio.Lock()  # the progress file's writes and removal, in order
+        self._pending: tuple[Program, Position, int | None, bool] | None = None
+        self._saver: asyncio.Task[None] | None = None
 
     @property
     def where(self) -> str:
@@ -293,7 +296,7 @@ class SerialTransport:
             log.info("%s: sending %s over %s (%s mode)", self.machine, what, self.where, settings.mode)
             outcome = await self._transfer(wire, drip.control, timing, report, self.alarm, member)
         except TransferFailed as exc:
-            self._clear_checkpoint()  # the job's reason says where it stopped
+            await self._clear()  # the job's reason says where it stopped
             if exc.outcome is not None:
                 self._figures(exc.outcome)
             if exc.offset > wire.body_start or not exc.permanent:
@@ -304,7 +307,7 @@ class SerialTransport:
             raise
         finally:
             self.current = None
-        self._clear_checkpoint()
+        await self._clear()
         self._figures(outcome)
         if opened_here and self.listener is None:
             await self._close()
@@ -336,7 +339,9 @@ class SerialTransport:
             if now - last_checkpoint >= CHECKPOINT_EVERY:
                 last_checkpoint = now
                 resume = None if timing is None else timing.resume_line(pos.sent)
-                self._write_checkpoint(program, pos, resume, answer=answer)
+                # Written off the I/O thread: a disk that stalls a write (a journal commit, a busy
+                # SD card) must not stall every line's next slice (bench: 0.16 s steps, all lines dry).
+                loop.call_soon_threadsafe(self._save_checkpoint, (program, pos, resume, answer))
             if progress is not None:
                 loop.call_soon_threadsafe(
                     progress, Progress(pos.sent, pos.line, pos.lead, pos.remaining, pos.held)
@@ -515,10 +520,29 @@ class SerialTransport:
         finally:
             self.current = None
             if timing is not None:
-                self._clear_checkpoint()
+                await self._clear()
         return result
 
     # --- the checkpoint ----------------------------------------------------------------------------
+
+    def _save_checkpoint(self, point: tuple[Program, Position, int | None, bool]) -> None:
+        """In the event loop: write the newest position in a worker thread, one write at a time, in order
+        with `_clear` (which waits for the write in hand, so that no late write outlives the transfer)."""
+        self._pending = point
+        if self._saver is None or self._saver.done():
+            self._saver = asyncio.get_running_loop().create_task(self._save_pending(), name="dnc:checkpoint")
+
+    async def _save_pending(self) -> None:
+        while self._pending is not None:
+            (program, pos, resume, answer), self._pending = self._pending, None
+            async with self._files:
+                await asyncio.to_thread(self._write_checkpoint, program, pos, resume, answer=answer)
+
+    async def _clear(self) -> None:
+        """Remove the progress file once the writes queued before have been made."""
+        self._pending = None
+        async with self._files:
+            await asyncio.to_thread(self._clear_checkpoint)
 
     def _write_checkpoint(
         self, program: Program, pos: Position, resume: int | None, *, answer: bool = False
