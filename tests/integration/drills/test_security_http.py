@@ -83,7 +83,9 @@ def gateway_file(directory: Path, ports: dict[str, int], mqtt_port: int) -> Path
             "mtconnect": {"host": "127.0.0.1", "port": ports["mtconnect"]},
             "users": [{"name": name, "role": role, "password_hash": hash_password(password, n=2**10)}
                       for name, (role, password) in USERS.items()],
-            "access": {"mqtt_writer_role": "operator"},
+            # The mapping's COPYDATA target takes writes: they act as the operator (the loader refuses it
+            # otherwise; no door acts as the admin for want of a login).
+            "access": {"mqtt_writer_role": "operator", "copydata_role": "operator"},
         },
     )  # fmt: skip
 
