@@ -26,6 +26,8 @@ from gateway.errors import RequestError
 from gateway.shims.heap import settled_heap
 from simulator.dnc import DncFace, DncOptions
 from simulator.errors import SimulatorError
+from simulator.focas import DEFAULT_SESSIONS as FOCAS_SESSIONS
+from simulator.focas import FocasFace
 from simulator.ftp_store import FtpStore
 from simulator.machine import Machine, MachineState
 from simulator.noise import Noise, NoiseSpec
@@ -63,6 +65,8 @@ class Simulator:
         noise: NoiseSpec | None = None,
         dnc: DncOptions | None = None,
         shdr_port: int | None = None,
+        focas_port: int | None = None,
+        focas_sessions: int = FOCAS_SESSIONS,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -95,6 +99,9 @@ class Simulator:
         # The MTConnect adapter face (simulator/shdr.py): off unless a port is given (0: any free one).
         self.shdr_port = shdr_port
         self.shdr: ShdrFace | None = None
+        # The FOCAS2 face (simulator/focas): off unless a port is given (0: any free one).
+        self.focas_port, self.focas_sessions = focas_port, focas_sessions
+        self.focas: FocasFace | None = None
         self._opcua_auth = (opcua_user, opcua_password)
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
@@ -157,6 +164,11 @@ class Simulator:
             self.shdr = await stack.enter_async_context(
                 ShdrFace(self.machine, host=self.host, port=self.shdr_port, clock=self.clock)
             )
+        if self.focas_port is not None:
+            self.focas = await stack.enter_async_context(
+                FocasFace(self.machine, self.programs, host=self.host, port=self.focas_port,
+                          sessions=self.focas_sessions)
+            )  # fmt: skip
         if self.loop_program:
             try:
                 self.machine.select_program(self.loop_program)

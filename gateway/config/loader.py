@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -21,6 +21,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from gateway.auth.known_passwords import is_known, known_passwords_of
+from gateway.codecs.focas.address import parse_address as focas_address
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.alarms import SOURCE_TAGS
@@ -29,6 +30,9 @@ from gateway.config.jobs import CONTROLLER_TAGS
 from gateway.config.mapping import DRIVER_TAGS, MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
+
+#: The parser of each driver's `source` strings, run at load time so that a typo is a file:line error.
+ADDRESS_PARSERS: dict[str, Callable[[str], object]] = {"opcua": parse_address, "focas": focas_address}
 
 Loc = tuple[str | int, ...]
 M = TypeVar("M", bound=BaseModel)
@@ -333,12 +337,14 @@ def _structure_issues(located: Located) -> list[ConfigIssue]:
         loc: Loc = ("variables", indices[pos], "path")
         issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
     driver = located.data.get("driver")
-    if isinstance(driver, dict) and driver.get("type", "opcua") == "opcua":
-        issues.extend(_address_issues(located, variables))
+    if isinstance(driver, dict) and driver.get("type", "opcua") in ADDRESS_PARSERS:
+        issues.extend(_address_issues(located, variables, ADDRESS_PARSERS[driver.get("type", "opcua")]))
     return issues
 
 
-def _address_issues(located: Located, variables: Sequence[Any]) -> list[ConfigIssue]:
+def _address_issues(
+    located: Located, variables: Sequence[Any], parse_address: Callable[[str], object]
+) -> list[ConfigIssue]:
     """Catch a typo in a node id at load time, not as a Bad variable at run time."""
     issues = []
     for index, var in enumerate(variables):

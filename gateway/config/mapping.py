@@ -23,6 +23,7 @@ from gateway.config.alarms import AlarmsConfig, alarms_issues
 from gateway.config.base import Backoff, Strict, TypeField
 from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.config.focas import FocasDriver
 from gateway.config.jobs import JobsConfig
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.config.mtconnect import READ_ONLY_DRIVERS, MTConnectDriver, ShdrDriver, VariableMTConnect
@@ -278,11 +279,12 @@ def _driver_type(value: Any) -> str:
     return str(getattr(value, "type", "opcua"))
 
 
-DRIVER_TAGS = ("opcua", "mtconnect", "shdr")
+DRIVER_TAGS = ("opcua", "mtconnect", "shdr", "focas")
 Driver = Annotated[
     Annotated[OpcUaDriver, Tag("opcua")]
     | Annotated[MTConnectDriver, Tag("mtconnect")]
-    | Annotated[ShdrDriver, Tag("shdr")],
+    | Annotated[ShdrDriver, Tag("shdr")]
+    | Annotated[FocasDriver, Tag("focas")],
     Discriminator(_driver_type),
 ]
 

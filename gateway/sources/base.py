@@ -51,4 +51,8 @@ def create_source(machine: Machine, mapping: MachineMapping) -> Source:
         from gateway.sources.mtconnect.shdr_source import ShdrSource
 
         return ShdrSource(machine, mapping)
+    if driver.type == "focas":
+        from gateway.sources.focas.source import FocasSource
+
+        return FocasSource(machine, mapping)
     raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable
