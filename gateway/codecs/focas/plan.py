@@ -183,7 +183,7 @@ def _one(
     if k == "macro":
         first, last = next((a, b) for a, b in macros if a <= item.number <= b)
         at = 8 * (item.number - first)
-        return command(fn.MACRO_READ, first, last), lambda r, c: decode_scaled(r.data, at)
+        return command(fn.MACRO_READ, first, last), lambda r, c: _number(decode_scaled(r.data, at))
     if k == "pmc":
         width = fn.PMC_TYPE_SIZE[item.size]
         start, end = next((a, b) for a, b in pmc_ranges[(item.area, item.size)] if a <= item.number <= b)
