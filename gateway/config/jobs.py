@@ -16,6 +16,7 @@ from pydantic import ByteSize, Discriminator, Field, SecretStr, Tag, field_valid
 
 from gateway.auth.passwords import parse_hash
 from gateway.config.base import Backoff, Strict
+from gateway.config.focas import ControllerFocas
 from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
 
@@ -216,9 +217,11 @@ def _controller_type(value: Any) -> str:
     return str(getattr(value, "type", "ftp"))
 
 
-CONTROLLER_TAGS = ("ftp", "serial")
+CONTROLLER_TAGS = ("ftp", "serial", "focas")
 Controller = Annotated[
-    Annotated[ControllerFtp, Tag("ftp")] | Annotated[ControllerSerial, Tag("serial")],
+    Annotated[ControllerFtp, Tag("ftp")]
+    | Annotated[ControllerSerial, Tag("serial")]
+    | Annotated[ControllerFocas, Tag("focas")],
     Discriminator(_controller_type),
 ]
 
