@@ -18,6 +18,7 @@ from simulator.dnc.options import _port_or_off, add_dnc_arguments, dnc_banner, d
 from simulator.errors import SimulatorError
 from simulator.focas import DEFAULT_PORT as FOCAS_PORT
 from simulator.focas import DEFAULT_SESSIONS as FOCAS_SESSIONS
+from simulator.haas_mdc import DEFAULT_PORT as HAAS_PORT
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
 from simulator.shdr import DEFAULT_PORT as SHDR_PORT
@@ -27,6 +28,7 @@ log = logging.getLogger("simulator")
 
 SHDR_ENV = "CNC_SIM_SHDR_PORT"
 FOCAS_ENV = "CNC_SIM_FOCAS_PORT"
+HAAS_ENV = "CNC_SIM_HAAS_PORT"
 
 NOISY = ("asyncua", "aioftp")
 
@@ -91,6 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--focas-sessions", type=int, default=FOCAS_SESSIONS, metavar="N",
         help=f"FOCAS sessions open at once before one is refused, as a Fanuc's (default {FOCAS_SESSIONS})",
+    )  # fmt: skip
+    p.add_argument(
+        "--haas-port", type=_port_or_off, default=_port_default(HAAS_ENV, HAAS_PORT), metavar="PORT",
+        help=f"Haas NGC machine data collection port (default ${HAAS_ENV} or {HAAS_PORT}; 'off')",
     )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
@@ -186,6 +192,7 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         shdr_port=args.shdr_port,
         focas_port=args.focas_port,
         focas_sessions=args.focas_sessions,
+        haas_port=args.haas_port,
     )
     try:
         async with simulator:
@@ -240,6 +247,7 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
             if sim.focas
             else []
         ),
+        *([f"  Haas MDC {sim.haas.url}  (Q-commands; mappings/haas-sim.yaml reads it)"] if sim.haas else []),
         "  stop     Ctrl-C",
         "",
     ]

@@ -22,6 +22,7 @@ from pydantic import BaseModel, ValidationError
 
 from gateway.auth.known_passwords import is_known, known_passwords_of
 from gateway.codecs.focas.address import parse_address as focas_address
+from gateway.codecs.haas_mdc.protocol import parse_address as mdc_address
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.alarms import SOURCE_TAGS
@@ -32,7 +33,11 @@ from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
 
 #: The parser of each driver's `source` strings, run at load time so that a typo is a file:line error.
-ADDRESS_PARSERS: dict[str, Callable[[str], object]] = {"opcua": parse_address, "focas": focas_address}
+ADDRESS_PARSERS: dict[str, Callable[[str], object]] = {
+    "opcua": parse_address,
+    "focas": focas_address,
+    "haas-mdc": mdc_address,
+}
 
 Loc = tuple[str | int, ...]
 M = TypeVar("M", bound=BaseModel)

@@ -24,6 +24,7 @@ from gateway.config.base import Backoff, Strict, TypeField
 from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.config.focas import FocasDriver
+from gateway.config.haas_mdc import HaasMdcDriver
 from gateway.config.jobs import JobsConfig
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.config.mtconnect import READ_ONLY_DRIVERS, MTConnectDriver, ShdrDriver, VariableMTConnect
@@ -279,12 +280,13 @@ def _driver_type(value: Any) -> str:
     return str(getattr(value, "type", "opcua"))
 
 
-DRIVER_TAGS = ("opcua", "mtconnect", "shdr", "focas")
+DRIVER_TAGS = ("opcua", "mtconnect", "shdr", "focas", "haas-mdc")
 Driver = Annotated[
     Annotated[OpcUaDriver, Tag("opcua")]
     | Annotated[MTConnectDriver, Tag("mtconnect")]
     | Annotated[ShdrDriver, Tag("shdr")]
-    | Annotated[FocasDriver, Tag("focas")],
+    | Annotated[FocasDriver, Tag("focas")]
+    | Annotated[HaasMdcDriver, Tag("haas-mdc")],
     Discriminator(_driver_type),
 ]
 

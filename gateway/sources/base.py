@@ -55,4 +55,8 @@ def create_source(machine: Machine, mapping: MachineMapping) -> Source:
         from gateway.sources.focas.source import FocasSource
 
         return FocasSource(machine, mapping)
+    if driver.type == "haas-mdc":
+        from gateway.sources.haas_mdc.source import HaasMdcSource
+
+        return HaasMdcSource(machine, mapping)
     raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable

@@ -89,6 +89,8 @@ class FocasFace:
             server.close()
         for writer in list(self._writers):
             writer.transport.abort()
+        if self._tasks:  # the aborted connections end their handlers; cancel what is left
+            await asyncio.wait(list(self._tasks), timeout=0.5)
         for task in list(self._tasks):
             task.cancel()
         if self._tasks:

@@ -35,15 +35,11 @@ from gateway.config.mapping import MachineMapping
 from gateway.errors import ControllerRefused, ControllerUnavailable, OutOfRange, SourceError, TypeMismatch
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
-from gateway.model.types import DataType
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.controller_values import fit
 
 log = logging.getLogger("gateway.sources.focas")
 
-_INTEGERS = frozenset(
-    {DataType.SBYTE, DataType.BYTE, DataType.INT16, DataType.UINT16, DataType.INT32, DataType.UINT32,
-     DataType.INT64, DataType.UINT64}
-)  # fmt: skip
 #: A controller's refusal of a read, as the status a variable shows.
 STATUS_OF = {EW_FUNC: "BadNotSupported", EW_NOOPT: "BadNotSupported", EW_NUMBER: "BadNodeIdUnknown",
              EW_DATA: "BadDataUnavailable", EW_BUSY: "BadResourceUnavailable"}  # fmt: skip
@@ -238,34 +234,3 @@ def _refused(node: VariableNode, reply: Reply) -> None:
     if reply.error:
         kind = OutOfRange if reply.error == EW_NUMBER else ControllerRefused
         raise kind(f"{node.full_path}: the controller refused: {describe(reply.error)}")
-
-
-def fit(node: VariableNode, value: Any) -> Any:
-    """A value as the variable's controller type wants it (an integral macro for an Int32, ...)."""
-    spec = node.definition.source_type or node.definition.type
-    base = spec.base
-    if spec.array:
-        if not isinstance(value, list):
-            raise TypeError(f"the controller sent one value, the mapping says {spec}")
-        return [_scalar(base, v) for v in value]
-    if isinstance(value, list):
-        raise TypeError(f"the controller sent a list, the mapping says {spec}")
-    return _scalar(base, value)
-
-
-def _scalar(base: DataType, value: Any) -> Any:
-    if value is None:
-        raise TypeError("the controller has no value (vacant)")
-    if base is DataType.STRING:
-        return value if isinstance(value, str) else str(value)
-    if base is DataType.BOOLEAN:
-        return bool(value)
-    if base in _INTEGERS:
-        if isinstance(value, str):
-            raise TypeError(f"the controller sent text, the mapping says {base.value}")
-        if isinstance(value, float) and not value.is_integer():
-            raise TypeError(f"{value!r} is not an integer, the mapping says {base.value}")
-        return int(value)
-    if isinstance(value, str):
-        raise TypeError(f"the controller sent text, the mapping says {base.value}")
-    return float(value)

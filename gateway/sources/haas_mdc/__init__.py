@@ -1,0 +1,1 @@
+"""The Haas NGC machine data collection driver (`driver: {type: haas-mdc}`)."""
