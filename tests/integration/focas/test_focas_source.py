@@ -99,3 +99,37 @@ async def test_writes_go_to_the_control_and_are_read_back(tmp_path: Path) -> Non
         # a macro write the control refuses (a system variable) names the code
         with pytest.raises(OutOfRange):
             await machine.write("Macros/M501", 1e12, CTX)
+
+
+async def test_commands_select_start_and_reset_a_fanuc_with_their_guards(tmp_path: Path) -> None:
+    """mappings/fanuc-sim.yaml's commands: select-program, start (cnc_start), reset (ERS through the PMC),
+    each refused by its guard where the machine's state does not allow it."""
+    from gateway.errors import InvalidState
+
+    ctx = WriteContext("test", role="operator")
+    async with (
+        simulator(tmp_path) as sim,
+        running(gateway_config(tmp_path, fanuc_mapping(sim.focas.port))) as gw,
+    ):  # type: ignore[union-attr]
+        machine = gw.tree.machines[MACHINE]
+        await wait_until(lambda: value(gw, "Machine/Run") == 0, timeout=10, message="connected, reset state")
+        methods = machine.methods
+        await machine.call_method(methods[("Commands", "select-program")], ["soft-limit.nc"], ctx)
+        assert sim.machine.program.name == "soft-limit.nc"
+        await machine.call_method(methods[("Commands", "start")], [], ctx)
+        await wait_until(
+            lambda: value(gw, "ActiveAlarms/Numbers") == [1001], timeout=15, message="the soft-limit alarm"
+        )
+        await wait_until(lambda: value(gw, "Machine/Run") == 1, message="STOP after the alarm")
+        await machine.call_method(
+            methods[("Commands", "reset")], [], ctx
+        )  # ERS: done when Machine/Alarm is 0
+        assert not sim.machine.alarms
+        sim.machine.select_program("demo.nc")
+        sim.machine.start()
+        await wait_until(lambda: value(gw, "Machine/Run") == 3, message="running")
+        with pytest.raises(
+            InvalidState, match="Machine/Run is 3"
+        ):  # select-program's guard: not while running
+            await machine.call_method(methods[("Commands", "select-program")], ["soft-limit.nc"], ctx)
+        assert sim.machine.program.name == "demo.nc"
