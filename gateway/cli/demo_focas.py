@@ -6,9 +6,10 @@ import argparse
 import os
 from collections.abc import Callable
 
-from gateway.config.focas import ControllerFocas, FocasDriver
+from gateway.config.focas import ControllerFocas
 from gateway.config.mapping import MachineMapping
 from gateway.config.mqtt import MachineMqtt
+from gateway.sources.focas.config import FocasDriver
 
 DEFAULT_PORT = 8193
 MAPPING = "fanuc-sim.yaml"

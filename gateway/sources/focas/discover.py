@@ -15,13 +15,13 @@ from urllib.parse import urlsplit
 
 import yaml
 
-from gateway.clients.focas.session import FocasSession
 from gateway.codecs.focas.address import parse_address
 from gateway.codecs.focas.errors import describe
 from gateway.codecs.focas.plan import make_plan
-from gateway.config.focas import DEFAULT_FOCAS_PORT
-from gateway.config.mapping import MACHINE_RE
 from gateway.errors import SourceError
+from gateway.settings.names import MACHINE_RE
+from gateway.sources.focas.config import DEFAULT_FOCAS_PORT
+from gateway.sources.focas.session import FocasSession
 
 SLOW = 60_000  # ms: what does not change
 

@@ -18,7 +18,6 @@ import time
 from collections.abc import Sequence
 from typing import Any, Self
 
-from gateway.clients.focas.pool import SessionPool
 from gateway.codecs.focas.address import Item, parse_address
 from gateway.codecs.focas.commands import Reply
 from gateway.codecs.focas.errors import EW_BUSY, EW_DATA, EW_FUNC, EW_NOOPT, EW_NUMBER, FocasError, describe
@@ -30,13 +29,14 @@ from gateway.codecs.focas.writes import (
     pmc_read_byte,
     write_commands,
 )
-from gateway.config.focas import FocasDriver
-from gateway.config.mapping import MachineMapping
 from gateway.errors import ControllerRefused, ControllerUnavailable, OutOfRange, SourceError, TypeMismatch
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.base import DriverMapping, settings_of
 from gateway.sources.controller_values import fit
+from gateway.sources.focas.config import FocasDriver
+from gateway.sources.focas.pool import SessionPool
 
 log = logging.getLogger("gateway.sources.focas")
 
@@ -57,10 +57,9 @@ class Group:
 
 
 class FocasSource:
-    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
-        assert isinstance(mapping.driver, FocasDriver)
+    def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
         self.machine = machine
-        self.driver: FocasDriver = mapping.driver
+        self.driver = settings_of(mapping, FocasDriver)
         d = self.driver
         self.pool = SessionPool(d.host, d.port, d.timeout, d.sessions)
         self.items: dict[VariableNode, Item] = {}
@@ -69,10 +68,7 @@ class FocasSource:
         for node in machine.mapped:
             item = parse_address(node.definition.source)  # the loader checked it
             self.items[node] = item
-            spec = specs.get(node.path)
-            interval = (
-                mapping.sampling_interval(spec) if spec is not None else mapping.defaults.sampling_interval
-            )
+            interval = mapping.sampling_interval(specs[node.path])
             by_interval.setdefault(max(interval, 10.0) / 1000.0, []).append((node, item))
         self.groups = [Group(i, e, d.max_alarms) for i, e in sorted(by_interval.items())]
         self._last: dict[VariableNode, Any] = {}

@@ -15,34 +15,30 @@ import logging
 import time
 from typing import Any, Self
 
-from gateway.clients.haas_mdc import MdcConnection
 from gateway.codecs.haas_mdc.protocol import Item, MdcError, Query, parse_address, value_of
-from gateway.config.haas_mdc import HaasMdcDriver
-from gateway.config.mapping import MachineMapping
 from gateway.errors import ControllerRefused, ControllerUnavailable, SourceError, TypeMismatch
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.base import DriverMapping, settings_of
 from gateway.sources.controller_values import fit
+from gateway.sources.haas_mdc.config import HaasMdcDriver
+from gateway.sources.haas_mdc.connection import MdcConnection
 
 log = logging.getLogger("gateway.sources.haas_mdc")
 
 
 class HaasMdcSource:
-    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
-        assert isinstance(mapping.driver, HaasMdcDriver)
+    def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
         self.machine = machine
-        self.driver: HaasMdcDriver = mapping.driver
+        self.driver = settings_of(mapping, HaasMdcDriver)
         self.items: dict[VariableNode, Item] = {}
         specs = {v.path: v for v in mapping.variables}
         groups: dict[float, list[tuple[VariableNode, Item]]] = {}
         for node in machine.mapped:
             item = parse_address(node.definition.source)
             self.items[node] = item
-            spec = specs.get(node.path)
-            interval = (
-                mapping.sampling_interval(spec) if spec is not None else mapping.defaults.sampling_interval
-            )
+            interval = mapping.sampling_interval(specs[node.path])
             groups.setdefault(max(interval, 50.0) / 1000.0, []).append((node, item))
         self.groups = sorted(groups.items())
         self.connection: MdcConnection | None = None

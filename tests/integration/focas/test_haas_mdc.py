@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from gateway.clients.haas_mdc import MdcConnection
 from gateway.codecs.haas_mdc.protocol import Query
 from gateway.config.loader import load_mapping
 from gateway.errors import SourceError
 from gateway.model.context import WriteContext
+from gateway.sources.haas_mdc.connection import MdcConnection
 from gateway.sources.haas_mdc.source import HaasMdcSource
 from tests.integration.focas.conftest import ROOT, gateway_config, running, value
 from tests.waiting import wait_until

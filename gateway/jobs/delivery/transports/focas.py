@@ -14,13 +14,13 @@ import hashlib
 import re
 from typing import Literal, Self
 
-from gateway.clients.focas import transfer
-from gateway.clients.focas.session import FocasSession
-from gateway.clients.focas.transfer import TransferRefused
 from gateway.codecs.focas.errors import EW_DATA, EW_LENGTH, EW_OVRFLOW, EW_PROT
 from gateway.config.focas import ControllerFocas
 from gateway.errors import DeliveryError, ProgramNotFound, SourceError
 from gateway.jobs.delivery.transport import Program, Progress, RemoteFile, ReportProgress
+from gateway.sources.focas import transfer
+from gateway.sources.focas.session import FocasSession
+from gateway.sources.focas.transfer import TransferRefused
 
 NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,31}$")  # a 30i-series file name
 PERMANENT = frozenset({EW_DATA, EW_LENGTH, EW_OVRFLOW, EW_PROT})

@@ -13,8 +13,8 @@ import contextlib
 import logging
 from collections.abc import AsyncIterator
 
-from gateway.clients.focas.session import FocasSession, SessionRefused
 from gateway.errors import SourceError
+from gateway.sources.focas.session import FocasSession, SessionRefused
 
 log = logging.getLogger("gateway.clients.focas")
 

@@ -11,7 +11,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from gateway.config.base import Backoff, Strict
+from gateway.settings.base import Backoff, Strict
 
 DEFAULT_MDC_PORT = 5051
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable
 
-from gateway.clients.focas.session import FocasSession
 from gateway.codecs.focas import functions as fn
 from gateway.codecs.focas.commands import command
 from gateway.codecs.focas.errors import FocasError, describe
@@ -18,6 +17,7 @@ from gateway.codecs.focas.frame import SESSION_TRANSFER, Kind, encode_frame
 from gateway.codecs.focas.program import CHUNK, download_frames, result_of, start_payload, upload_name
 from gateway.codecs.focas.values import DirEntry, decode_dir, path_field
 from gateway.errors import SourceError
+from gateway.sources.focas.session import FocasSession
 
 FOLDER_PAGE = 20  # entries per folder read
 DRAIN_EVERY = 32  # data frames written before waiting for the socket to take them (about 45 KB)
