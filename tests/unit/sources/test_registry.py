@@ -25,7 +25,7 @@ def test_each_driver_model_is_tagged_with_its_type(spec: DriverSpec) -> None:
 
 
 def test_the_default_driver_comes_first_then_by_type() -> None:
-    assert registry.types() == ("opcua", "mtconnect", "shdr")
+    assert registry.types() == ("opcua", "focas", "haas-mdc", "mtconnect", "shdr")
     assert registry.find("opcua") is OPCUA and registry.find("modbus-typo") is None
 
 
