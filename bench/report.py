@@ -81,6 +81,7 @@ class Results:
     targets_16: list[Target] = field(default_factory=list)  # issue 16's: the web console
     targets_14: list[Target] = field(default_factory=list)  # issue 14's: serial DNC
     targets_22: list[Target] = field(default_factory=list)  # issue 22's: serial DNC on real device servers
+    targets_25: list[Target] = field(default_factory=list)  # issue 25's: FOCAS
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -126,6 +127,7 @@ class Results:
             "targets_16": [t.as_dict() for t in self.targets_16],
             "targets_14": [t.as_dict() for t in self.targets_14],
             "targets_22": [t.as_dict() for t in self.targets_22],
+            "targets_25": [t.as_dict() for t in self.targets_25],
             "details": self.details,
             "errors": self.errors,
         }
@@ -186,6 +188,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 15)", _targets(results.targets_15)]
     if results.targets_17:
         out += ["", "Targets (issue 17)", _targets(results.targets_17)]
+    if results.targets_25:
+        out += ["", "Targets (issue 25)", _targets(results.targets_25)]
     if results.targets_16:
         out += ["", "Targets (issue 16)", _targets(results.targets_16)]
     if results.targets_14:

@@ -133,6 +133,7 @@ def judge(ctx: Context) -> None:
     r.targets_16 = judge_16(ctx)
     r.targets_14 = judge_14(ctx)
     r.targets_22 = judge_22(ctx)
+    r.targets_25 = judge_25(ctx)
 
 
 def _dnc_runs(ctx: Context) -> list[tuple[str, dict[str, Any]]]:
@@ -461,3 +462,34 @@ def _ms(value: float | None) -> str:
 
 def _rate(rate: float | None) -> str:
     return "max" if rate is None or (isinstance(rate, float) and math.isinf(rate)) else f"{rate:,.0f}/s"
+
+
+def judge_25(ctx: Context) -> list[Target]:
+    """Issue 25 (FOCAS), from bench/scenarios/focas.py; nothing when the scenario did not run."""
+    f: dict[str, Any] = ctx.results.details.get("focas", {})
+    if not f:
+        return []
+    on_time = f.get("on_time")
+    cycles = f"{f.get('cycles', 0)} cycles ({f.get('late', 0)} late) of {f.get('expected_cycles', 0)} due"
+    trips = f"{f.get('requests_per_cycle') or 0:.2f} round trips for 50 items"
+    times = f"FOCAS {f.get('focas_s') or 0:.3f} s vs FTP {f.get('ftp_s') or 0:.3f} s (medians of 3)"
+    return [
+        Target(
+            "50 items over 20 FOCAS machines at a 100 ms poll: poll cycles on time", 95, 99, "%",
+            value=100 * on_time if on_time is not None else None,
+            source=cycles,
+        ),
+        Target(
+            "requests per cycle relative to one request per item", 0.2, 0.05, "x", higher_is_better=False,
+            value=f.get("relative"), source=trips,
+        ),
+        Target(
+            "gateway CPU for that load", 30, 10, "% of a core", higher_is_better=False,
+            value=f.get("cpu_pct"), source="this process (the 20 faces run in another)",
+        ),
+        Target(
+            "1 MB program download to the simulator over FOCAS: time vs FTP to the same store", 2.0, 1.2, "x",
+            higher_is_better=False, value=f.get("ratio"),
+            source=times,
+        ),
+    ]  # fmt: skip

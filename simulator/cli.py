@@ -16,6 +16,9 @@ from pathlib import Path
 from simulator.dnc import DncOptions
 from simulator.dnc.options import _port_or_off, add_dnc_arguments, dnc_banner, dnc_options
 from simulator.errors import SimulatorError
+from simulator.focas import DEFAULT_PORT as FOCAS_PORT
+from simulator.focas import DEFAULT_SESSIONS as FOCAS_SESSIONS
+from simulator.haas_mdc import DEFAULT_PORT as HAAS_PORT
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
 from simulator.shdr import DEFAULT_PORT as SHDR_PORT
@@ -24,6 +27,8 @@ from simulator.variables import NAMESPACE_URI
 log = logging.getLogger("simulator")
 
 SHDR_ENV = "CNC_SIM_SHDR_PORT"
+FOCAS_ENV = "CNC_SIM_FOCAS_PORT"
+HAAS_ENV = "CNC_SIM_HAAS_PORT"
 
 NOISY = ("asyncua", "aioftp")
 
@@ -81,18 +86,34 @@ def build_parser() -> argparse.ArgumentParser:
         "--shdr-port", type=_port_or_off, default=_shdr_default(), metavar="PORT",
         help=f"MTConnect adapter (SHDR) port (default ${SHDR_ENV} or {SHDR_PORT}; 'off')",
     )  # fmt: skip
+    p.add_argument(
+        "--focas-port", type=_port_or_off, default=_port_default(FOCAS_ENV, FOCAS_PORT), metavar="PORT",
+        help=f"Fanuc FOCAS2 Ethernet port (default ${FOCAS_ENV} or {FOCAS_PORT}; 'off')",
+    )  # fmt: skip
+    p.add_argument(
+        "--focas-sessions", type=int, default=FOCAS_SESSIONS, metavar="N",
+        help=f"FOCAS sessions open at once before one is refused, as a Fanuc's (default {FOCAS_SESSIONS})",
+    )  # fmt: skip
+    p.add_argument(
+        "--haas-port", type=_port_or_off, default=_port_default(HAAS_ENV, HAAS_PORT), metavar="PORT",
+        help=f"Haas NGC machine data collection port (default ${HAAS_ENV} or {HAAS_PORT}; 'off')",
+    )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
 
 
 def _shdr_default() -> int | None:
-    text = os.environ.get(SHDR_ENV)
+    return _port_default(SHDR_ENV, SHDR_PORT)
+
+
+def _port_default(env: str, default: int) -> int | None:
+    text = os.environ.get(env)
     if text is None:
-        return SHDR_PORT
+        return default
     try:
         return _port_or_off(text)
     except argparse.ArgumentTypeError:
-        return SHDR_PORT
+        return default
 
 
 def _rate(text: str) -> float:
@@ -169,6 +190,9 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         noise=_noise(args),
         dnc=dnc,
         shdr_port=args.shdr_port,
+        focas_port=args.focas_port,
+        focas_sessions=args.focas_sessions,
+        haas_port=args.haas_port,
     )
     try:
         async with simulator:
@@ -213,6 +237,17 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
             if sim.shdr
             else []
         ),
+        *(
+            [
+                (
+                    f"  FOCAS    {sim.focas.url}  (Fanuc FOCAS2, {sim.focas.max_sessions} sessions: "
+                    "mappings/fanuc-sim.yaml reads it)"
+                )
+            ]
+            if sim.focas
+            else []
+        ),
+        *([f"  Haas MDC {sim.haas.url}  (Q-commands; mappings/haas-sim.yaml reads it)"] if sim.haas else []),
         "  stop     Ctrl-C",
         "",
     ]

@@ -106,6 +106,20 @@ class DirectoryStore:
         staging.write_bytes(data)
         os.replace(staging, target)
 
+    def read_bytes(self, name: str) -> bytes:
+        """The program's bytes as stored (a FOCAS upload sends them unchanged)."""
+        path = self._path(name)
+        if path is None or not path.is_file():
+            raise ProgramNotFound(name)
+        return path.read_bytes()
+
+    def delete(self, name: str) -> None:
+        """Remove a program (a FOCAS delete); ProgramNotFound when there is none."""
+        path = self._path(name)
+        if path is None or not path.is_file():
+            raise ProgramNotFound(name)
+        path.unlink()
+
     def names(self) -> list[str]:
         if not self.programs.is_dir():
             return []

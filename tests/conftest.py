@@ -17,6 +17,8 @@ settings.load_profile("shared-machine")
 os.environ.setdefault("CNC_SIM_DNC_PORT", "off")
 os.environ.setdefault("CNC_SIM_DNC_RFC2217_PORT", "off")
 os.environ.setdefault("CNC_SIM_SHDR_PORT", "off")  # and no fixed SHDR (MTConnect adapter) port either
+os.environ.setdefault("CNC_SIM_FOCAS_PORT", "off")  # nor FOCAS (8193)
+os.environ.setdefault("CNC_SIM_HAAS_PORT", "off")  # nor Haas MDC (5051)
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`

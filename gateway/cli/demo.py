@@ -25,6 +25,7 @@ from typing import Any
 
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
+from gateway.cli import demo_focas
 from gateway.cli.check import report_config_error
 from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
@@ -40,6 +41,8 @@ from gateway.config.mtconnect import AgentConfig
 from gateway.config.sparkplug import SparkplugConfig
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
+from gateway.sources.base import settings_of
+from gateway.sources.opcua.config import OpcUaDriver
 
 log = logging.getLogger("gateway.demo")
 
@@ -112,6 +115,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--sim-dnc-ftp-port", type=int, default=2123, help="the serial machine simulator's FTP port"
     )
+    demo_focas.add_arguments(p, _port_or_off)
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
 
@@ -156,6 +160,8 @@ def handle(args: argparse.Namespace) -> int:
     files = [find_mapping(args.mapping)]
     if args.sim_dnc_port is not None:
         files.append(find_mapping(None, "laser-dnc.yaml"))
+    if args.sim_focas_port is not None:
+        files.append(find_mapping(None, demo_focas.MAPPING))
     try:
         base = load(files)
     except ConfigError as exc:
@@ -163,7 +169,8 @@ def handle(args: argparse.Namespace) -> int:
         return 2
     mapping = base.machines[0]
     endpoint = f"opc.tcp://127.0.0.1:{args.sim_opcua_port}"
-    mapping = mapping.model_copy(update={"driver": mapping.driver.model_copy(update={"endpoint": endpoint})})
+    driver = settings_of(mapping, OpcUaDriver).model_copy(update={"endpoint": endpoint})  # the demo machine
+    mapping = mapping.model_copy(update={"driver": driver})
     if (
         mapping.mqtt is None
     ):  # the demo lets MQTT write the readwrite variables (Feed/Override…) and run commands
@@ -175,6 +182,8 @@ def handle(args: argparse.Namespace) -> int:
         machines.append(
             point_at(base.machines[1], opcua_port=args.sim_dnc_opcua_port, dnc_port=args.sim_dnc_port)
         )
+    if args.sim_focas_port is not None:
+        machines.append(demo_focas.point_at(base.machines[-1], args.sim_focas_port))
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://0.0.0.0:{args.opcua_port}/cnc-gateway"),
         state_dir=str(args.state_dir),
@@ -260,7 +269,7 @@ async def demo(config: Config, args: argparse.Namespace) -> None:
         # The simulator first, so the gateway finds its controller at once.
         switch = None if external else await stack.enter_async_context(SimulatorSwitch(config, args, toggle))
         dnc = None
-        if len(config.machines) > 1 and not port_in_use("127.0.0.1", args.sim_dnc_opcua_port):
+        if args.sim_dnc_port is not None and not port_in_use("127.0.0.1", args.sim_dnc_opcua_port):
             dnc = await stack.enter_async_context(
                 dnc_simulator(args, config.state_dir / "simulator-dnc-store")
             )
@@ -302,7 +311,7 @@ async def _run_demo(
     tasks: list[tuple[str, Callable[[], Coroutine[object, object, None]]]] = [
         ("demo:driver", lambda: keep_program_running(machine, busy))
     ]
-    if jobs is not None and len(config.machines) > 1:
+    if jobs is not None and args.sim_dnc_port is not None and len(config.machines) > 1:
         serial = gw.tree.machines[config.machines[1].machine]
         state = serial.nodes["Machine/State"]
         tasks.append(("demo:drip", lambda: keep_dripping(jobs, serial.name, lambda: state.sample.value == 0)))
@@ -344,6 +353,7 @@ class SimulatorSwitch:
             speed=args.speed,
             store=self.store,
             shdr_port=args.sim_shdr_port,
+            focas_port=args.sim_focas_port,
         )
         await sim.__aenter__()
         self._sim = sim
@@ -510,7 +520,7 @@ def mtconnect_banner(gw: Gateway, args: argparse.Namespace, external: bool) -> l
             f"  SHDR adapter     shdr://127.0.0.1:{args.sim_shdr_port}  (the simulator's; "
             "mappings/laser-sim-shdr.yaml reads it: README, MTConnect)"
         )
-    return lines
+    return lines + demo_focas.banner(args.sim_focas_port, external)
 
 
 def web_banner(gw: Gateway) -> list[str]:

@@ -9,9 +9,9 @@ import logging
 import sys
 from pathlib import Path
 
-from gateway.config.mapping import check_endpoint
 from gateway.errors import SourceError
 from gateway.logconfig import configure
+from gateway.settings.urls import check_endpoint
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -20,7 +20,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="browse a controller's OPC UA server (or an MTConnect agent) and print a starting mapping file",
     )
     p.add_argument(
-        "endpoint", help="opc.tcp://host:port of the controller, or http://host:port of an MTConnect agent"
+        "endpoint",
+        help="opc.tcp://host:port of the controller, http://host:port of an MTConnect agent, or "
+        "focas://host:8193 of a Fanuc",
     )
     p.add_argument(
         "--device", default=None, help="MTConnect: the device's name or uuid, when the agent has several"
@@ -40,11 +42,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def handle(args: argparse.Namespace) -> int:
     import os
 
-    from gateway.sources.opcua_discover import discover
+    from gateway.sources.opcua.discover import discover
 
     configure("warning")
     if args.endpoint.startswith(("http://", "https://")):
         return _mtconnect(args)
+    if args.endpoint.startswith("focas://"):
+        return _focas(args)
     try:
         check_endpoint(args.endpoint)
     except ValueError as exc:
@@ -78,6 +82,17 @@ def _mtconnect(args: argparse.Namespace) -> int:
         text = asyncio.run(
             discover_agent(args.endpoint, machine=args.machine, device=args.device, wait=args.timeout)
         )
+    except (SourceError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return _write(args, text)
+
+
+def _focas(args: argparse.Namespace) -> int:
+    from gateway.sources.focas.discover import discover_focas
+
+    try:
+        text = asyncio.run(discover_focas(args.endpoint, machine=args.machine, timeout=args.timeout))
     except (SourceError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -15,9 +15,10 @@ from typing import Annotated, Any, Literal
 from pydantic import ByteSize, Discriminator, Field, SecretStr, Tag, field_validator, model_validator
 
 from gateway.auth.passwords import parse_hash
-from gateway.config.base import Backoff, Strict
+from gateway.config.focas import ControllerFocas
 from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
+from gateway.settings.base import Backoff, Strict
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _USER = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.@\-]{0,63}$")
@@ -216,9 +217,11 @@ def _controller_type(value: Any) -> str:
     return str(getattr(value, "type", "ftp"))
 
 
-CONTROLLER_TAGS = ("ftp", "serial")
+CONTROLLER_TAGS = ("ftp", "serial", "focas")
 Controller = Annotated[
-    Annotated[ControllerFtp, Tag("ftp")] | Annotated[ControllerSerial, Tag("serial")],
+    Annotated[ControllerFtp, Tag("ftp")]
+    | Annotated[ControllerSerial, Tag("serial")]
+    | Annotated[ControllerFocas, Tag("focas")],
     Discriminator(_controller_type),
 ]
 

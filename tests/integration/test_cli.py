@@ -227,6 +227,7 @@ def demo_extra_args() -> list[str]:
         "--sim-dnc-port",
         "--sim-dnc-opcua-port",
         "--sim-dnc-ftp-port",
+        "--sim-focas-port",
     ):
         if flag in options:
             extra += [flag, str(free_port())]

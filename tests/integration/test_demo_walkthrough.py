@@ -104,6 +104,7 @@ async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[str]:
         "--sim-dnc-port",
         "--sim-dnc-opcua-port",
         "--sim-dnc-ftp-port",
+        "--sim-focas-port",
     )
     ports = {flag: free_port() for flag in flags}
     env = {k: v for k, v in os.environ.items() if k != "CNC_DEMO_PASSWORD"}  # the README's passwords

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from gateway.config.focas import ControllerFocas
 from gateway.config.jobs import ControllerFtp, ControllerSerial, JobsConfig
 from gateway.jobs.delivery.transport import DeliveryTransport, OpenStore
+from gateway.jobs.delivery.transports.focas import FocasTransport
 from gateway.jobs.delivery.transports.ftp import FtpTransport
 from gateway.jobs.delivery.transports.serial import SerialTransport
 from gateway.jobs.dnc.transfers import TransferLog
@@ -31,6 +33,8 @@ def transport_for(
         return FtpTransport(controller, verify=jobs.verify)
     if isinstance(controller, ControllerSerial):
         return SerialTransport(controller, machine=machine, state_dir=state_dir, transfer_log=transfer_log)
+    if isinstance(controller, ControllerFocas):
+        return FocasTransport(controller, verify=jobs.verify)
     # A settings model without its branch here: a bug, not a configuration error.
     raise TypeError(f"no delivery transport for {type(controller).__name__}")
 
@@ -41,4 +45,6 @@ def program_store_for(jobs: JobsConfig) -> OpenStore | None:
     controller = jobs.controller
     if isinstance(controller, ControllerFtp):
         return FtpTransport(controller).store
+    if isinstance(controller, ControllerFocas):
+        return FocasTransport(controller).store
     return None
