@@ -16,6 +16,7 @@ from pathlib import Path
 from simulator.dnc import DncOptions
 from simulator.dnc.options import _port_or_off, add_dnc_arguments, dnc_banner, dnc_options
 from simulator.errors import SimulatorError
+from simulator.modbus import DEFAULT_PORT as MODBUS_PORT
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
 from simulator.shdr import DEFAULT_PORT as SHDR_PORT
@@ -24,6 +25,7 @@ from simulator.variables import NAMESPACE_URI
 log = logging.getLogger("simulator")
 
 SHDR_ENV = "CNC_SIM_SHDR_PORT"
+MODBUS_ENV = "CNC_SIM_MODBUS_PORT"
 
 NOISY = ("asyncua", "aioftp")
 
@@ -81,18 +83,26 @@ def build_parser() -> argparse.ArgumentParser:
         "--shdr-port", type=_port_or_off, default=_shdr_default(), metavar="PORT",
         help=f"MTConnect adapter (SHDR) port (default ${SHDR_ENV} or {SHDR_PORT}; 'off')",
     )  # fmt: skip
+    p.add_argument(
+        "--modbus-port", type=_port_or_off, default=_env_port(MODBUS_ENV, MODBUS_PORT), metavar="PORT",
+        help=f"the chiller's Modbus TCP port (default ${MODBUS_ENV} or {MODBUS_PORT}; 'off')",
+    )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
 
 
 def _shdr_default() -> int | None:
-    text = os.environ.get(SHDR_ENV)
+    return _env_port(SHDR_ENV, SHDR_PORT)
+
+
+def _env_port(env: str, default: int) -> int | None:
+    text = os.environ.get(env)
     if text is None:
-        return SHDR_PORT
+        return default
     try:
         return _port_or_off(text)
     except argparse.ArgumentTypeError:
-        return SHDR_PORT
+        return default
 
 
 def _rate(text: str) -> float:
@@ -169,6 +179,7 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         noise=_noise(args),
         dnc=dnc,
         shdr_port=args.shdr_port,
+        modbus_port=args.modbus_port,
     )
     try:
         async with simulator:
@@ -211,6 +222,11 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
         *(
             [f"  MTConnect {sim.shdr.url}  (SHDR adapter: mappings/laser-sim-shdr.yaml reads it)"]
             if sim.shdr
+            else []
+        ),
+        *(
+            [f"  Modbus   {sim.modbus.url}  (the chiller, unit 1: mappings/chiller-sim.yaml)"]
+            if sim.modbus
             else []
         ),
         "  stop     Ctrl-C",

@@ -28,6 +28,7 @@ from simulator.dnc import DncFace, DncOptions
 from simulator.errors import SimulatorError
 from simulator.ftp_store import FtpStore
 from simulator.machine import Machine, MachineState
+from simulator.modbus import Chiller, ModbusFace
 from simulator.noise import Noise, NoiseSpec
 from simulator.opcua_server import PlcServer, utcnow
 from simulator.shdr import ShdrFace
@@ -63,6 +64,7 @@ class Simulator:
         noise: NoiseSpec | None = None,
         dnc: DncOptions | None = None,
         shdr_port: int | None = None,
+        modbus_port: int | None = None,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -95,6 +97,10 @@ class Simulator:
         # The MTConnect adapter face (simulator/shdr.py): off unless a port is given (0: any free one).
         self.shdr_port = shdr_port
         self.shdr: ShdrFace | None = None
+        # The chiller's Modbus TCP face (simulator/modbus): off unless a port is given (0: any free one).
+        self.chiller = Chiller(ambient=self.machine.ambient)
+        self.modbus_port = modbus_port
+        self.modbus: ModbusFace | None = None
         self._opcua_auth = (opcua_user, opcua_password)
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
@@ -157,6 +163,10 @@ class Simulator:
             self.shdr = await stack.enter_async_context(
                 ShdrFace(self.machine, host=self.host, port=self.shdr_port, clock=self.clock)
             )
+        if self.modbus_port is not None:
+            self.modbus = await stack.enter_async_context(
+                ModbusFace(self.chiller.image, host=self.host, port=self.modbus_port)
+            )
         if self.loop_program:
             try:
                 self.machine.select_program(self.loop_program)
@@ -194,6 +204,8 @@ class Simulator:
             now = time.monotonic()
             try:
                 self.machine.step((now - last) * self.speed)
+                if self.modbus is not None:
+                    self.chiller.step((now - last) * self.speed, self.machine.laser.power_act)
                 self._keep_looping(now)
                 await self._opcua.publish()
                 if self.shdr is not None:

@@ -48,6 +48,8 @@ def print_config(config: Config, out: TextIO) -> None:
     default_role = gw.access.default_write_role if enabled else None
     for mapping in config.machines:
         print_tree(mapping, out, default_role)
+        if (describe_plan := getattr(mapping.driver, "describe_plan", None)) is not None:  # a polled driver
+            print("\n".join(describe_plan(mapping.variables, mapping.sampling_interval)), file=out)
         print_commands(mapping, out)
         copydata_role = gw.access.copydata_role or "none: refused"  # never implied, users or not
         print_copydata(mapping, out, copydata_role if gw.access.checks_roles() else None)

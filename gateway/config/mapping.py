@@ -24,6 +24,7 @@ from gateway.config.base import Backoff, Strict, TypeField
 from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.config.jobs import JobsConfig
+from gateway.config.modbus import ModbusDriver
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.config.mtconnect import READ_ONLY_DRIVERS, MTConnectDriver, ShdrDriver, VariableMTConnect
 from gateway.model.definitions import MachineDefinition, Range, VariableDefinition
@@ -278,11 +279,12 @@ def _driver_type(value: Any) -> str:
     return str(getattr(value, "type", "opcua"))
 
 
-DRIVER_TAGS = ("opcua", "mtconnect", "shdr")
+DRIVER_TAGS = ("opcua", "mtconnect", "shdr", "modbus")
 Driver = Annotated[
     Annotated[OpcUaDriver, Tag("opcua")]
     | Annotated[MTConnectDriver, Tag("mtconnect")]
-    | Annotated[ShdrDriver, Tag("shdr")],
+    | Annotated[ShdrDriver, Tag("shdr")]
+    | Annotated[ModbusDriver, Tag("modbus")],
     Discriminator(_driver_type),
 ]
 
@@ -346,6 +348,9 @@ class MachineMapping(Strict):
         if driver is not None and driver.type in READ_ONLY_DRIVERS:
             message = f"a {driver.type} driver is read-only (MTConnect has no writes): use access: read"
             located_errors([((i, "access"), message) for i, var in enumerate(variables) if var.writable])
+        check = getattr(driver, "variable_issues", None)  # a driver's own checks of its variables' sources
+        if check is not None:
+            located_errors(check(variables))
         return variables
 
     @field_validator("jobs")

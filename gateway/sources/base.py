@@ -51,4 +51,8 @@ def create_source(machine: Machine, mapping: MachineMapping) -> Source:
         from gateway.sources.mtconnect.shdr_source import ShdrSource
 
         return ShdrSource(machine, mapping)
+    if driver.type == "modbus":
+        from gateway.sources.modbus.source import ModbusSource
+
+        return ModbusSource(machine, mapping)
     raise ValueError(f"unknown driver type {driver.type!r}")  # config validation makes this unreachable

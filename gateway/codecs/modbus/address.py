@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from enum import Enum
 
 from gateway.errors import CodecError
-from gateway.model.types import DataType, TypeSpec
 
 MAX_ADDRESS = 65535
 MAX_REGISTERS = 125  # per read (the specification's limit for FC 3 and 4)
@@ -115,14 +114,13 @@ class Order(str, Enum):
         return self in (Order.BADC, Order.DCBA)
 
 
-# What a variable of each type is on the device when its source names no Modbus type.
-_DEFAULT_KIND: dict[DataType, Kind] = {
-    DataType.SBYTE: Kind.INT16, DataType.BYTE: Kind.UINT16,
-    DataType.INT16: Kind.INT16, DataType.UINT16: Kind.UINT16,
-    DataType.INT32: Kind.INT32, DataType.UINT32: Kind.UINT32,
-    DataType.INT64: Kind.INT64, DataType.UINT64: Kind.UINT64,
-    DataType.FLOAT: Kind.FLOAT32, DataType.DOUBLE: Kind.FLOAT64,
+# What a variable of each type (its OPC UA type name) is on the device when its source names no Modbus type.
+_DEFAULT_KIND: dict[str, Kind] = {
+    "SByte": Kind.INT16, "Byte": Kind.UINT16, "Int16": Kind.INT16, "UInt16": Kind.UINT16,
+    "Int32": Kind.INT32, "UInt32": Kind.UINT32, "Int64": Kind.INT64, "UInt64": Kind.UINT64,
+    "Float": Kind.FLOAT32, "Double": Kind.FLOAT64,
 }  # fmt: skip
+_WHOLE = frozenset({"SByte", "Byte", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"})
 
 _STRING_RE = re.compile(r"^string\s*[\[(]\s*(\d+)\s*[\])]$")
 _PLACE_RE = re.compile(r"^(\d+)(?:\.(\d+))?$")
@@ -294,34 +292,35 @@ def _kind(token: str, whole: str) -> tuple[Kind, int | None]:
     raise ModbusAddressError(f"{whole!r}: {token!r} is not a Modbus type; expected {names}, string[N]")
 
 
-def resolve(address: ModbusAddress, raw_type: TypeSpec, default_order: Order = Order.ABCD) -> Field:
-    """The field of a variable whose controller type is `raw_type`; ModbusAddressError if they do not fit."""
-    if raw_type.array:
+def resolve(address: ModbusAddress, raw_type: str, default_order: Order = Order.ABCD) -> Field:
+    """The field of a variable whose controller type is `raw_type` (an OPC UA type name, as the mapping's
+    `source_type` or `type`: "Float", "Int32[]"); ModbusAddressError if the two do not fit."""
+    if raw_type.endswith("[]"):
         raise ModbusAddressError(f"{address}: Modbus variables are scalars; map each element on its own")
-    base = raw_type.base
+    base = raw_type
     kind = address.kind
     if kind is None:
-        if base is DataType.BOOLEAN:
+        if base == "Boolean":
             raise ModbusAddressError(
                 f"{address}: a Boolean is a coil, a discrete input or a bit of a register "
                 f"({address.table.value}:{address.address}.0)"
             )
-        if base is DataType.STRING:
+        if base == "String":
             raise ModbusAddressError(f"{address}: give the string's length in registers: {address}:string[8]")
         if base not in _DEFAULT_KIND:
-            raise ModbusAddressError(f"{address}: a {base.value} has no Modbus layout")
+            raise ModbusAddressError(f"{address}: a {base} has no Modbus layout")
         kind = _DEFAULT_KIND[base]
     if kind in (Kind.BOOL, Kind.BIT):
-        if base is not DataType.BOOLEAN:
-            raise ModbusAddressError(f"{address} is one bit; the variable must be Boolean, not {base.value}")
+        if base != "Boolean":
+            raise ModbusAddressError(f"{address} is one bit; the variable must be Boolean, not {base}")
     elif kind is Kind.STRING:
-        if base is not DataType.STRING:
-            raise ModbusAddressError(f"{address} is a string; the variable must be String, not {base.value}")
-    elif base is DataType.BOOLEAN or base is DataType.STRING or base is DataType.DATETIME:
-        raise ModbusAddressError(f"{address} is a {kind.value}; a {base.value} variable cannot hold it")
-    elif not kind.integer and raw_type.is_integer:
+        if base != "String":
+            raise ModbusAddressError(f"{address} is a string; the variable must be String, not {base}")
+    elif base not in _DEFAULT_KIND:
+        raise ModbusAddressError(f"{address} is a {kind.value}; a {base} variable cannot hold it")
+    elif not kind.integer and base in _WHOLE:
         raise ModbusAddressError(
-            f"{address} is a {kind.value}; an {base.value} variable would lose its fraction "
+            f"{address} is a {kind.value}; an {base} variable would lose its fraction "
             f"(make the variable Float or Double, or give source_type)"
         )
     count = address.length if kind is Kind.STRING and address.length is not None else kind.registers
@@ -337,7 +336,7 @@ def resolve(address: ModbusAddress, raw_type: TypeSpec, default_order: Order = O
         kind=kind,
         order=order,
         bit=address.bit,
-        as_float=base in (DataType.FLOAT, DataType.DOUBLE),
+        as_float=base in ("Float", "Double"),
     )
 
 

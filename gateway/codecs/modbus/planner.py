@@ -58,7 +58,7 @@ class Request(Generic[K]):
         return _READ_FUNCTION[self.table]
 
     def describe(self) -> str:
-        unit = "bits" if self.table.bits else "registers"
+        unit = ("bit" if self.table.bits else "register") + ("s" if self.count != 1 else "")
         used = len({(f.start, f.count) for _, f, _ in self.fields})
         return (
             f"FC{self.function:<2} {self.table.value}:{self.start}-{self.end - 1} ({self.count} {unit}, "

@@ -1,0 +1,294 @@
+"""The Modbus TCP driver (`driver: {type: modbus, host, port, unit, …}`): polling groups, writes, reconnect.
+
+Variables are grouped by their `sampling_interval`; each group's fields are coalesced into requests by
+the pure planner (gateway/codecs/modbus/planner.py) once, at start, and the plan is what
+`cnc-gateway check` prints. One task polls every group of the device over one connection, each when it
+is due (a group whose cycle overran starts its next one at once and counts the overrun; cycles are not
+made up). The time of each response is the source timestamp of what it brought, and only changes go to
+the tree: a response whose registers are those of the last one is not decoded at all, and of one that
+changed, only the variables whose values changed are handed on.
+
+Failures, from narrow to wide:
+- an exception response marks the variables of that request Bad (ILLEGAL DATA ADDRESS:
+  BadNodeIdUnknown, and the other codes their own status) and the rest of the device stays Good; for
+  ILLEGAL DATA ADDRESS on a request of several variables, those variables are read one by one from the
+  next cycle on (`Limits`' isolation), so that only the bad address stays Bad;
+- an answer that does not fit its request (too few registers) marks that request's variables Bad;
+- no answer, a lost connection or garbled bytes end the connection: every variable turns Bad and the
+  driver reconnects with the shared backoff (gateway/reconnect.py).
+
+Writes come checked from the tree (role, type, range, scaling: the one write path); a coil is written
+with FC 5, a register with FC 6, several registers with FC 16 (FC 15/16 always with `write_multiple`);
+a bit of a register is read, changed and written back (FC 3 then 6: the device may change the other
+bits in between, which the README says). The device's refusal comes back as `ControllerRefused` with
+its name; then the field is read back and the tree takes that value before the write is answered.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any, Self
+
+from gateway.codecs.modbus.address import Field, Kind, Table
+from gateway.codecs.modbus.layout import Decoder, decoder, encode
+from gateway.codecs.modbus.planner import Request, plan
+from gateway.config.mapping import MachineMapping
+from gateway.config.modbus import ModbusDriver
+from gateway.errors import ControllerRefused, ControllerUnavailable, SourceError
+from gateway.model.sample import ReadBack, utcnow
+from gateway.model.tree import Machine, VariableNode
+from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.modbus.link import DeviceRefused, LinkLost, ModbusLink
+
+log = logging.getLogger("gateway.sources.modbus")
+
+_UNSET: Any = object()
+
+
+@dataclass(slots=True)
+class _Slot:
+    """One variable: its field, its decoder, the last value handed to the tree."""
+
+    node: VariableNode
+    field: Field
+    decode: Decoder
+    last: Any = _UNSET
+
+
+@dataclass(slots=True)
+class _Read:
+    """One planned request and what it brings."""
+
+    request: Request[int]
+    slots: list[tuple[_Slot, int]]
+    last: list[int] | None = None  # the registers of the last good answer
+    bad: str | None = None  # the status of its variables while it fails
+
+    def forget(self) -> None:
+        self.last = None
+        for slot, _ in self.slots:
+            slot.last = _UNSET
+
+
+@dataclass(slots=True)
+class _Group:
+    interval: float  # s
+    fields: list[tuple[int, Field]]
+    isolated: set[int] = field(default_factory=set)
+    reads: list[_Read] = field(default_factory=list)
+    due: float = 0.0
+    cycles: int = 0
+    overruns: int = 0  # cycles that ended after the next one was due
+
+
+class ModbusSource:
+    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
+        assert isinstance(mapping.driver, ModbusDriver)
+        self.machine = machine
+        self.mapping = mapping
+        self.driver: ModbusDriver = mapping.driver
+        d = self.driver
+        self.link = ModbusLink(d.host, d.port, d.unit, d.timeout)
+        self._slots: dict[int, _Slot] = {}
+        self._by_node: dict[VariableNode, _Slot] = {}
+        groups = d.polling_groups(mapping.variables, mapping.sampling_interval)
+        for fields in groups.values():
+            for index, spot in fields:
+                node = machine.nodes[mapping.variables[index].path]
+                slot = _Slot(node, spot, decoder(spot))
+                self._slots[index] = slot
+                self._by_node[node] = slot
+        self.groups = [_Group(ms / 1000.0, fields) for ms, fields in groups.items()]
+        for group in self.groups:
+            self._plan(group)
+        self.responses = 0  # answers that carried values
+        self.unchanged = 0  # of which were the same registers as the last time
+        self._outage = OutageLog(log)
+        self._connected = False
+        self._started = time.monotonic()
+
+    def __repr__(self) -> str:
+        return f"<ModbusSource {self.machine.name} {self.driver.endpoint}>"
+
+    async def __aenter__(self) -> Self:
+        self.machine.writer = self
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        if self.machine.writer is self:
+            self.machine.writer = None
+        self.link.close()
+        if self._connected:
+            self._connected = False
+            self.machine.status.disconnected("gateway stopped")
+
+    @property
+    def requests_per_cycle(self) -> float:
+        """Requests of one cycle of every group, per variable read (the planner's saving)."""
+        requests = sum(len(g.reads) for g in self.groups)
+        return requests / max(1, len(self._slots))
+
+    def _plan(self, group: _Group) -> None:
+        group.reads = [
+            _Read(request, [(self._slots[key], offset) for key, _, offset in request.fields])
+            for request in plan(group.fields, self.driver.limits, group.isolated)
+        ]
+
+    # --- the connection --------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        backoff = Backoff.of(self.driver.reconnect, stable_after=10.0)
+        while True:
+            self.machine.status.connecting()
+            try:
+                await self.link.connect()
+                self._up(backoff)
+                await self._poll()
+            except SourceError as exc:
+                self._drop(exc.reason, exc.status)
+            finally:
+                self.link.close()
+            backoff.ended()
+            await asyncio.sleep(backoff.next())
+
+    def _up(self, backoff: Backoff) -> None:
+        self._connected = True
+        backoff.connected()
+        self.machine.status.connected()
+        for group in self.groups:
+            for read in group.reads:
+                read.forget()
+                read.bad = None
+        self._outage.recovered("%s: polling %s (%d requests a cycle for %d variables)", self.machine.name,
+                               self.driver.endpoint, sum(len(g.reads) for g in self.groups),
+                               len(self._slots))  # fmt: skip
+
+    def _drop(self, reason: str, status: str) -> None:
+        was = self._connected
+        self._connected = False
+        if status == "BadCommunicationError" or status == "BadTimeout":
+            self.machine.invalidate(status, reason)
+        else:
+            self.machine.invalidate("BadNotConnected", reason)
+        self.machine.status.disconnected(reason)
+        name, where = self.machine.name, self.driver.endpoint
+        if was:
+            self._outage.failed(reason, "%s: lost %s: %s; reconnecting", name, where, reason)
+        else:
+            self._outage.failed(reason, "%s: cannot reach %s: %s; will keep retrying", name, where, reason)
+
+    # --- polling ---------------------------------------------------------------------------------
+
+    async def _poll(self) -> None:
+        now = time.monotonic()
+        for group in self.groups:
+            group.due = now
+        while True:
+            group = min(self.groups, key=lambda g: g.due)
+            delay = group.due - time.monotonic()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            await self._cycle(group)
+            group.cycles += 1
+            group.due += group.interval
+            now = time.monotonic()
+            if group.due < now:  # overran: the next cycle starts now, the missed ones are not made up
+                group.overruns += 1
+                group.due = now
+
+    async def _cycle(self, group: _Group) -> None:
+        replan = False
+        machine = self.machine
+        link = self.link
+        for read in group.reads:
+            request = read.request
+            try:
+                values = await link.read(request.table, request.start, request.count)
+            except LinkLost:
+                raise
+            except DeviceRefused as refused:
+                replan |= self._refused(group, read, refused)
+                continue
+            except SourceError as exc:  # an answer that does not fit the request
+                self._bad(read, exc.status, exc.reason)
+                continue
+            stamp = utcnow()
+            self.responses += 1
+            if read.bad is not None:
+                read.bad = None
+                read.forget()
+            elif values == read.last:
+                self.unchanged += 1
+                continue
+            read.last = values
+            for slot, offset in read.slots:
+                value = slot.decode(values, offset)
+                if value != slot.last:
+                    slot.last = value
+                    machine.ingest(slot.node, value, stamp)
+        if replan:
+            self._plan(group)
+
+    def _refused(self, group: _Group, read: _Read, refused: DeviceRefused) -> bool:
+        """Mark the request's variables Bad; True if the group is to be planned again with them apart."""
+        request = read.request
+        distinct = {(f.start, f.count) for _, f, _ in request.fields}
+        if refused.code == 2 and len(distinct) > 1:
+            group.isolated.update(key for key, _, _ in request.fields)
+            log.warning("%s: %s refused %s; reading its %d variables one by one to find the address",
+                        self.machine.name, self.driver.endpoint, refused.reason,
+                        len(request.fields))  # fmt: skip
+            self._bad(read, refused.status, f"the device refused {refused.reason}")
+            return True
+        self._bad(read, refused.status, f"the device refused {refused.reason}")
+        return False
+
+    def _bad(self, read: _Read, status: str, reason: str) -> None:
+        if read.bad == status:
+            return
+        if read.bad is None:
+            log.warning("%s: %s", self.machine.name, reason)
+        read.bad = status
+        read.forget()
+        stamp = utcnow()
+        for slot, _ in read.slots:
+            self.machine.ingest(slot.node, None, stamp, status, reason)
+
+    # --- writes ----------------------------------------------------------------------------------
+
+    async def write(self, node: VariableNode, raw: Any) -> ReadBack | None:
+        slot = self._by_node.get(node)
+        if slot is None:  # pragma: no cover - the tree only writes mapped variables
+            raise ControllerRefused(f"{node.full_path} is not a Modbus variable", status="BadNodeIdUnknown")
+        spot = slot.field
+        link = self.link
+        multiple = self.driver.write_multiple
+        try:
+            if spot.kind is Kind.BIT:
+                registers = encode(spot, raw)
+                current = (await link.read(Table.HOLDING, spot.start, 1))[0]
+                mask = 1 << (spot.bit or 0)
+                word = current | mask if registers[0] else current & ~mask & 0xFFFF
+                await link.write(Table.HOLDING, spot.start, [word], multiple=multiple)
+            else:
+                await link.write(spot.table, spot.start, encode(spot, raw), multiple=multiple)
+        except DeviceRefused as refused:
+            raise ControllerRefused(
+                f"{node.full_path}: the device refused {refused.reason}", status=refused.status
+            ) from None
+        except SourceError as exc:
+            raise ControllerUnavailable(f"{node.full_path}: {exc.reason}") from None
+        return await self._read_back(slot)
+
+    async def _read_back(self, slot: _Slot) -> ReadBack | None:
+        spot = slot.field
+        try:
+            values = await self.link.read(spot.table, spot.start, spot.count)
+        except SourceError as exc:
+            log.info("%s: reading %s back after a write failed: %s", self.machine.name, spot.describe(),
+                     exc.reason)  # fmt: skip
+            return None
+        return ReadBack(slot.decode(values, 0), utcnow())
