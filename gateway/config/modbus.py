@@ -143,7 +143,7 @@ class ModbusDriver(Strict):
             where.append(index)
         for later, earlier in overlaps(fields):
             a, b = fields[later], fields[earlier]
-            hint = " (a float32 or int32 takes two registers)" if a.start == b.start + 1 else ""
+            hint = " (a float32 or int32 takes two registers)" if abs(a.start - b.start) == 1 else ""
             message = f"{a.describe()} overlaps variables[{where[earlier]}], {b.describe()}{hint}"
             issues.append(((where[later], "source"), message))
         return sorted(issues, key=lambda issue: (int(issue[0][0]), str(issue[0][1])))

@@ -171,7 +171,7 @@ class Field:
         where = f"{self.table.value}:{self.start}" + (f".{self.bit}" if self.bit is not None else "")
         kind = f"string[{self.count}]" if self.kind is Kind.STRING else self.kind.value
         order = f" {self.order.value}" if self.kind.registers > 1 or self.kind is Kind.STRING else ""
-        unit = "bit" if self.table.bits else "register"
+        unit = {Table.COIL: "coil", Table.DISCRETE: "discrete input"}.get(self.table, "register")
         span = f"{unit} {self.start}" if self.count == 1 else f"{unit}s {self.start}-{self.end - 1}"
         return f"{where} {kind}{order} ({span})"
 
