@@ -81,6 +81,7 @@ class Results:
     targets_16: list[Target] = field(default_factory=list)  # issue 16's: the web console
     targets_14: list[Target] = field(default_factory=list)  # issue 14's: serial DNC
     targets_22: list[Target] = field(default_factory=list)  # issue 22's: serial DNC on real device servers
+    targets_26: list[Target] = field(default_factory=list)  # issue 26's: the Modbus TCP and S7 drivers
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -126,6 +127,7 @@ class Results:
             "targets_16": [t.as_dict() for t in self.targets_16],
             "targets_14": [t.as_dict() for t in self.targets_14],
             "targets_22": [t.as_dict() for t in self.targets_22],
+            "targets_26": [t.as_dict() for t in self.targets_26],
             "details": self.details,
             "errors": self.errors,
         }
@@ -192,6 +194,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 14)", _targets(results.targets_14)]
     if results.targets_22:
         out += ["", "Targets (issue 22)", _targets(results.targets_22)]
+    if results.targets_26:
+        out += ["", "Targets (issue 26)", _targets(results.targets_26)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -25,7 +25,7 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, dnc, jobs, mirror, mtconnect, naive, peer, scale, sparkplug, web
+from bench.scenarios import baselines, dnc, jobs, mirror, mtconnect, naive, peer, plc, scale, sparkplug, web
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -41,6 +41,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "mtconnect": mtconnect.run,
     "web": web.run,
     "dnc": dnc.run,
+    "plc": plc.run,
 }
 
 

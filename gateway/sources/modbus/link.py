@@ -16,6 +16,7 @@ source decides, with gateway.reconnect's backoff.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import Sequence
 from typing import Any, cast
@@ -114,6 +115,19 @@ class _Guard:
         if transport is not None:
             transport.close()
         return len(data)
+
+
+def _cancelled_meanwhile() -> None:
+    """Raise the CancelledError a cancel of this task asked for, if pymodbus swallowed it.
+
+    pymodbus waits for each answer with asyncio.wait_for, which on Python 3.11 returns the answer and
+    drops the cancellation when both arrive together (fixed in 3.12): a driver cancelled while polling
+    flat out would then poll on, and the gateway would not stop. The cancel is still counted on the
+    task (`cancelling()`), so it is delivered here.
+    """
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError
 
 
 class ModbusLink:
@@ -234,6 +248,7 @@ class ModbusLink:
         self.requests += 1
         try:
             response: ModbusPDU = await call
+            _cancelled_meanwhile()
         except LinkLost:
             raise
         except ModbusException as exc:

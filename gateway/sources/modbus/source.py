@@ -105,6 +105,7 @@ class ModbusSource:
         for group in self.groups:
             self._plan(group)
         self.responses = 0  # answers that carried values
+        self.registers = 0  # registers (or bits) those answers brought
         self.unchanged = 0  # of which were the same registers as the last time
         self._outage = OutageLog(log)
         self._connected = False
@@ -217,6 +218,7 @@ class ModbusSource:
                 continue
             stamp = utcnow()
             self.responses += 1
+            self.registers += request.count
             if read.bad is not None:
                 read.bad = None
                 read.forget()
