@@ -6,9 +6,9 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test lint unit integration install system-deps schema soak bench clean sparkplug-proto
 
-# setup.py builds gateway/jobs/validation/_plain.c (validation's compiled reader) and gateway/sources/_publish.c
+# setup.py builds gateway/jobs/validation/_plain.c (validation's compiled reader) and gateway/sources/opcua/_publish.c
 # (the OPC UA source's PublishResponse reader) in place; a change to either reinstalls.
-$(STAMP): pyproject.toml setup.py gateway/jobs/validation/_plain.c gateway/sources/_publish.c
+$(STAMP): pyproject.toml setup.py gateway/jobs/validation/_plain.c gateway/sources/opcua/_publish.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'

@@ -2,7 +2,7 @@
 
 * gateway/jobs/validation/_plain.c: G-code validation's plain-block reader (about thirty
   times faster than the pure-Python reader on large programs);
-* gateway/sources/_publish.c: the OPC UA source's PublishResponse reader for data changes
+* gateway/sources/opcua/_publish.c: the OPC UA source's PublishResponse reader for data changes
   (asyncua's own decoding does the rest, and all of it where this is not built).
 
 Everything else is in pyproject.toml. Where no C compiler is available the install still
@@ -21,8 +21,8 @@ setup(
             optional=True,
         ),
         Extension(
-            "gateway.sources._publish",
-            ["gateway/sources/_publish.c"],
+            "gateway.sources.opcua._publish",
+            ["gateway/sources/opcua/_publish.c"],
             extra_compile_args=["-O2", "-Wall", "-Wextra"],
             optional=True,
         ),

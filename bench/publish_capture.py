@@ -28,7 +28,7 @@ from asyncua import Client, ua
 from asyncua.common.utils import Buffer
 from asyncua.ua.ua_binary import struct_from_binary
 
-from gateway.sources import publish_decode
+from gateway.sources.opcua import publish_decode
 from simulator.noise import NoiseSpec
 from simulator.runner import Simulator
 from simulator.variables import NAMESPACE_URI, build_variables

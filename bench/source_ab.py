@@ -1,7 +1,7 @@
 """The OPC UA source alone, A/B: CPU per 1,000 changes with asyncua's decoding and with the compiled reader.
 
 `python -m bench.source_ab [--variables N] [--rate R] [--window S] [--rounds K]` starts the simulator's
-noise mode in a process of its own, runs the gateway's real OPC UA source (gateway.sources.opcua_client)
+noise mode in a process of its own, runs the gateway's real OPC UA source (gateway.sources.opcua.client)
 into a variable tree with no sink in this process, and alternates windows with the compiled PublishResponse
 reader forced off and on (`publish_decode.PURE`), measuring this process's CPU time per change taken.
 Alternating windows in one process cancels most of a shared machine's drift; the medians are printed as
@@ -24,8 +24,8 @@ import yaml
 from bench.procs import Agent
 from gateway.config.mapping import MachineMapping
 from gateway.model.tree import VariableTree
-from gateway.sources import publish_decode
-from gateway.sources.opcua_client import OpcUaSource
+from gateway.sources.opcua import publish_decode
+from gateway.sources.opcua.client import OpcUaSource
 from simulator.noise import NoiseSpec, noise_mapping
 
 

@@ -24,7 +24,8 @@ from gateway.config.loader import Config
 from gateway.model.tree import VariableTree
 from gateway.shims.heap import settled_heap
 from gateway.sinks.base import Sink
-from gateway.sources.base import Source, create_source
+from gateway.sources.base import Source
+from gateway.sources.registry import create_source
 
 if TYPE_CHECKING:  # imported where they are built, only when the configuration asks for them
     from gateway.alarms.service import AlarmService

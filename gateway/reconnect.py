@@ -45,7 +45,7 @@ def backoff_delays(
 
 
 class BackoffShape(Protocol):
-    """The three numbers of a config's backoff section (gateway.config.base.Backoff has them)."""
+    """The three numbers of a config's backoff section (gateway.settings.base.Backoff has them)."""
 
     @property
     def initial(self) -> float: ...

@@ -21,8 +21,8 @@ from bench.agents.protocol import percentiles
 from gateway.model.hub import Change
 from gateway.model.tree import VariableNode
 from gateway.sinks.mqtt.sink import MqttSink
-from gateway.sources.opcua_client import OpcUaSource
-from gateway.sources.publish_decode import Change as SourceChange
+from gateway.sources.opcua.client import OpcUaSource
+from gateway.sources.opcua.publish_decode import Change as SourceChange
 
 STRIDE = 8  # every 8th change of a batch: thousands a second under load, plenty for a p99
 

@@ -40,6 +40,8 @@ from gateway.config.mtconnect import AgentConfig
 from gateway.config.sparkplug import SparkplugConfig
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
+from gateway.sources.base import settings_of
+from gateway.sources.opcua.config import OpcUaDriver
 
 log = logging.getLogger("gateway.demo")
 
@@ -163,7 +165,8 @@ def handle(args: argparse.Namespace) -> int:
         return 2
     mapping = base.machines[0]
     endpoint = f"opc.tcp://127.0.0.1:{args.sim_opcua_port}"
-    mapping = mapping.model_copy(update={"driver": mapping.driver.model_copy(update={"endpoint": endpoint})})
+    driver = settings_of(mapping, OpcUaDriver).model_copy(update={"endpoint": endpoint})  # the demo machine
+    mapping = mapping.model_copy(update={"driver": driver})
     if (
         mapping.mqtt is None
     ):  # the demo lets MQTT write the readwrite variables (Feed/Override…) and run commands

@@ -27,6 +27,8 @@ from typing import Any
 from gateway.config.jobs import ControllerSerial
 from gateway.config.mapping import MachineMapping
 from gateway.errors import RequestError
+from gateway.sources.base import settings_of
+from gateway.sources.opcua.config import OpcUaDriver
 
 log = logging.getLogger("gateway.demo")
 
@@ -60,7 +62,9 @@ def drip_program(turns: int = 12, points: int = 90) -> bytes:
 
 def point_at(mapping: MachineMapping, *, opcua_port: int, dnc_port: int) -> MachineMapping:
     """The serial machine's mapping with the demo's ports."""
-    driver = mapping.driver.model_copy(update={"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}"})
+    driver = settings_of(mapping, OpcUaDriver).model_copy(
+        update={"endpoint": f"opc.tcp://127.0.0.1:{opcua_port}"}
+    )
     mapping = mapping.model_copy(update={"driver": driver})
     if mapping.jobs is not None and isinstance(mapping.jobs.controller, ControllerSerial):
         controller = mapping.jobs.controller.model_copy(update={"where": f"socket://127.0.0.1:{dnc_port}"})

@@ -9,9 +9,9 @@ import logging
 import sys
 from pathlib import Path
 
-from gateway.config.mapping import check_endpoint
 from gateway.errors import SourceError
 from gateway.logconfig import configure
+from gateway.settings.urls import check_endpoint
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def handle(args: argparse.Namespace) -> int:
     import os
 
-    from gateway.sources.opcua_discover import discover
+    from gateway.sources.opcua.discover import discover
 
     configure("warning")
     if args.endpoint.startswith(("http://", "https://")):

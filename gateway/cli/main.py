@@ -28,18 +28,29 @@ COMMANDS = (
     "dnc",
     "sparkplug",
     "tokens",
-    "modbus",
 )
 MODULE_OF = {name: name for name in COMMANDS if name != "passwords"} | {"hash-password": "passwords"}
 
 
+def _driver_commands() -> dict[str, str]:
+    """The verbs drivers add (gateway/sources/base.py `DriverSpec.commands`): verb -> module. Read only for
+    a verb that is not the gateway's own, so that those do not load the drivers' settings models."""
+    from gateway.sources.registry import DRIVERS
+
+    return {verb: module for spec in DRIVERS for verb, module in spec.commands}
+
+
 def _modules(argv: Sequence[str]) -> tuple[str, ...]:
-    """The command modules to register: the named command's alone, or all (no command, --help, a typo)."""
+    """The command modules to register (dotted names): the named command's alone, or all (no command,
+    --help, a typo)."""
     first = next((arg for arg in argv if not arg.startswith("-")), None)
-    if first is None:
-        return COMMANDS
-    module = MODULE_OF.get(first)
-    return COMMANDS if module is None else (module,)
+    module = MODULE_OF.get(first) if first is not None else None
+    if module is not None:
+        return (f"gateway.cli.{module}",)
+    drivers = _driver_commands()
+    if first is not None and first in drivers:
+        return (drivers[first],)
+    return (*(f"gateway.cli.{name}" for name in COMMANDS), *drivers.values())
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
@@ -51,8 +62,8 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"cnc-gateway {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS if argv is None else _modules(argv):
-        importlib.import_module(f"gateway.cli.{name}").register(sub)
+    for module in _modules([] if argv is None else argv):
+        importlib.import_module(module).register(sub)
     return parser
 
 

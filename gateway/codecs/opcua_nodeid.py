@@ -9,7 +9,7 @@ asyncua's own parser silently ignores what it does not understand; this one says
 what is wrong, so a typo turns one variable Bad with a reason instead of
 subscribing to the wrong node. Pure: no I/O, no asyncua, so that the config
 loader checks every address at load time and the OPC UA source driver
-(gateway/sources/opcua_client.py) resolves them at connect time with the same code.
+(gateway/sources/opcua/client.py) resolves them at connect time with the same code.
 Errors are `gateway.errors.AddressError` (a CodecError).
 """
 

@@ -33,8 +33,8 @@ from typing import Literal
 from pydantic import Field, field_validator
 
 from gateway.auth.passwords import parse_hash
-from gateway.config.base import Strict
 from gateway.model.access import DEFAULT_ROLES
+from gateway.settings.base import Strict
 
 ROLE_RE = re.compile(r"^[a-z][a-z0-9_\-]{0,31}$")
 USER_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.@\-]{0,63}$")

@@ -37,9 +37,9 @@ from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, fi
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from gateway.config.access import check_role_name
-from gateway.config.base import Strict, TypeField
 from gateway.errors import RequestError
 from gateway.model.types import TypeSpec, coerce
+from gateway.settings.base import Strict, TypeField
 
 NAME_RE = re.compile(r"^[a-z][a-z0-9_\-]{0,62}$")
 ARG_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,62}$")

@@ -27,7 +27,7 @@ from typing import Any, Literal
 from pydantic import Field, ModelWrapValidatorHandler, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from gateway.config.base import Backoff, Strict
+from gateway.settings.base import Backoff, Strict
 
 U32_MAX = 2**32 - 1
 DEFAULT_TCP_PORT = 5020

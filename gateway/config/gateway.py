@@ -18,14 +18,14 @@ from gateway.config.access import (
     check_users,
     unknown_role,
 )
-from gateway.config.base import Strict
 from gateway.config.http import HttpConfig
 from gateway.config.jobs import InboxConfig
-from gateway.config.mapping import check_endpoint
 from gateway.config.mqtt import MqttConfig
 from gateway.config.mtconnect import AgentConfig
 from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
 from gateway.config.sparkplug import SparkplugConfig
+from gateway.settings.base import Strict
+from gateway.settings.urls import check_endpoint
 
 SecurityMode = SecurityName
 

@@ -32,7 +32,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, Field, SecretStr, field_validator
 
 from gateway.config.access import check_role_name
-from gateway.config.base import Strict
+from gateway.settings.base import Strict
 
 
 class HttpTls(Strict):

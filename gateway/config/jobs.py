@@ -15,9 +15,9 @@ from typing import Annotated, Any, Literal
 from pydantic import ByteSize, Discriminator, Field, SecretStr, Tag, field_validator, model_validator
 
 from gateway.auth.passwords import parse_hash
-from gateway.config.base import Backoff, Strict
 from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
+from gateway.settings.base import Backoff, Strict
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _USER = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.@\-]{0,63}$")

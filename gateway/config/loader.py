@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -21,14 +21,14 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from gateway.auth.known_passwords import is_known, known_passwords_of
-from gateway.codecs.opcua_nodeid import parse_address
 from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.config.alarms import SOURCE_TAGS
 from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import CONTROLLER_TAGS
-from gateway.config.mapping import DRIVER_TAGS, MachineMapping, tree_conflicts
+from gateway.config.mapping import MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
+from gateway.sources import registry
 
 Loc = tuple[str | int, ...]
 M = TypeVar("M", bound=BaseModel)
@@ -204,7 +204,7 @@ def issues_from(exc: ValidationError, located: Located) -> list[ConfigIssue]:
 def _untagged(loc: Loc) -> Loc:
     """Without the member names pydantic puts after a tagged union (`driver.opcua.endpoint`)."""
     for at, tags in (
-        (("driver",), DRIVER_TAGS),
+        (("driver",), registry.types()),
         (("alarms", "source"), SOURCE_TAGS),
         (("jobs", "controller"), CONTROLLER_TAGS),
     ):
@@ -333,21 +333,24 @@ def _structure_issues(located: Located) -> list[ConfigIssue]:
         loc: Loc = ("variables", indices[pos], "path")
         issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), message))
     driver = located.data.get("driver")
-    if isinstance(driver, dict) and driver.get("type", "opcua") == "opcua":
-        issues.extend(_address_issues(located, variables))
+    spec = registry.find(str(driver.get("type", registry.DEFAULT))) if isinstance(driver, dict) else None
+    if spec is not None and spec.check_address is not None:
+        issues.extend(_address_issues(located, variables, spec.check_address))
     return issues
 
 
-def _address_issues(located: Located, variables: Sequence[Any]) -> list[ConfigIssue]:
-    """Catch a typo in a node id at load time, not as a Bad variable at run time."""
+def _address_issues(
+    located: Located, variables: Sequence[Any], check: Callable[[str], object]
+) -> list[ConfigIssue]:
+    """Catch a typo in a driver address (a node id) at load time, not as a Bad variable at run time."""
     issues = []
     for index, var in enumerate(variables):
         source = var.get("source") if isinstance(var, dict) else None
         if not isinstance(source, str) or not source:
             continue
         try:
-            parse_address(source)
-        except AddressError as exc:
+            check(source)
+        except (AddressError, ValueError) as exc:
             loc: Loc = ("variables", index, "source")
             issues.append(ConfigIssue(located.file, located.line(loc), format_loc(loc), str(exc)))
     return issues

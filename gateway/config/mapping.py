@@ -13,26 +13,23 @@ commands) are given the mappings by gateway/app.py.
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any, Literal
-from urllib.parse import urlsplit
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
-from pydantic import Discriminator, Field, SecretStr, Tag, ValidationInfo, field_validator, model_validator
+from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
 from gateway.config.access import check_role_name
 from gateway.config.alarms import AlarmsConfig, alarms_issues
-from gateway.config.base import Backoff, Strict, TypeField
 from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.config.jobs import JobsConfig
-from gateway.config.modbus import ModbusDriver
 from gateway.config.mqtt import MachineMqtt, VariableMqtt
-from gateway.config.mtconnect import READ_ONLY_DRIVERS, MTConnectDriver, ShdrDriver, VariableMTConnect
 from gateway.model.definitions import MachineDefinition, Range, VariableDefinition
 from gateway.model.types import TypeSpec
-
-RESERVED_SEGMENTS = frozenset({"Status", "Jobs", "Commands", "Programs", "Alarms"})
-SEGMENT_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
-MACHINE_RE = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,62}$")
+from gateway.settings.base import Strict, TypeField
+from gateway.settings.mtconnect import VariableMTConnect
+from gateway.settings.names import MACHINE_RE, RESERVED_SEGMENTS, SEGMENT_RE
+from gateway.sources import registry
+from gateway.sources.base import DriverSettings, VariableSettings
 
 
 def check_path(path: str) -> str:
@@ -226,67 +223,23 @@ class VariableSpec(Strict):
         )
 
 
-def check_endpoint(url: str, scheme: str = "opc.tcp") -> str:
-    parts = urlsplit(url)
-    if parts.scheme != scheme:
-        raise ValueError(f"endpoint {url!r} must start with {scheme}://")
-    try:
-        port = parts.port
-    except ValueError:
-        raise ValueError(f"endpoint {url!r} has an invalid port") from None
-    if not parts.hostname:
-        raise ValueError(f"endpoint {url!r} has no host")
-    if port is None:
-        raise ValueError(f"endpoint {url!r} needs an explicit port, e.g. {scheme}://host:4840")
-    return url
-
-
-class OpcUaDriver(Strict):
-    """A controller with an OPC UA server (B&R, Siemens, Beckhoff, Fanuc with the option, the simulator)."""
-
-    type: Literal["opcua"] = "opcua"
-    endpoint: str
-    username: str | None = None
-    password: SecretStr | None = None
-    security: str = Field(
-        default="None",
-        description="asyncua security string, e.g. Basic256Sha256,SignAndEncrypt,cert.pem,key.pem",
-    )
-    timeout: float = Field(default=5.0, gt=0, description="Seconds per request")
-    publishing_interval: float = Field(default=100.0, gt=0, description="Milliseconds")
-    watchdog_interval: float = Field(default=1.0, gt=0, description="Seconds between liveness probes")
-    publish_requests: int = Field(
-        default=1,
-        ge=1,
-        le=8,
-        description="Publish requests kept at the controller. 1: the next only once an answer is in the "
-        "tree, so a gateway that falls behind is handed just the newest value of each variable; more "
-        "keep the controller answering while the gateway works (more changes per second from a busy "
-        "controller, or over a slow link)",
-    )
-    reconnect: Backoff = Backoff()
-
-    @field_validator("endpoint")
-    @classmethod
-    def _endpoint(cls, url: str) -> str:
-        return check_endpoint(url)
-
-
 def _driver_type(value: Any) -> str:
     """Which driver model a `driver:` section is; files from before the other drivers have no `type`."""
     if isinstance(value, dict):
-        return str(value.get("type", "opcua"))
-    return str(getattr(value, "type", "opcua"))
+        return str(value.get("type", registry.DEFAULT))
+    return str(getattr(value, "type", registry.DEFAULT))
 
 
-DRIVER_TAGS = ("opcua", "mtconnect", "shdr", "modbus")
-Driver = Annotated[
-    Annotated[OpcUaDriver, Tag("opcua")]
-    | Annotated[MTConnectDriver, Tag("mtconnect")]
-    | Annotated[ShdrDriver, Tag("shdr")]
-    | Annotated[ModbusDriver, Tag("modbus")],
-    Discriminator(_driver_type),
-]
+def _driver_union() -> Any:
+    """`driver:` as pydantic validates it: the registered drivers' models, tagged by their type."""
+    members = tuple(Annotated[spec.settings, Tag(spec.type)] for spec in registry.ordered())
+    return Annotated[Union[members], Discriminator(_driver_type)]  # noqa: UP007 - built from a tuple
+
+
+if TYPE_CHECKING:  # what the code may read of any driver's settings; each driver narrows to its own
+    Driver = DriverSettings
+else:
+    Driver = _driver_union()
 
 
 class VariableDefaults(Strict):
@@ -343,12 +296,13 @@ class MachineMapping(Strict):
     @field_validator("variables")
     @classmethod
     def _read_only_driver(cls, variables: list[VariableSpec], info: ValidationInfo) -> list[VariableSpec]:
-        """MTConnect (an agent or an adapter) cannot be written: its variables are `access: read`."""
+        """A read-only driver (MTConnect agent or adapter) cannot write: its variables are access: read."""
         driver = info.data.get("driver")
-        if driver is not None and driver.type in READ_ONLY_DRIVERS:
-            message = f"a {driver.type} driver is read-only (MTConnect has no writes): use access: read"
+        spec = registry.find(driver.type) if driver is not None else None
+        if spec is not None and spec.read_only is not None:
+            message = f"a {spec.type} driver is read-only ({spec.read_only}): use access: read"
             located_errors([((i, "access"), message) for i, var in enumerate(variables) if var.writable])
-        check = getattr(driver, "variable_issues", None)  # a driver's own checks of its variables' sources
+        check = getattr(driver, "variable_issues", None)  # a driver's own checks across its variables
         if check is not None:
             located_errors(check(variables))
         return variables
@@ -417,10 +371,10 @@ class MachineMapping(Strict):
             acknowledge_role=self.alarms.acknowledge_role if self.alarms is not None else None,
         )
 
-    def sampling_interval(self, var: VariableSpec) -> float:
+    def sampling_interval(self, var: VariableSettings) -> float:
         return self.defaults.sampling_interval if var.sampling_interval is None else var.sampling_interval
 
-    def queue_size(self, var: VariableSpec) -> int:
+    def queue_size(self, var: VariableSettings) -> int:
         return self.defaults.queue_size if var.queue_size is None else var.queue_size
 
 

@@ -21,7 +21,7 @@ from pydantic import (
 )
 
 from gateway.config.access import check_role_name
-from gateway.config.base import Backoff, Strict
+from gateway.settings.base import Backoff, Strict
 
 QoS = Literal[0, 1, 2]
 PayloadMode = Literal["json", "raw"]

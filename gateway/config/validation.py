@@ -35,7 +35,7 @@ from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from gateway.config.base import Strict
+from gateway.settings.base import Strict
 
 Dialect = Literal["generic", "fanuc", "linuxcnc", "sinumerik", "laser-sim"]
 

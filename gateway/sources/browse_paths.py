@@ -1,4 +1,4 @@
-"""Tree paths for browsed nodes: the browse names, cleaned up to the mapping rules.
+"""Tree paths for browsed nodes: the browse names, cleaned up to the mapping rules (both drivers' discover).
 
 Pure helpers for `discover`. Paths are made unique case-insensitively, because
 MQTT topics are lower-case, and a path is never both a folder and a variable.
@@ -11,7 +11,7 @@ import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from gateway.config.mapping import RESERVED_SEGMENTS
+from gateway.settings.names import RESERVED_SEGMENTS
 
 RESERVED_PREFIX = "Controller_"
 

@@ -18,7 +18,7 @@ STACKS = [
     ),
     ("data_received (asyncua/client/ua_client.py:80);decode (asyncua/ua/ua_binary.py:500)", 6),
     (
-        "_process (gateway/sources/opcua_client.py);ingest (gateway/model/tree.py);set (asyncio/locks.py:1)",
+        "_process (gateway/sources/opcua/client.py);ingest (gateway/model/tree.py);set (asyncio/locks.py:1)",
         3,
     ),
     ("_push (gateway/sinks/opcua/server.py:340);pack (asyncua/ua/ua_binary.py:300)", 2),

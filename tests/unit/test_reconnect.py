@@ -103,7 +103,7 @@ def test_backoff_without_stable_after_only_starts_over_when_reset() -> None:
 
 
 def test_backoff_of_a_config_section() -> None:
-    from gateway.config.base import Backoff as BackoffConfig
+    from gateway.settings.base import Backoff as BackoffConfig
 
     backoff = Backoff.of(BackoffConfig(initial=0.25, max=1.0, factor=3.0), stable_after=5.0)
     assert (backoff.initial, backoff.factor, backoff.maximum, backoff.stable_after) == (0.25, 3.0, 1.0, 5.0)

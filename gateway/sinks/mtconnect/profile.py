@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 from gateway.codecs.mtconnect.model import Category, Component, DataItem, Description, Device, Representation
 from gateway.codecs.mtconnect.units import factor, native_units, standard_units
 from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import AgentConfig, VariableMTConnect
+from gateway.config.mtconnect import AgentConfig
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.settings.mtconnect import VariableMTConnect
 
 UUID_PREFIX = "urn:cnc-gateway:"
 _NOT_ID = re.compile(r"[^A-Za-z0-9_.\-]")

@@ -35,12 +35,12 @@ from typing import Any, Self
 from gateway.codecs.modbus.address import Field, Kind, Table
 from gateway.codecs.modbus.layout import Decoder, decoder, encode
 from gateway.codecs.modbus.planner import Request, plan
-from gateway.config.mapping import MachineMapping
-from gateway.config.modbus import ModbusDriver
 from gateway.errors import ControllerRefused, ControllerUnavailable, SourceError
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.base import DriverMapping, settings_of
+from gateway.sources.modbus.config import ModbusDriver
 from gateway.sources.modbus.link import DeviceRefused, LinkLost, ModbusLink
 
 log = logging.getLogger("gateway.sources.modbus")
@@ -62,7 +62,7 @@ class _Slot:
 class _Read:
     """One planned request and what it brings."""
 
-    request: Request[int]
+    request: Request[VariableNode]
     slots: list[tuple[_Slot, int]]
     last: list[int] | None = None  # the registers of the last good answer
     bad: str | None = None  # the status of its variables while it fails
@@ -76,8 +76,8 @@ class _Read:
 @dataclass(slots=True)
 class _Group:
     interval: float  # s
-    fields: list[tuple[int, Field]]
-    isolated: set[int] = field(default_factory=set)
+    fields: list[tuple[VariableNode, Field]]
+    isolated: set[VariableNode] = field(default_factory=set)
     reads: list[_Read] = field(default_factory=list)
     due: float = 0.0
     cycles: int = 0
@@ -85,22 +85,20 @@ class _Group:
 
 
 class ModbusSource:
-    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
-        assert isinstance(mapping.driver, ModbusDriver)
+    def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
         self.machine = machine
         self.mapping = mapping
-        self.driver: ModbusDriver = mapping.driver
+        self.driver: ModbusDriver = settings_of(mapping, ModbusDriver)
         d = self.driver
         self.link = ModbusLink(d.host, d.port, d.unit, d.timeout)
-        self._slots: dict[int, _Slot] = {}
+        interval = {var.path: mapping.sampling_interval(var) for var in mapping.variables}
+        entries = [(node, node.definition.source, node.definition.raw_type, interval[node.path])
+                   for node in machine.mapped]  # fmt: skip
+        groups = d.polling_groups(entries)
         self._by_node: dict[VariableNode, _Slot] = {}
-        groups = d.polling_groups(mapping.variables, mapping.sampling_interval)
         for fields in groups.values():
-            for index, spot in fields:
-                node = machine.nodes[mapping.variables[index].path]
-                slot = _Slot(node, spot, decoder(spot))
-                self._slots[index] = slot
-                self._by_node[node] = slot
+            for node, spot in fields:
+                self._by_node[node] = _Slot(node, spot, decoder(spot))
         self.groups = [_Group(ms / 1000.0, fields) for ms, fields in groups.items()]
         for group in self.groups:
             self._plan(group)
@@ -130,11 +128,11 @@ class ModbusSource:
     def requests_per_cycle(self) -> float:
         """Requests of one cycle of every group, per variable read (the planner's saving)."""
         requests = sum(len(g.reads) for g in self.groups)
-        return requests / max(1, len(self._slots))
+        return requests / max(1, len(self._by_node))
 
     def _plan(self, group: _Group) -> None:
         group.reads = [
-            _Read(request, [(self._slots[key], offset) for key, _, offset in request.fields])
+            _Read(request, [(self._by_node[key], offset) for key, _, offset in request.fields])
             for request in plan(group.fields, self.driver.limits, group.isolated)
         ]
 
@@ -165,7 +163,7 @@ class ModbusSource:
                 read.bad = None
         self._outage.recovered("%s: polling %s (%d requests a cycle for %d variables)", self.machine.name,
                                self.driver.endpoint, sum(len(g.reads) for g in self.groups),
-                               len(self._slots))  # fmt: skip
+                               len(self._by_node))  # fmt: skip
 
     def _drop(self, reason: str, status: str) -> None:
         was = self._connected

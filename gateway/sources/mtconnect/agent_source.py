@@ -33,12 +33,12 @@ from gateway.codecs.mtconnect.responses import (
     parse_streams,
 )
 from gateway.codecs.mtconnect.timestamps import parse_timestamp
-from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import MTConnectDriver
 from gateway.errors import ControllerRefused, SourceError
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.base import DriverMapping, settings_of
+from gateway.sources.mtconnect.config import MTConnectDriver
 from gateway.sources.mtconnect.http_client import AgentClient
 from gateway.sources.mtconnect.values import Ingest
 
@@ -56,11 +56,10 @@ class Restarted(Exception):
 
 
 class MTConnectSource:
-    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
-        assert isinstance(mapping.driver, MTConnectDriver)
+    def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
         self.machine = machine
         self.mapping = mapping
-        self.driver: MTConnectDriver = mapping.driver
+        self.driver = settings_of(mapping, MTConnectDriver)
         self.ingest = Ingest(machine, "the agent")
         self.instance_id: int | None = None
         self.next_sequence: int | None = None

@@ -20,9 +20,9 @@ from gateway.codecs.mtconnect.model import Category, Component, DataItem, Device
 from gateway.codecs.mtconnect.responses import parse_devices
 from gateway.codecs.mtconnect.units import NATIVE_NAMES
 from gateway.codecs.mtconnect.vocabulary import FLOAT_EVENTS, INTEGER_EVENTS, THREE_SPACE
-from gateway.config.mapping import MACHINE_RE
-from gateway.config.mtconnect import check_url
 from gateway.errors import SourceError
+from gateway.settings.names import MACHINE_RE
+from gateway.settings.urls import check_url
 from gateway.sources.browse_paths import Key, assign_paths
 from gateway.sources.mtconnect.http_client import AgentClient
 

@@ -33,12 +33,12 @@ from gateway.codecs.mtconnect.shdr import (
     ShdrReader,
     TimeSeriesObservation,
 )
-from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import ShdrDriver
 from gateway.errors import ControllerRefused, SourceError
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sources.base import DriverMapping, settings_of
+from gateway.sources.mtconnect.config import ShdrDriver
 from gateway.sources.mtconnect.values import Ingest
 
 log = logging.getLogger("gateway.sources.mtconnect")
@@ -48,10 +48,9 @@ JUNK_LOG_EVERY = 10.0  # s between log lines about unreadable lines
 
 
 class ShdrSource:
-    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
-        assert isinstance(mapping.driver, ShdrDriver)
+    def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
         self.machine = machine
-        self.driver: ShdrDriver = mapping.driver
+        self.driver = settings_of(mapping, ShdrDriver)
         self.ingest = Ingest(machine, "the adapter")
         self.keys: dict[str, VariableNode] = {}
         self.kinds: dict[str, ItemKind] = {}

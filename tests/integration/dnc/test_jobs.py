@@ -151,7 +151,7 @@ async def test_a_gateway_restart_mid_drip_waits_for_an_operator(harness: Build, 
 @asynccontextmanager
 async def mirrored(h: Any) -> AsyncIterator[None]:
     """The machine's OPC UA source, so that its variables (Machine/State) are in the tree."""
-    from gateway.sources.base import create_source
+    from gateway.sources.registry import create_source
 
     [mapping] = h.service.config.machines
     source = create_source(h.tree.machines[mapping.machine], mapping)

@@ -16,7 +16,7 @@ from asyncua import Server, ua
 
 from gateway.config.mapping import MachineMapping
 from gateway.model.tree import Machine
-from gateway.sources.opcua_client import OpcUaSource
+from gateway.sources.opcua.client import OpcUaSource
 from tests.trees import MappedTree
 from tests.waiting import free_port
 

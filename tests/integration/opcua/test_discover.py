@@ -12,7 +12,7 @@ import yaml
 from gateway.config.loader import load_mapping
 from gateway.config.mapping import MachineMapping
 from gateway.errors import SourceError
-from gateway.sources.opcua_discover import discover
+from gateway.sources.opcua.discover import discover
 from tests.integration.opcua.conftest import NS_URI, Controller
 from tests.waiting import free_port
 

@@ -16,8 +16,9 @@ import pytest
 from gateway.errors import ControllerRefused, ControllerUnavailable
 from gateway.model.context import WriteContext
 from gateway.model.tree import Machine
-from gateway.sources import opcua_client, publish_decode
-from gateway.sources.opcua_client import OpcUaSource
+from gateway.sources.opcua import client as opcua_client
+from gateway.sources.opcua import publish_decode
+from gateway.sources.opcua.client import OpcUaSource
 from tests.integration.opcua.conftest import NS_URI, SOURCE_TS, Controller, make_machine, source_for
 from tests.waiting import free_port, wait_until
 

@@ -9,7 +9,7 @@ from asyncua import Server, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from gateway.sources.opcua_client import certificate_uri
+from gateway.sources.opcua.client import certificate_uri
 from tests.integration.opcua.conftest import make_machine, source_for
 from tests.waiting import free_port, wait_until
 

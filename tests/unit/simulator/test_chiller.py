@@ -20,7 +20,7 @@ def test_the_shipped_mapping_reads_every_point_of_the_map_as_the_chiller_lays_it
     mapping = load_mapping(ROOT / "mappings" / "chiller-sim.yaml", environ={})
     by_field = {}
     for variable in mapping.variables:
-        by_field[mapping.driver.field(variable)] = variable.path  # type: ignore[union-attr]
+        by_field[mapping.driver.field(variable.source, variable.raw_type)] = variable.path  # type: ignore[attr-defined]
     assert len(by_field) == len(CHILLER_MAP)
     for point in CHILLER_MAP:
         assert point.field in by_field, f"{point.name} ({point.source}) is not read by the mapping"

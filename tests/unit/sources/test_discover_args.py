@@ -1,6 +1,6 @@
 import pytest
 
-from gateway.sources.opcua_discover import discover
+from gateway.sources.opcua.discover import discover
 
 
 async def test_bad_arguments_are_rejected_before_connecting() -> None:

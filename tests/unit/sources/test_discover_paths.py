@@ -1,7 +1,8 @@
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gateway.config.mapping import SEGMENT_RE, check_path, tree_conflicts
+from gateway.config.mapping import check_path, tree_conflicts
+from gateway.settings.names import SEGMENT_RE
 from gateway.sources.browse_paths import assign_paths, sanitize_segment
 
 

@@ -1,6 +1,6 @@
 """The receive path, fed with PublishResponses encoded by asyncua (no network needed).
 
-Each response goes through gateway.sources.publish_decode as one off the wire would, once read by the
+Each response goes through gateway.sources.opcua.publish_decode as one off the wire would, once read by the
 compiled reader and once by asyncua's decoding (every test runs on both paths).
 """
 
@@ -14,9 +14,9 @@ from asyncua.ua.ua_binary import struct_to_binary
 
 from gateway.config.mapping import MachineMapping
 from gateway.model.tree import Machine, VariableTree
-from gateway.sources import publish_decode
-from gateway.sources.opcua_client import OpcUaSource
-from gateway.sources.publish_decode import decode
+from gateway.sources.opcua import publish_decode
+from gateway.sources.opcua.client import OpcUaSource
+from gateway.sources.opcua.publish_decode import decode
 
 TS = datetime(2024, 5, 6, 7, 8, 9, tzinfo=UTC)
 SERVER_TS = datetime(2024, 5, 6, 7, 8, 10, tzinfo=UTC)

@@ -4,7 +4,7 @@ import pytest
 from asyncua.ua import StatusCodes
 from asyncua.ua.uaerrors import UaStatusCodeError
 
-from gateway.sources.opcua_status import describe_error, status_name
+from gateway.sources.opcua.status import describe_error, status_name
 
 
 @pytest.mark.parametrize(

@@ -32,8 +32,8 @@ from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from bench.publish_capture import read_records
-from gateway.sources import publish_decode
-from gateway.sources.publish_decode import Publish, decode, decode_fast, from_response
+from gateway.sources.opcua import publish_decode
+from gateway.sources.opcua.publish_decode import Publish, decode, decode_fast, from_response
 
 TYPE_ID = b"\x01\x00\x3d\x03"  # PublishResponse_Encoding_DefaultBinary, a four-byte NodeId
 CORPUS = Path(__file__).resolve().parents[2] / "corpus" / "opcua"
@@ -108,7 +108,7 @@ def test_the_compiled_reader_is_built_where_a_compiler_is() -> None:
     compiler = os.environ.get("CI") or shutil.which("cc") or shutil.which("gcc")
     if publish_decode.compiled is None and not compiler:
         pytest.skip("no C compiler here: asyncua decodes every response")
-    assert publish_decode.compiled is not None, "gateway/sources/_publish.c was not built: pip install -e ."
+    assert publish_decode.compiled is not None, "sources/opcua/_publish.c was not built: pip install -e ."
 
 
 def test_the_captured_corpus_is_real() -> None:

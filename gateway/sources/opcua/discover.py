@@ -22,12 +22,13 @@ from asyncua import Client, ua
 from asyncua.ua.uaerrors import UaError
 
 from gateway.codecs.opcua_nodeid import parse_address
-from gateway.config.mapping import MACHINE_RE, check_endpoint
 from gateway.errors import AddressError, SourceError
+from gateway.settings.names import MACHINE_RE
+from gateway.settings.urls import check_endpoint
 from gateway.shims.ua import new_node_id
 from gateway.sources.browse_paths import Key, assign_paths
-from gateway.sources.opcua_client import close_client, open_client
-from gateway.sources.opcua_status import describe_error
+from gateway.sources.opcua.client import close_client, open_client
+from gateway.sources.opcua.status import describe_error
 
 BROWSE_BATCH = 100  # nodes per Browse request
 READ_BATCH = 1000  # attributes per Read request

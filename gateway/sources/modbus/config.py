@@ -17,12 +17,14 @@ variables:
 Polling groups are the variables' `sampling_interval`s (default `defaults.sampling_interval`). Every
 `source` is parsed and resolved against its variable's type here, so that a wrong address, a type the
 register cannot hold, a write to a read-only table or two variables on the same register are
-`file:line` errors before anything starts (the `variable_issues` hook MachineMapping calls).
+`file:line` errors before anything starts: `variable_issues`, which MachineMapping calls on a driver's
+settings that have it (the driver spec's `check_address` sees one source at a time, without its type
+or its neighbours). `describe_plan` is what `cnc-gateway check` prints for a driver that has it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Sequence
 from typing import Literal, Protocol, TypeVar
 
 from pydantic import Field as PydanticField
@@ -38,8 +40,8 @@ from gateway.codecs.modbus.address import (
     resolve,
 )
 from gateway.codecs.modbus.planner import Limits, plan
-from gateway.config.base import Backoff, Strict
 from gateway.model.types import TypeSpec
+from gateway.settings.base import Backoff, Strict
 
 DEFAULT_PORT = 502
 MIN_INTERVAL = 10.0  # ms: faster is a busy loop against a device, not polling
@@ -64,6 +66,7 @@ class MappedVariable(Protocol):
 
 
 V = TypeVar("V", bound=MappedVariable)
+K = TypeVar("K", bound=Hashable)
 
 
 class ModbusDriver(Strict):
@@ -110,9 +113,9 @@ class ModbusDriver(Strict):
     def limits(self) -> Limits:
         return Limits(self.max_registers, self.max_bits, self.max_gap, self.max_bit_gap)
 
-    def field(self, variable: MappedVariable) -> Field:
-        """The variable's field on the device (ModbusAddressError if its source does not fit it)."""
-        return resolve(parse_address(variable.source), str(variable.raw_type), self.order)
+    def field(self, source: str, raw_type: TypeSpec) -> Field:
+        """A variable's field on the device (ModbusAddressError if its source does not fit its type)."""
+        return resolve(parse_address(source), str(raw_type), self.order)
 
     def variable_issues(self, variables: Sequence[MappedVariable]) -> list[tuple[Loc, str]]:
         """Located problems of a mapping's variables for this device (MachineMapping raises them)."""
@@ -121,7 +124,7 @@ class ModbusDriver(Strict):
         where: list[int] = []
         for index, variable in enumerate(variables):
             try:
-                field = self.field(variable)
+                field = self.field(variable.source, variable.raw_type)
             except ModbusAddressError as exc:
                 issues.append(((index, "source"), str(exc)))
                 continue
@@ -149,14 +152,13 @@ class ModbusDriver(Strict):
         return sorted(issues, key=lambda issue: (int(issue[0][0]), str(issue[0][1])))
 
     def polling_groups(
-        self, variables: Sequence[V], interval_of: Callable[[V], float]
-    ) -> dict[float, list[tuple[int, Field]]]:
-        """The polling groups, fastest first: interval (ms) -> (variable index, field). The mapping has been
-        checked (variable_issues), so every field resolves."""
-        groups: dict[float, list[tuple[int, Field]]] = {}
-        for index, variable in enumerate(variables):
-            interval = max(MIN_INTERVAL, interval_of(variable))
-            groups.setdefault(interval, []).append((index, self.field(variable)))
+        self, variables: Iterable[tuple[K, str, TypeSpec, float]]
+    ) -> dict[float, list[tuple[K, Field]]]:
+        """The polling groups, fastest first: interval (ms) -> (key, field), from (key, source, raw type,
+        interval in ms) per variable. The mapping has been checked (variable_issues): every field resolves."""
+        groups: dict[float, list[tuple[K, Field]]] = {}
+        for key, source, raw_type, interval in variables:
+            groups.setdefault(max(MIN_INTERVAL, interval), []).append((key, self.field(source, raw_type)))
         return dict(sorted(groups.items()))
 
     def describe_plan(self, variables: Sequence[V], interval_of: Callable[[V], float]) -> list[str]:
@@ -166,7 +168,8 @@ class ModbusDriver(Strict):
             f"gaps up to {self.max_gap} registers / {self.max_bit_gap} bits read through):"
         )
         lines = [head]
-        for interval, fields in self.polling_groups(variables, interval_of).items():
+        entries = [(i, v.source, v.raw_type, interval_of(v)) for i, v in enumerate(variables)]
+        for interval, fields in self.polling_groups(entries).items():
             requests = plan(fields, self.limits)
             count = len(fields)
             lines.append(

@@ -11,7 +11,7 @@ option) and the simulator. Design choices, and why:
   a queue) and logs stack traces when the socket drops. Here one task sends the
   Publish requests and feeds each data change straight into `Machine.ingest`,
   synchronously, through a ClientHandle → node dict. The answers are read by
-  gateway.sources.publish_decode: a compiled reader for the usual data changes,
+  gateway.sources.opcua.publish_decode: a compiled reader for the usual data changes,
   asyncua's own decoding for everything else.
 * **Errors stop here.** asyncua's exceptions are translated into gateway.errors
   (writes) or into a Bad status plus one readable log line (connection), never
@@ -45,16 +45,17 @@ from asyncua.ua.uaerrors import (
 from cryptography import x509
 
 from gateway.codecs.opcua_nodeid import OpcUaAddress, parse_address
-from gateway.config.mapping import MachineMapping, OpcUaDriver
 from gateway.errors import AddressError, ControllerRefused, ControllerUnavailable
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import INT_BOUNDS, DataType, TypeSpec
 from gateway.reconnect import Backoff, OutageLog
 from gateway.shims.ua import new_node_id, new_status_error
-from gateway.sources.asyncua_logs import quiet_asyncua_logging
-from gateway.sources.opcua_status import describe_error, status_doc, status_name
-from gateway.sources.publish_decode import Change, Publish, from_notifications, publish
+from gateway.sources.base import DriverMapping, settings_of
+from gateway.sources.opcua.asyncua_logs import quiet_asyncua_logging
+from gateway.sources.opcua.config import OpcUaDriver
+from gateway.sources.opcua.publish_decode import Change, Publish, from_notifications, publish
+from gateway.sources.opcua.status import describe_error, status_doc, status_name
 
 log = logging.getLogger(__name__)
 
@@ -184,12 +185,10 @@ def _no_publish_loop() -> None:
 class OpcUaSource:
     """One machine's OPC UA connection: subscribe, ingest, reconnect, write."""
 
-    def __init__(self, machine: Machine, mapping: MachineMapping) -> None:
+    def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
         self.machine = machine
         self.mapping = mapping
-        if not isinstance(mapping.driver, OpcUaDriver):  # create_source picks this class by the driver's type
-            raise TypeError(f"{machine.name}: not an OPC UA driver: {mapping.driver.type}")
-        self.driver: OpcUaDriver = mapping.driver
+        self.driver = settings_of(mapping, OpcUaDriver)  # the registry picks this class by the driver's type
         self._client: Client | None = None
         self._connected = False
         self._publish_task: asyncio.Task[None] | None = None

@@ -8,7 +8,7 @@
  *
  * where changes is a list of (ClientHandle, Variant.Value, SourceTimestamp or ServerTimestamp or None,
  * StatusCode value) tuples, one per MonitoredItemNotification, in wire order: exactly what
- * gateway.sources.publish_decode.from_response() derives from asyncua's own struct_from_binary.
+ * gateway.sources.opcua.publish_decode.from_response() derives from asyncua's own struct_from_binary.
  *
  * It returns None for anything it is not certain to read exactly as asyncua does: another notification
  * type (status change, events), an extension object in any other form, diagnostic infos, variants with

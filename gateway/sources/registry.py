@@ -1,0 +1,75 @@
+"""The drivers: one line per driver folder. Adding a driver is its folder and its line here.
+
+The drivers of this repository are a static table: the import contracts (pyproject.toml) then see every
+edge from the configuration to a driver, mypy checks every spec, and a driver needs no install step. A
+driver shipped as a package of its own adds itself without a line here, through the entry point group
+`cnc_gateway.drivers` (name: its type, value: `module:SPEC`), read once when this module is imported
+(docs/architecture.md, "The registry").
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import entry_points
+
+from gateway.model.tree import Machine
+from gateway.sources.base import DriverMapping, DriverSpec, Source
+from gateway.sources.modbus import SPEC as MODBUS
+from gateway.sources.mtconnect import AGENT as MTCONNECT
+from gateway.sources.mtconnect import SHDR
+from gateway.sources.opcua import SPEC as OPCUA
+
+BUILT_IN: tuple[DriverSpec, ...] = (
+    MODBUS,
+    MTCONNECT,
+    OPCUA,
+    SHDR,
+)
+
+GROUP = "cnc_gateway.drivers"
+
+
+def installed(built_in: tuple[DriverSpec, ...] = BUILT_IN) -> tuple[DriverSpec, ...]:
+    """The drivers other packages declare under the entry point group `cnc_gateway.drivers`.
+
+    A value that is not a DriverSpec, or a type that another driver has, stops the start with a
+    TypeError naming the entry point: two drivers for one `type` would make mapping files ambiguous."""
+    taken = {spec.type: "cnc-gateway" for spec in built_in}
+    found = []
+    for point in sorted(entry_points(group=GROUP), key=lambda p: p.name):
+        spec = point.load()
+        where = f"entry point {point.name} = {point.value}"
+        if not isinstance(spec, DriverSpec):
+            raise TypeError(f"{where} ({GROUP}) is a {type(spec).__name__}, not a DriverSpec")
+        if spec.type in taken:
+            raise TypeError(f"{where}: driver type {spec.type!r} is already {taken[spec.type]}'s")
+        taken[spec.type] = where
+        found.append(spec)
+    return tuple(found)
+
+
+DRIVERS: tuple[DriverSpec, ...] = BUILT_IN + installed()
+
+# The driver of a `driver:` section without a `type` (mapping files from before the other drivers).
+DEFAULT = OPCUA.type
+
+
+def ordered() -> tuple[DriverSpec, ...]:
+    """The drivers in the order users see them (schema, error messages): the default, then by type."""
+    return tuple(sorted(DRIVERS, key=lambda spec: (spec.type != DEFAULT, spec.type)))
+
+
+def types() -> tuple[str, ...]:
+    return tuple(spec.type for spec in ordered())
+
+
+def find(type_name: str) -> DriverSpec | None:
+    """The driver of `driver.type`, None if no driver has that type."""
+    return next((spec for spec in DRIVERS if spec.type == type_name), None)
+
+
+def create_source(machine: Machine, mapping: DriverMapping) -> Source:
+    """The source of one machine, by its mapping's `driver.type` (the loader refuses unknown types)."""
+    spec = find(mapping.driver.type)
+    if spec is None:
+        raise ValueError(f"unknown driver type {mapping.driver.type!r}")
+    return spec.create(machine, mapping)
