@@ -25,6 +25,7 @@ import re
 from dataclasses import dataclass
 from enum import Enum
 
+from gateway.codecs.overlap import overlaps as shared
 from gateway.errors import CodecError
 
 MAX_ADDRESS = 65535
@@ -341,26 +342,6 @@ def resolve(address: ModbusAddress, raw_type: str, default_order: Order = Order.
 
 
 def overlaps(fields: list[Field]) -> list[tuple[int, int]]:
-    """(later, earlier) index pairs of fields that share a register or bit (mapping mistakes).
-
-    Bits of one register may stand beside each other and beside the register itself (a status word
-    and its bits); the same bit twice may not.
-    """
-    found: list[tuple[int, int]] = []
-    order = sorted(range(len(fields)), key=lambda i: (fields[i].table.value, fields[i].start, i))
-    active: list[int] = []  # fields of the current table that may still overlap what follows
-    table: Table | None = None
-    for index in order:
-        field = fields[index]
-        if field.table is not table:
-            table, active = field.table, []
-        active = [j for j in active if fields[j].end > field.start]
-        for j in active:
-            other = fields[j]
-            if field.kind is Kind.BIT or other.kind is Kind.BIT:
-                if field.kind is Kind.BIT and other.kind is Kind.BIT and field.bit == other.bit:
-                    found.append((max(index, j), min(index, j)))
-                continue
-            found.append((max(index, j), min(index, j)))
-        active.append(index)
-    return sorted(found)
+    """(later, earlier) index pairs of fields that share a register or bit (mapping mistakes); bits of one
+    register may stand beside each other and beside the register itself, the same bit twice may not."""
+    return shared([(f.table, f.start, f.end, f.bit if f.kind is Kind.BIT else None) for f in fields])

@@ -16,7 +16,6 @@ source decides, with gateway.reconnect's backoff.
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from collections.abc import Sequence
 from typing import Any, cast
@@ -28,6 +27,7 @@ from pymodbus.pdu import ModbusPDU
 from gateway.codecs.modbus.address import Table
 from gateway.codecs.modbus.frames import MBAP, exception_name, exception_status
 from gateway.errors import SourceError
+from gateway.shims.cancel import deliver_cancel
 
 log = logging.getLogger("gateway.sources.modbus")
 
@@ -115,19 +115,6 @@ class _Guard:
         if transport is not None:
             transport.close()
         return len(data)
-
-
-def _cancelled_meanwhile() -> None:
-    """Raise the CancelledError a cancel of this task asked for, if pymodbus swallowed it.
-
-    pymodbus waits for each answer with asyncio.wait_for, which on Python 3.11 returns the answer and
-    drops the cancellation when both arrive together (fixed in 3.12): a driver cancelled while polling
-    flat out would then poll on, and the gateway would not stop. The cancel is still counted on the
-    task (`cancelling()`), so it is delivered here.
-    """
-    task = asyncio.current_task()
-    if task is not None and task.cancelling():
-        raise asyncio.CancelledError
 
 
 class ModbusLink:
@@ -248,7 +235,7 @@ class ModbusLink:
         self.requests += 1
         try:
             response: ModbusPDU = await call
-            _cancelled_meanwhile()
+            deliver_cancel()  # a cancel pymodbus' wait_for swallowed (Python 3.11)
         except LinkLost:
             raise
         except ModbusException as exc:

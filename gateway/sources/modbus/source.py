@@ -26,10 +26,8 @@ its name; then the field is read back and the tree takes that value before the w
 
 from __future__ import annotations
 
-import asyncio
 import logging
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Self
 
 from gateway.codecs.modbus.address import Field, Kind, Table
@@ -38,10 +36,10 @@ from gateway.codecs.modbus.planner import Request, plan
 from gateway.errors import ControllerRefused, ControllerUnavailable, SourceError
 from gateway.model.sample import ReadBack, utcnow
 from gateway.model.tree import Machine, VariableNode
-from gateway.reconnect import Backoff, OutageLog
 from gateway.sources.base import DriverMapping, settings_of
 from gateway.sources.modbus.config import ModbusDriver
 from gateway.sources.modbus.link import DeviceRefused, LinkLost, ModbusLink
+from gateway.sources.polling import Group, Poller
 
 log = logging.getLogger("gateway.sources.modbus")
 
@@ -69,26 +67,15 @@ class _Read:
 
     def forget(self) -> None:
         self.last = None
+        self.bad = None
         for slot, _ in self.slots:
             slot.last = _UNSET
 
 
-@dataclass(slots=True)
-class _Group:
-    interval: float  # s
-    fields: list[tuple[VariableNode, Field]]
-    isolated: set[VariableNode] = field(default_factory=set)
-    reads: list[_Read] = field(default_factory=list)
-    due: float = 0.0
-    cycles: int = 0
-    overruns: int = 0  # cycles that ended after the next one was due
-
-
-class ModbusSource:
+class ModbusSource(Poller[Field, _Read]):
     def __init__(self, machine: Machine, mapping: DriverMapping) -> None:
-        self.machine = machine
-        self.mapping = mapping
         self.driver: ModbusDriver = settings_of(mapping, ModbusDriver)
+        super().__init__(machine, self.driver, log)
         d = self.driver
         self.link = ModbusLink(d.host, d.port, d.unit, d.timeout)
         interval = {var.path: mapping.sampling_interval(var) for var in mapping.variables}
@@ -99,15 +86,12 @@ class ModbusSource:
         for fields in groups.values():
             for node, spot in fields:
                 self._by_node[node] = _Slot(node, spot, decoder(spot))
-        self.groups = [_Group(ms / 1000.0, fields) for ms, fields in groups.items()]
+        self.groups = [Group(ms / 1000.0, fields) for ms, fields in groups.items()]
         for group in self.groups:
             self._plan(group)
         self.responses = 0  # answers that carried values
         self.registers = 0  # registers (or bits) those answers brought
         self.unchanged = 0  # of which were the same registers as the last time
-        self._outage = OutageLog(log)
-        self._connected = False
-        self._started = time.monotonic()
 
     def __repr__(self) -> str:
         return f"<ModbusSource {self.machine.name} {self.driver.endpoint}>"
@@ -119,10 +103,7 @@ class ModbusSource:
     async def __aexit__(self, *exc_info: object) -> None:
         if self.machine.writer is self:
             self.machine.writer = None
-        self.link.close()
-        if self._connected:
-            self._connected = False
-            self.machine.status.disconnected("gateway stopped")
+        await self.stopped()
 
     @property
     def requests_per_cycle(self) -> float:
@@ -130,75 +111,30 @@ class ModbusSource:
         requests = sum(len(g.reads) for g in self.groups)
         return requests / max(1, len(self._by_node))
 
-    def _plan(self, group: _Group) -> None:
+    def _plan(self, group: Group[Field, _Read]) -> None:
         group.reads = [
             _Read(request, [(self._by_node[key], offset) for key, _, offset in request.fields])
             for request in plan(group.fields, self.driver.limits, group.isolated)
         ]
 
-    # --- the connection --------------------------------------------------------------------------
+    # --- Poller ----------------------------------------------------------------------------------
 
-    async def run(self) -> None:
-        backoff = Backoff.of(self.driver.reconnect, stable_after=10.0)
-        while True:
-            self.machine.status.connecting()
-            try:
-                await self.link.connect()
-                self._up(backoff)
-                await self._poll()
-            except SourceError as exc:
-                self._drop(exc.reason, exc.status)
-            finally:
-                self.link.close()
-            backoff.ended()
-            await asyncio.sleep(backoff.next())
+    async def connect(self) -> None:
+        await self.link.connect()
 
-    def _up(self, backoff: Backoff) -> None:
-        self._connected = True
-        backoff.connected()
-        self.machine.status.connected()
+    async def close(self) -> None:
+        self.link.close()
+
+    def forget(self) -> None:
         for group in self.groups:
             for read in group.reads:
                 read.forget()
-                read.bad = None
-        self._outage.recovered("%s: polling %s (%d requests a cycle for %d variables)", self.machine.name,
-                               self.driver.endpoint, sum(len(g.reads) for g in self.groups),
-                               len(self._by_node))  # fmt: skip
 
-    def _drop(self, reason: str, status: str) -> None:
-        was = self._connected
-        self._connected = False
-        if status == "BadCommunicationError" or status == "BadTimeout":
-            self.machine.invalidate(status, reason)
-        else:
-            self.machine.invalidate("BadNotConnected", reason)
-        self.machine.status.disconnected(reason)
-        name, where = self.machine.name, self.driver.endpoint
-        if was:
-            self._outage.failed(reason, "%s: lost %s: %s; reconnecting", name, where, reason)
-        else:
-            self._outage.failed(reason, "%s: cannot reach %s: %s; will keep retrying", name, where, reason)
+    def describe(self) -> str:
+        requests = sum(len(g.reads) for g in self.groups)
+        return f"{requests} requests a cycle for {len(self._by_node)} variables"
 
-    # --- polling ---------------------------------------------------------------------------------
-
-    async def _poll(self) -> None:
-        now = time.monotonic()
-        for group in self.groups:
-            group.due = now
-        while True:
-            group = min(self.groups, key=lambda g: g.due)
-            delay = group.due - time.monotonic()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            await self._cycle(group)
-            group.cycles += 1
-            group.due += group.interval
-            now = time.monotonic()
-            if group.due < now:  # overran: the next cycle starts now, the missed ones are not made up
-                group.overruns += 1
-                group.due = now
-
-    async def _cycle(self, group: _Group) -> None:
+    async def cycle(self, group: Group[Field, _Read]) -> None:
         replan = False
         machine = self.machine
         link = self.link
@@ -218,7 +154,6 @@ class ModbusSource:
             self.responses += 1
             self.registers += request.count
             if read.bad is not None:
-                read.bad = None
                 read.forget()
             elif values == read.last:
                 self.unchanged += 1
@@ -232,7 +167,7 @@ class ModbusSource:
         if replan:
             self._plan(group)
 
-    def _refused(self, group: _Group, read: _Read, refused: DeviceRefused) -> bool:
+    def _refused(self, group: Group[Field, _Read], read: _Read, refused: DeviceRefused) -> bool:
         """Mark the request's variables Bad; True if the group is to be planned again with them apart."""
         request = read.request
         distinct = {(f.start, f.count) for _, f, _ in request.fields}
@@ -251,8 +186,8 @@ class ModbusSource:
             return
         if read.bad is None:
             log.warning("%s: %s", self.machine.name, reason)
-        read.bad = status
         read.forget()
+        read.bad = status
         stamp = utcnow()
         for slot, _ in read.slots:
             self.machine.ingest(slot.node, None, stamp, status, reason)

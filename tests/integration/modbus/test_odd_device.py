@@ -77,13 +77,18 @@ async def test_values_in_every_layout_and_one_request_per_range() -> None:
         assert plan == [("coil", 5, 1), ("holding", 0, 12), ("holding", 200, 1), ("input", 0, 4)]
 
 
-async def test_an_exception_on_one_range_marks_only_its_variables_bad() -> None:
+async def test_an_exception_on_one_range_marks_only_its_variables_bad(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     device = filled(OddDevice())
     device.quirk("exception:4", lambda r: reading(r, 200))  # SERVER DEVICE FAILURE, always
     async with device, polling(modbus_mapping(device.port, VARIABLES)) as (machine, _):
         await wait_until(lambda: sample(machine, "Far").status == "BadDeviceFailure", message="Far Bad")
         assert "SERVER DEVICE FAILURE (exception 4)" in sample(machine, "Far").reason
         await wait_until(lambda: good(machine, "A", "B", "C", "D", "In", "Coil"), message="the rest Good")
+        await wait_until(lambda: len(device.reads(3)) > 20, message="a few more cycles")
+        said = [r for r in caplog.records if "SERVER DEVICE FAILURE" in r.getMessage()]
+        assert len(said) == 1, "said once, not every cycle"
         device.quirks.clear()
         await wait_until(lambda: good(machine, "Far"), message="Far back once the device answers")
 
