@@ -19,6 +19,7 @@ from simulator.errors import SimulatorError
 from simulator.modbus import DEFAULT_PORT as MODBUS_PORT
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
+from simulator.s7_face import DEFAULT_PORT as S7_PORT
 from simulator.shdr import DEFAULT_PORT as SHDR_PORT
 from simulator.variables import NAMESPACE_URI
 
@@ -26,8 +27,9 @@ log = logging.getLogger("simulator")
 
 SHDR_ENV = "CNC_SIM_SHDR_PORT"
 MODBUS_ENV = "CNC_SIM_MODBUS_PORT"
+S7_ENV = "CNC_SIM_S7_PORT"
 
-NOISY = ("asyncua", "aioftp")
+NOISY = ("asyncua", "aioftp", "snap7")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -86,6 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--modbus-port", type=_port_or_off, default=_env_port(MODBUS_ENV, MODBUS_PORT), metavar="PORT",
         help=f"the chiller's Modbus TCP port (default ${MODBUS_ENV} or {MODBUS_PORT}; 'off')",
+    )  # fmt: skip
+    p.add_argument(
+        "--s7-port", type=_port_or_off, default=_env_port(S7_ENV, S7_PORT), metavar="PORT",
+        help=f"the PLC's S7 (ISO-on-TCP) port (default ${S7_ENV} or {S7_PORT}; 'off')",
     )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
@@ -180,6 +186,7 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         dnc=dnc,
         shdr_port=args.shdr_port,
         modbus_port=args.modbus_port,
+        s7_port=args.s7_port,
     )
     try:
         async with simulator:

@@ -18,6 +18,7 @@ os.environ.setdefault("CNC_SIM_DNC_PORT", "off")
 os.environ.setdefault("CNC_SIM_DNC_RFC2217_PORT", "off")
 os.environ.setdefault("CNC_SIM_SHDR_PORT", "off")  # and no fixed SHDR (MTConnect adapter) port either
 os.environ.setdefault("CNC_SIM_MODBUS_PORT", "off")  # nor the chiller's Modbus TCP port
+os.environ.setdefault("CNC_SIM_S7_PORT", "off")  # nor the PLC's S7 port
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`

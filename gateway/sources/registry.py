@@ -17,11 +17,13 @@ from gateway.sources.modbus import SPEC as MODBUS
 from gateway.sources.mtconnect import AGENT as MTCONNECT
 from gateway.sources.mtconnect import SHDR
 from gateway.sources.opcua import SPEC as OPCUA
+from gateway.sources.s7 import SPEC as S7
 
 BUILT_IN: tuple[DriverSpec, ...] = (
     MODBUS,
     MTCONNECT,
     OPCUA,
+    S7,
     SHDR,
 )
 

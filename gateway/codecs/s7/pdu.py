@@ -87,7 +87,9 @@ class Item(Generic[K]):
 
     def describe(self) -> str:
         where = f"DB{self.db}" if self.area is Area.DB else self.area.prefix
-        return f"{where} bytes {self.start}-{self.start + self.size - 1} ({len(self.fields)} variables)"
+        count = len(self.fields)
+        plural = "s" if count != 1 else ""
+        return f"{where} bytes {self.start}-{self.start + self.size - 1} ({count} variable{plural})"
 
 
 @dataclass(frozen=True, slots=True)

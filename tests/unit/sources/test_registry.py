@@ -25,7 +25,7 @@ def test_each_driver_model_is_tagged_with_its_type(spec: DriverSpec) -> None:
 
 
 def test_the_default_driver_comes_first_then_by_type() -> None:
-    assert registry.types() == ("opcua", "modbus", "mtconnect", "shdr")
+    assert registry.types() == ("opcua", "modbus", "mtconnect", "s7", "shdr")
     assert registry.find("opcua") is OPCUA and registry.find("modbus-typo") is None
 
 
@@ -65,7 +65,12 @@ def test_driver_folders_import_no_other_driver_and_nothing_of_the_configuration_
     alone, so that a driver can be added or removed as one folder."""
     graph = grimp.build_graph("gateway")
     folders = {s.create.__module__ for s in registry.BUILT_IN}
-    assert folders == {"gateway.sources.opcua", "gateway.sources.mtconnect", "gateway.sources.modbus"}
+    assert folders == {
+        "gateway.sources.opcua",
+        "gateway.sources.mtconnect",
+        "gateway.sources.modbus",
+        "gateway.sources.s7",
+    }
     for folder in folders:
         modules = {folder} | graph.find_descendants(folder)
         imported = set().union(*(graph.find_modules_directly_imported_by(m) for m in modules))
