@@ -38,6 +38,7 @@ from snap7.type import SrvArea
 
 from gateway.codecs.s7.address import Area, Field, Kind
 from gateway.codecs.s7.layout import encode
+from gateway.errors import RequestError
 from simulator.errors import SimulatorError
 from simulator.machine import Machine, MachineState
 
@@ -81,6 +82,7 @@ class S7Face:
         host: str = "127.0.0.1",
         port: int = DEFAULT_PORT,
         clock: Callable[[], datetime],
+        blocks: dict[int, bytearray] | None = None,
     ) -> None:
         self.machine = machine
         self.host = host
@@ -91,6 +93,7 @@ class S7Face:
         self.flags = bytearray(16)
         self.inputs = bytearray(8)
         self.outputs = bytearray(8)
+        self.blocks = blocks or {}  # more data blocks, served as they are (tests, benchmarks)
         self.ticks = 0
         self.message = ""
         self._override: int | None = None
@@ -108,6 +111,8 @@ class S7Face:
         server.register_area(SrvArea.MK, 0, self.flags)
         server.register_area(SrvArea.PE, 0, self.inputs)
         server.register_area(SrvArea.PA, 0, self.outputs)
+        for number, block in self.blocks.items():
+            server.register_area(SrvArea.DB, number, block)
         self.db20[0:2] = struct.pack(">h", self.machine.override)
         self.db20[4:38] = encode(_STRING32, "")
         self._override = self.machine.override
@@ -179,12 +184,15 @@ class S7Face:
             self._override = override
             try:
                 m.set_override(override)
-            except Exception as exc:  # noqa: BLE001 - a PLC ignores a setpoint it cannot take
-                log.info("S7: override %s not taken: %s", override, exc)
+            except RequestError as exc:  # a PLC ignores a setpoint it cannot take
+                log.info("S7: override %s not taken: %s", override, exc.reason)
         if hold != self._hold:
             self._hold = hold
-            if hold and m.state is MachineState.RUNNING:
-                m.pause()
-            elif not hold and m.state is MachineState.PAUSED:
-                m.resume()
+            try:
+                if hold and m.state is MachineState.RUNNING:
+                    m.pause()
+                elif not hold and m.state is MachineState.PAUSED:
+                    m.resume()
+            except RequestError as exc:  # as a PLC ignores a command the machine cannot take now
+                log.info("S7: feed hold %s not taken: %s", hold, exc.reason)
         self.message = message

@@ -124,7 +124,11 @@ class ModbusDriver(Strict):
         where: list[int] = []
         for index, variable in enumerate(variables):
             try:
-                field = self.field(variable.source, variable.raw_type)
+                address = parse_address(variable.source)
+            except ModbusAddressError:
+                continue  # the loader reports it (the driver spec's check_address)
+            try:
+                field = resolve(address, str(variable.raw_type), self.order)
             except ModbusAddressError as exc:
                 issues.append(((index, "source"), str(exc)))
                 continue

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import sys
+from datetime import datetime
 from typing import TextIO
 
 from gateway.codecs.s7.address import Kind, S7Address, S7AddressError, parse_address, resolve
@@ -121,5 +122,6 @@ def print_values(addresses: list[S7Address], results: list[bytes | str], out: Te
                 shown.append(f"({exc})")
                 continue
             label = field.kind.value
-            shown.append(f"{label} {value.isoformat() if hasattr(value, 'isoformat') else value!r}")
+            text = value.isoformat() if isinstance(value, datetime) else repr(value)
+            shown.append(f"{label} {text}")
         print(f"{address!s:<{width}}{'  '.join(shown)}   [{result.hex(' ')}]", file=out)

@@ -88,7 +88,11 @@ class S7Driver(Strict):
         where: list[int] = []
         for index, variable in enumerate(variables):
             try:
-                field = self.field(variable.source, variable.raw_type)
+                address = parse_address(variable.source)
+            except S7AddressError:
+                continue  # the loader reports it (the driver spec's check_address)
+            try:
+                field = resolve(address, str(variable.raw_type))
             except S7AddressError as exc:
                 issues.append(((index, "source"), str(exc)))
                 continue
