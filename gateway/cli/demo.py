@@ -25,6 +25,7 @@ from typing import Any
 
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
+from gateway.cli import demo_plc
 from gateway.cli.check import report_config_error
 from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
@@ -114,6 +115,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--sim-dnc-ftp-port", type=int, default=2123, help="the serial machine simulator's FTP port"
     )
+    demo_plc.add_arguments(p)
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
 
@@ -158,6 +160,7 @@ def handle(args: argparse.Namespace) -> int:
     files = [find_mapping(args.mapping)]
     if args.sim_dnc_port is not None:
         files.append(find_mapping(None, "laser-dnc.yaml"))
+    files += [find_mapping(None, name) for name in demo_plc.mapping_names(args)]
     try:
         base = load(files)
     except ConfigError as exc:
@@ -178,6 +181,7 @@ def handle(args: argparse.Namespace) -> int:
         machines.append(
             point_at(base.machines[1], opcua_port=args.sim_dnc_opcua_port, dnc_port=args.sim_dnc_port)
         )
+    machines += demo_plc.point(list(base.machines[len(machines) :]), args)  # the chiller, the PLC
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://0.0.0.0:{args.opcua_port}/cnc-gateway"),
         state_dir=str(args.state_dir),
@@ -263,7 +267,7 @@ async def demo(config: Config, args: argparse.Namespace) -> None:
         # The simulator first, so the gateway finds its controller at once.
         switch = None if external else await stack.enter_async_context(SimulatorSwitch(config, args, toggle))
         dnc = None
-        if len(config.machines) > 1 and not port_in_use("127.0.0.1", args.sim_dnc_opcua_port):
+        if args.sim_dnc_port is not None and not port_in_use("127.0.0.1", args.sim_dnc_opcua_port):
             dnc = await stack.enter_async_context(
                 dnc_simulator(args, config.state_dir / "simulator-dnc-store")
             )
@@ -305,7 +309,7 @@ async def _run_demo(
     tasks: list[tuple[str, Callable[[], Coroutine[object, object, None]]]] = [
         ("demo:driver", lambda: keep_program_running(machine, busy))
     ]
-    if jobs is not None and len(config.machines) > 1:
+    if jobs is not None and args.sim_dnc_port is not None:
         serial = gw.tree.machines[config.machines[1].machine]
         state = serial.nodes["Machine/State"]
         tasks.append(("demo:drip", lambda: keep_dripping(jobs, serial.name, lambda: state.sample.value == 0)))
@@ -347,6 +351,7 @@ class SimulatorSwitch:
             speed=args.speed,
             store=self.store,
             shdr_port=args.sim_shdr_port,
+            **demo_plc.simulator_ports(args),
         )
         await sim.__aenter__()
         self._sim = sim
@@ -450,6 +455,7 @@ def print_banner(
     lines += web_banner(gw)
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     lines += mtconnect_banner(gw, args, external)
+    lines += demo_plc.banner(args, None if mqtt is None else mqtt.prefix)
     if not external:
         lines.append(
             "  outage drill     press Enter (or kill -USR1 <pid>) to stop the simulator, again to restart it"
