@@ -12,11 +12,11 @@ import sys
 from pathlib import Path
 from typing import Any, TextIO
 
-from gateway.config.commands import CommandSpec, Condition
-from gateway.config.copydata import CopydataTarget
+from gateway.commands.config import CommandSpec, Condition
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ConfigError
+from gateway.sinks.copydata.config import CopydataTarget
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

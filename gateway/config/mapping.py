@@ -17,17 +17,17 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
-from gateway.config.access import check_role_name
-from gateway.config.alarms import AlarmsConfig, alarms_issues
-from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
-from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.alarms.config import AlarmsConfig, alarms_issues
+from gateway.commands.config import CommandName, CommandSpec, command_issues, located_errors
 from gateway.config.jobs import JobsConfig
-from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.model.definitions import MachineDefinition, Range, VariableDefinition
 from gateway.model.types import TypeSpec
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict, TypeField
 from gateway.settings.mtconnect import VariableMTConnect
 from gateway.settings.names import MACHINE_RE, RESERVED_SEGMENTS, SEGMENT_RE
+from gateway.sinks.copydata.config import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.sinks.mqtt.config import MachineMqtt, VariableMqtt
 from gateway.sources import registry
 from gateway.sources.base import DriverSettings, VariableSettings
 

@@ -32,8 +32,6 @@ from typing import Self
 
 from gateway import __version__
 from gateway.codecs.mqtt_publish import remaining_length
-from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.errors import BrokerError, BrokerRefused, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
@@ -51,6 +49,7 @@ from gateway.sinks.mqtt.client import (
     tls_context,
 )
 from gateway.sinks.mqtt.commands import CommandRequests
+from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
@@ -83,7 +82,7 @@ class MqttSink:
         tree: VariableTree,
         config: MqttConfig,
         state_dir: Path,
-        mappings: Mapping[str, MachineMapping],
+        mappings: Mapping[str, MqttMachineEntry],
         *,
         base_dir: Path | None = None,
     ) -> None:

@@ -40,7 +40,6 @@ from asyncua.server.address_space import AddressSpace, AttributeService
 
 from gateway import __version__
 from gateway.auth.users import UserDirectory
-from gateway.config.gateway import OpcUaServerConfig
 from gateway.errors import SinkError
 from gateway.model.context import WriteContext
 from gateway.model.hub import Change, Subscription
@@ -57,6 +56,7 @@ from gateway.shims.ua import new_node_id, new_status_code
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
 from gateway.sinks.opcua.bulk import NodeWriter
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,

@@ -65,8 +65,6 @@ from gateway.codecs.sparkplug import (
     state_topic,
 )
 from gateway.codecs.sparkplug.aliases import Aliases
-from gateway.config.mapping import MachineMapping
-from gateway.config.sparkplug import SUFFIX, SparkplugBroker, SparkplugConfig
 from gateway.errors import BrokerError, BrokerRefused
 from gateway.model.hub import Change, Subscription
 from gateway.model.reach import reach
@@ -82,9 +80,11 @@ from gateway.sinks.mqtt.client import (
     default_client_id,
     tls_context,
 )
+from gateway.sinks.mqtt.config import MqttMachineEntry
 from gateway.sinks.sparkplug.bdseq import FILE as BDSEQ_FILE
 from gateway.sinks.sparkplug.bdseq import BdSeqStore
 from gateway.sinks.sparkplug.commands import Outcomes, Requests
+from gateway.sinks.sparkplug.config import SUFFIX, SparkplugBroker, SparkplugConfig
 from gateway.sinks.sparkplug.devices import (
     QUALITY_PROPERTY,
     CommandMetric,
@@ -139,7 +139,7 @@ class SparkplugSink:
         config: SparkplugConfig,
         broker: SparkplugBroker,
         state_dir: Path,
-        mappings: Mapping[str, MachineMapping],
+        mappings: Mapping[str, MqttMachineEntry],
         *,
         base_dir: Path | None = None,
     ) -> None:

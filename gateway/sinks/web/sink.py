@@ -28,8 +28,6 @@ from urllib.parse import quote, urlsplit
 from gateway import __version__
 from gateway.auth.ratelimit import LoginLimiter
 from gateway.auth.tokens import TokenStore, tokens_path
-from gateway.config.http import HttpConfig
-from gateway.config.loader import Config
 from gateway.errors import NotFound, RequestError, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.sample import quality_of
@@ -37,6 +35,7 @@ from gateway.model.tree import VariableTree
 from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.http_listener import Limits
 from gateway.sinks.web.api import Api
+from gateway.sinks.web.config import ConsoleConfig, HttpConfig
 from gateway.sinks.web.http import (
     Admitted,
     HttpRequest,
@@ -74,7 +73,7 @@ class WebSink:
     def __init__(
         self,
         tree: VariableTree,
-        config: Config,
+        config: ConsoleConfig,
         http: HttpConfig,
         ports: Ports,
         *,

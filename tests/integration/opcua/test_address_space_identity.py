@@ -25,7 +25,6 @@ import pytest
 import pytest_asyncio
 from asyncua import Client, ua
 
-from gateway.config.gateway import OpcUaServerConfig
 from gateway.config.loader import load_mapping
 from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
@@ -33,6 +32,7 @@ from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
 from gateway.shims.asyncua_ns0 import LazyNodes, cache_file
 from gateway.sinks.opcua import OpcUaSink
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from tests.waiting import free_port, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

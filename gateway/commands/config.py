@@ -36,9 +36,9 @@ from typing import Annotated, Any
 from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from gateway.config.access import check_role_name
 from gateway.errors import RequestError
 from gateway.model.types import TypeSpec, coerce
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict, TypeField
 
 NAME_RE = re.compile(r"^[a-z][a-z0-9_\-]{0,62}$")
