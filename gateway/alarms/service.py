@@ -73,7 +73,7 @@ class AlarmService:
             await self.db(self.store.close)
         await asyncio.to_thread(self._pool.shutdown, True)
 
-    # --- the web console's port (gateway/sinks/web/ports.py AlarmsPort) ----------------------------
+    # --- the web console's port (gateway/sinks/ports.py AlarmsPort) ----------------------------
 
     @property
     def alarm_machines(self) -> list[str]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import Field, ValidationInfo, field_validator
 
@@ -19,7 +19,8 @@ from gateway.settings.access import (
     check_users,
     unknown_role,
 )
-from gateway.settings.base import Strict
+from gateway.settings.sections import Sectioned, with_sections
+from gateway.sinks import registry as sinks
 from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mtconnect.config import AgentConfig
 from gateway.sinks.opcua.config import OpcUaServerConfig
@@ -27,7 +28,7 @@ from gateway.sinks.sparkplug.config import SparkplugConfig
 from gateway.sinks.web.config import HttpConfig
 
 
-class GatewayConfig(Strict):
+class GatewayConfig(Sectioned):
     """Gateway-wide settings. A mapping file run on its own gets these defaults."""
 
     opcua: OpcUaServerConfig = OpcUaServerConfig()
@@ -122,3 +123,7 @@ class GatewayConfig(Strict):
             anonymous_allowed=not refuse,
             limiter=limiter if limiter is not None else self.login_limiter(),
         )
+
+
+if not TYPE_CHECKING:  # with the keys sinks registered after the registry came add
+    GatewayConfig = with_sections(GatewayConfig, sinks.gateway_sections())

@@ -23,6 +23,7 @@ from typing import Self
 
 from gateway.errors import SinkError
 from gateway.model.tree import VariableTree
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.copydata.config import CopydataMachineEntry
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.port import Transport, TransportPort
@@ -80,6 +81,11 @@ class CopydataSink:
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self._stack.aclose()
+
+    def health(self) -> SinkHealth:
+        """Always ready: a receiver may come at any time, and each target says its state in
+        Status/CopydataTargets."""
+        return SinkHealth(ready=True)
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:

@@ -38,6 +38,7 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
 from gateway.sinks.mqtt.client import (
     BrokerSettings,
@@ -269,6 +270,23 @@ class MqttSink:
         while self._inflight and self._online and loop.time() < deadline:  # noqa: ASYNC110 - as above
             await asyncio.sleep(0.01)
         await client.disconnect()
+
+    def health(self) -> SinkHealth:
+        """Ready while the broker connection is up; the queues as the diagnostics show them."""
+        backlog = self.backlog
+        return SinkHealth(
+            ready=self.state == STATE_CONNECTED,
+            state=self.state,
+            backlog=len(backlog) if backlog is not None else None,
+            dropped=backlog.dropped_total if backlog is not None else None,
+            in_flight=self.in_flight,
+            discarded=self.discarded,
+            coalesced=self.coalesced,
+            socket_queue=self.socket_queue,
+            connects=self.connects,
+            online=self.online,
+            last_error=self.last_error,
+        )
 
     async def run(self) -> None:
         """Keep the broker connection, mirror the changes, carry out writes; until cancelled."""

@@ -25,6 +25,7 @@ from gateway.errors import SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Subscription
 from gateway.model.tree import VariableNode, VariableTree
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.http_listener import Limits
 from gateway.sinks.mtconnect.agent import Agent
 from gateway.sinks.mtconnect.config import AgentConfig, AgentMachineEntry
@@ -195,6 +196,10 @@ class MTConnectSink:
                     log.error("MTConnect: observations not written to the buffer file: %s", exc)
 
     # --- running ---------------------------------------------------------------------------------
+
+    def health(self) -> SinkHealth:
+        """Ready once entered: the agent's port is bound there, or the start stopped."""
+        return SinkHealth(ready=True)
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from pydantic import Field, field_validator, model_validator
 
-from gateway.settings.base import Strict
+import gateway.sinks.opcua.extensions as extensions
+from gateway.settings.sections import Sectioned, with_sections
 from gateway.settings.urls import check_endpoint
 from gateway.sinks.opcua.endpoints import Profile, SecurityName, check_security, endpoints_for
 
 SecurityMode = SecurityName
 
 
-class OpcUaServerConfig(Strict):
+class OpcUaServerConfig(Sectioned):
     """The OPC UA server that SCADA clients connect to."""
 
     endpoint: str = "opc.tcp://0.0.0.0:4840/cnc-gateway"
@@ -42,3 +45,7 @@ class OpcUaServerConfig(Strict):
     def endpoints(self) -> tuple[str, ...]:
         """The security endpoints to offer (names from gateway.sinks.opcua.endpoints)."""
         return endpoints_for(self.security, self.profile)
+
+
+if not TYPE_CHECKING:  # with the keys the extensions add under opcua: (none but those of other packages)
+    OpcUaServerConfig = with_sections(OpcUaServerConfig, extensions.server_sections())

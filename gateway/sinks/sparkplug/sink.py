@@ -70,6 +70,7 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.reach import reach
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
 from gateway.sinks.mqtt.client import (
     BrokerSettings,
@@ -362,6 +363,21 @@ class SparkplugSink:
             except TimeoutError:
                 pass
         await client.disconnect()
+
+    def health(self) -> SinkHealth:
+        """Ready once the edge node is online: connected, and its NBIRTH and DBIRTHs published (connected
+        alone, or waiting for the primary host, is not yet serving Sparkplug consumers)."""
+        backlog = self.backlog
+        return SinkHealth(
+            ready=self.state == STATE_ONLINE,
+            state=self.state,
+            backlog=len(backlog) if backlog is not None else None,
+            dropped=backlog.dropped_total if backlog is not None else None,
+            in_flight=self.in_flight,
+            connects=self.connects,
+            online=self.online,
+            last_error=self.last_error,
+        )
 
     async def run(self) -> None:
         """Keep the session, publish the changes, carry out commands; until cancelled."""

@@ -37,9 +37,9 @@ from gateway.model.audit import AuditEntry, as_text
 from gateway.model.methods import Method
 from gateway.model.sample import quality_of, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.sinks.ports import Ports
 from gateway.sinks.web.config import ConsoleConfig, HttpConfig
 from gateway.sinks.web.http import HttpRequest, HttpResponse, json_response, plain, refused
-from gateway.sinks.web.ports import Ports
 from gateway.sinks.web.routes import Router
 from gateway.sinks.web.sessions import Caller
 

@@ -17,8 +17,8 @@ from gateway.config.loader import Config, load_mapping
 from gateway.jobs.queue.store import JobState
 from gateway.jobs.service import JobService
 from gateway.model.tree import VariableTree
-from gateway.sinks.opcua import OpcUaSink
 from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.opcua.server import OpcUaSink
 from tests.integration.jobs.conftest import GOOD, Store, mapping_text
 from tests.waiting import free_port, wait_until
 
