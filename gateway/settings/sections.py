@@ -10,8 +10,9 @@ as they are.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any, ClassVar, TypeVar
 
 from pydantic import BaseModel, Field, ValidationError, ValidationInfo, create_model, field_validator
@@ -32,9 +33,11 @@ class Section:
     # The schema's description of the key; "" for keys the file's model declares itself (the sections of
     # the adapters that came before the registry: their fields say it).
     description: str = ""
-    # In the mapping file: cross-checks of the section against the machine's variables (anything with
-    # `.path`, `.type`, `.writable`, as VariableSpec), yielding (location inside the section, message).
-    check: Callable[[Any, Sequence[Any]], Iterable[tuple[Loc, str]]] | None = None
+    # Cross-checks of the section against the rest of its file: called with the section's value and the
+    # file's keys validated before it, by key (in a mapping file `variables` (VariableSpecs: .path, .type,
+    # .writable ...), `jobs`, `alarms`, `commands` ...; a key that failed validation is absent), it
+    # yields (location inside the section, message), each a `file:line: <key>.<location>: message`.
+    check: Callable[[Any, Mapping[str, Any]], Iterable[tuple[Loc, str]]] | None = None
     # Lines `cnc-gateway check` prints under a machine whose mapping has the section.
     report: Callable[[Any], Iterable[str]] | None = None
 
@@ -52,7 +55,7 @@ class Sectioned(Strict):
 
 def with_sections(model: type[S], sections: Iterable[Section]) -> type[S]:
     """`model` with one optional key per section it does not declare yet, validated by the section's
-    model and checked by its `check` (which sees the `variables` validated before it). The model itself
+    model and checked by its `check` (which sees the keys validated before it). The model itself
     when there is none, so that a gateway without such adapters runs the models as written."""
     new: dict[str, Section] = {}
     for section in sections:
@@ -86,9 +89,8 @@ def with_sections(model: type[S], sections: Iterable[Section]) -> type[S]:
 
 def _checker(section: Section) -> Callable[[type[BaseModel], Any, ValidationInfo], Any]:
     def check(cls: type[BaseModel], value: Any, info: ValidationInfo) -> Any:
-        variables = info.data.get("variables")
         if value is not None and section.check is not None:
-            located_errors(list(section.check(value, variables if variables is not None else ())))
+            located_errors(list(section.check(value, MappingProxyType(info.data))))
         return value
 
     return check

@@ -11,7 +11,7 @@ line in gateway/sinks/opcua/extensions.py. tests/integration/test_example_view.p
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from pydantic import Field
@@ -31,8 +31,9 @@ class ExampleView(Strict):
     about: str = Field(description="A variable of this mapping the note is about")
 
 
-def _check(view: ExampleView, variables: Sequence[Any]) -> Iterable[tuple[Loc, str]]:
-    if view.about not in {v.path for v in variables}:
+def _check(view: ExampleView, earlier: Mapping[str, Any]) -> Iterable[tuple[Loc, str]]:
+    """`earlier`: the mapping's keys validated before this one (variables, jobs, alarms ...)."""
+    if view.about not in {v.path for v in earlier.get("variables", ())}:
         yield ("about",), f"{view.about!r} is not a variable of this mapping"
 
 
