@@ -30,17 +30,18 @@ from gateway.cli.check import report_config_error
 from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
 from gateway.cli.demo_driver import keep_program_running
-from gateway.config.access import AccessConfig, UserConfig
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
-from gateway.config.http import HttpConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import ControllerSerial, FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
-from gateway.config.mtconnect import AgentConfig
-from gateway.config.sparkplug import SparkplugConfig
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
+from gateway.settings.access import AccessConfig, UserConfig
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
+from gateway.sinks.mtconnect.config import AgentConfig
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.sparkplug.config import SparkplugConfig
+from gateway.sinks.web.config import HttpConfig
 from gateway.sources.base import settings_of
 from gateway.sources.opcua.config import OpcUaDriver
 
