@@ -15,7 +15,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt
+from gateway.sinks.mqtt.config import MachineMqtt
 
 MAPPINGS = {"modbus": "chiller-sim.yaml", "s7": "laser-sim-s7.yaml"}
 

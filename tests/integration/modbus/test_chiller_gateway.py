@@ -15,7 +15,7 @@ from asyncua import Client, ua
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
 from tests.waiting import free_port, wait_until
