@@ -50,12 +50,16 @@ test: $(STAMP) system-deps
 # import contracts in pyproject.toml (layers, no cycles; docs/architecture.md). Each runs even if one before
 # it failed, so one pass lists every finding; well under a minute.
 LINT_PATHS := gateway simulator bench tests
+# The example plugins (a driver, an OPC UA view) that tests/integration/test_example_*.py install from their
+# folders: type-checked as a third party's package would be, against the gateway's API.
+EXAMPLES := tests/example_driver:tests/example_view
 
 lint: $(STAMP)
 	@failed=""; \
 	echo "== ruff check"; $(BIN)/ruff check $(LINT_PATHS) || failed="$$failed ruff-check"; \
 	echo "== ruff format --check"; $(BIN)/ruff format --check $(LINT_PATHS) || failed="$$failed ruff-format"; \
 	echo "== mypy --strict"; $(BIN)/mypy --strict gateway simulator || failed="$$failed mypy"; \
+	MYPYPATH=$(EXAMPLES) $(BIN)/mypy --strict -p cnc_example_driver -p cnc_example_view || failed="$$failed mypy-examples"; \
 	echo "== import contracts"; $(BIN)/lint-imports --no-cache --no-logo || failed="$$failed import-contracts"; \
 	if [ -n "$$failed" ]; then echo "make lint: FAILED:$$failed (the findings are above)"; exit 1; fi; \
 	echo "make lint: ruff, ruff format, mypy --strict and the import contracts pass"

@@ -82,6 +82,7 @@ class Results:
     targets_14: list[Target] = field(default_factory=list)  # issue 14's: serial DNC
     targets_22: list[Target] = field(default_factory=list)  # issue 22's: serial DNC on real device servers
     targets_25: list[Target] = field(default_factory=list)  # issue 25's: FOCAS
+    targets_26: list[Target] = field(default_factory=list)  # issue 26's: the Modbus TCP and S7 drivers
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -128,6 +129,7 @@ class Results:
             "targets_14": [t.as_dict() for t in self.targets_14],
             "targets_22": [t.as_dict() for t in self.targets_22],
             "targets_25": [t.as_dict() for t in self.targets_25],
+            "targets_26": [t.as_dict() for t in self.targets_26],
             "details": self.details,
             "errors": self.errors,
         }
@@ -196,6 +198,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 14)", _targets(results.targets_14)]
     if results.targets_22:
         out += ["", "Targets (issue 22)", _targets(results.targets_22)]
+    if results.targets_26:
+        out += ["", "Targets (issue 26)", _targets(results.targets_26)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -25,7 +25,20 @@ from pathlib import Path
 from bench.context import Context, Settings
 from bench.procs import load_average
 from bench.report import Results, render
-from bench.scenarios import baselines, dnc, focas, jobs, mirror, mtconnect, naive, peer, scale, sparkplug, web
+from bench.scenarios import (
+    baselines,
+    dnc,
+    focas,
+    jobs,
+    mirror,
+    mtconnect,
+    naive,
+    peer,
+    plc,
+    scale,
+    sparkplug,
+    web,
+)
 from bench.targets import judge
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -42,6 +55,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "web": web.run,
     "dnc": dnc.run,
     "focas": focas.run,
+    "plc": plc.run,
 }
 
 

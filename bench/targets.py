@@ -134,6 +134,7 @@ def judge(ctx: Context) -> None:
     r.targets_14 = judge_14(ctx)
     r.targets_22 = judge_22(ctx)
     r.targets_25 = judge_25(ctx)
+    r.targets_26 = judge_26(ctx)
 
 
 def _dnc_runs(ctx: Context) -> list[tuple[str, dict[str, Any]]]:
@@ -493,3 +494,42 @@ def judge_25(ctx: Context) -> list[Target]:
             source=times,
         ),
     ]  # fmt: skip
+
+
+def judge_26(ctx: Context) -> list[Target]:
+    """Issue 26 (the Modbus TCP and S7 drivers), from bench/scenarios/plc.py; nothing when it did not run."""
+    plc: dict[str, Any] = ctx.results.details.get("plc", {})
+    targets: list[Target] = []
+    modbus = plc.get("modbus", {}).get("100ms")
+    if modbus:
+        cycles, regs, cpu = modbus["cycles_ratio"], modbus["registers_per_s"], modbus["cpu"]
+        gateway, raw = regs.get("gateway"), regs.get("raw")
+        flat = plc["modbus"].get("10ms", {}).get("registers_per_s", {})
+        targets.append(Target(
+            "Modbus: poll cycles achieved at 100 ms, 10,000 registers over 20 devices", 0.95, 0.99, "×",
+            value=cycles.get("gateway"),
+            source=f"raw pymodbus {cycles.get('raw') or 0:.1%}; {modbus.get('changes_per_s') or 0:,.0f} "
+            f"changes/s into the tree, CPU {cpu.get('gateway') or 0:.0%} (raw {cpu.get('raw') or 0:.0%})",
+        ))  # fmt: skip
+        targets.append(Target(
+            "Modbus: registers read/s relative to pymodbus' raw client, same plan, same run", 0.8, 0.95, "×",
+            value=gateway / raw if gateway and raw else None,
+            source=f"{gateway or 0:,.0f} vs {raw or 0:,.0f} reg/s at 100 ms; flat out "
+            f"{flat.get('gateway') or 0:,.0f} vs {flat.get('raw') or 0:,.0f}",
+        ))  # fmt: skip
+        targets.append(Target(
+            "Modbus: requests per cycle relative to one request per variable", 0.1, 0.05, "×",
+            higher_is_better=False, value=modbus.get("requests_per_variable"),
+            source=f"{modbus.get('requests_per_cycle')} requests for 8,000 variables",
+        ))  # fmt: skip
+    s7 = plc.get("s7")
+    if s7:
+        gateway, raw = s7.get("variables_per_s", {}).get("gateway"), s7.get("variables_per_s", {}).get("raw")
+        flat = s7.get("flat_variables_per_s", {})
+        targets.append(Target(
+            "S7: variables read/s relative to snap7's raw client, same plan, same run", 0.8, 0.95, "×",
+            value=gateway / raw if gateway and raw else None,
+            source=f"{gateway or 0:,.0f} vs {raw or 0:,.0f} var/s at 100 ms, 2,000 variables over 5 PLCs; "
+            f"flat out {flat.get('gateway') or 0:,.0f} vs {flat.get('raw') or 0:,.0f}",
+        ))  # fmt: skip
+    return targets

@@ -23,7 +23,8 @@ from gateway.commands.runner import install_commands
 from gateway.config.loader import Config
 from gateway.model.tree import VariableTree
 from gateway.shims.heap import settled_heap
-from gateway.sinks.base import Sink
+from gateway.sinks.base import Sink, SinkContext
+from gateway.sinks.registry import SINKS
 from gateway.sources.base import Source
 from gateway.sources.registry import create_source
 
@@ -77,75 +78,24 @@ def configure_access(config: Config, tree: VariableTree) -> None:
         )
 
 
-def build_sinks(
-    config: Config, tree: VariableTree, alarms: AlarmService | None = None, logins: LoginLimiter | None = None
-) -> list[Sink]:
-    from gateway.sinks.opcua.port import ServerExtension
-    from gateway.sinks.opcua.server import OpcUaSink
-
-    gw = config.gateway
-    extensions: list[ServerExtension] = []
-    if alarms is not None:  # alarm conditions and events in the address space
-        from gateway.sinks.opcua.alarms import OpcUaAlarms
-
-        extensions.append(OpcUaAlarms(alarms))
-    sinks: list[Sink] = [
-        OpcUaSink(tree, gw.opcua, config.state_dir, users=gw.user_directory(logins), extensions=extensions)
-    ]
-    if config.gateway.mqtt is not None:  # no `mqtt:` in the gateway file: no broker to reach
-        from gateway.sinks.mqtt.sink import MqttSink
-
-        sinks.append(
-            MqttSink(tree, config.gateway.mqtt, config.state_dir, config.mappings, base_dir=config.base_dir)
-        )
-    if gw.sparkplug is not None:  # every machine a device of one Sparkplug B edge node
-        from gateway.sinks.sparkplug.sink import SparkplugSink
-
-        broker = gw.sparkplug.connection(gw.mqtt)
-        sinks.append(
-            SparkplugSink(
-                tree, gw.sparkplug, broker, config.state_dir, config.mappings, base_dir=config.base_dir
-            )
-        )
-    if any(m.copydata is not None for m in config.machines):  # frames for nesting software
-        from gateway.sinks.copydata.sink import CopydataSink
-
-        sinks.append(CopydataSink(tree, config.mappings))
-    if gw.mtconnect is not None:  # the MTConnect agent (HTTP)
-        from gateway.sinks.mtconnect.sink import MTConnectSink
-
-        sinks.append(MTConnectSink(tree, gw.mtconnect, config.mappings, config.state_dir))
-    return sinks
-
-
-def build_web(
-    config: Config,
-    gateway: Gateway,
-    jobs: JobService | None,
-    alarms: AlarmService | None,
-    audit: AuditTrail,
-    sinks: list[Sink],
-) -> Sink | None:
-    """The web console, REST API and /metrics (`http:` in the gateway file; `http: null` turns it off).
-
-    It reaches the job queue, the alarms, the audit table and the OPC UA trust list only
-    through the ports of gateway/sinks/web/ports.py, which these objects implement."""
-    http = config.gateway.http
-    if http is None:
-        return None
-    from gateway.sinks.opcua.security import TrustList
-    from gateway.sinks.web.ports import Ports
-    from gateway.sinks.web.sink import WebSink
-
-    pki = next((getattr(s, "pki", None) for s in sinks if s.name == "opcua"), None)
-    ports = Ports(
-        gateway=gateway,
-        jobs=jobs,
-        alarms=alarms,
-        audit=audit,
-        trust=TrustList(pki) if pki is not None else None,
+def build_sinks(gateway: Gateway) -> list[Sink]:
+    """The sinks the configuration asks for, in the registry's order (gateway/sinks/registry.py): each
+    spec builds its sink from the context, or answers None when its section is absent."""
+    config = gateway.config
+    context = SinkContext(
+        tree=gateway.tree,
+        config=config,
+        mappings=config.mappings,
+        state_dir=config.state_dir,
+        base_dir=config.base_dir,
+        logins=gateway.logins,
+        host=gateway,
+        audit=gateway.audit,
+        jobs=gateway.jobs,
+        alarms=gateway.alarms,
     )
-    return WebSink(gateway.tree, config, http, ports, logins=gateway.logins)
+    built = (spec.create(context) for spec in SINKS)
+    return [sink for sink in built if sink is not None]
 
 
 def build_jobs(config: Config, tree: VariableTree, logins: LoginLimiter | None = None) -> JobService | None:
@@ -186,11 +136,10 @@ class Gateway:
         # Before the sinks are built: the job service adds Jobs/ variables and methods (Programs, and a
         # serial machine's Commands/Drip*, which the MQTT sink's command requests list when built).
         self.jobs = build_jobs(config, self.tree, self.logins)
-        self.sinks: list[Sink] = build_sinks(config, self.tree, self.alarms, self.logins)
         self.sources: list[Source] = [create_source(m, mappings[n]) for n, m in self.tree.machines.items()]
-        web = build_web(config, self, self.jobs, self.alarms, self.audit, self.sinks)
-        if web is not None:  # after the job service: the console submits through it
-            self.sinks.append(web)
+        # After the job service (the console submits through it), with the drivers built: each sink's
+        # __init__ adds the variables it reports on, which the sinks built after it see.
+        self.sinks: list[Sink] = build_sinks(self)
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
 
@@ -218,13 +167,7 @@ class Gateway:
     def not_ready(self) -> list[str]:
         """What keeps the gateway from being ready: start-up, a sink not up, a machine not yet tried."""
         waiting = [] if self.ready.is_set() else ["start-up"]
-        for sink in self.sinks:
-            up = getattr(sink, "up", None)
-            if up is None:  # the MQTT sink says its link's state
-                state = getattr(sink, "state", None)
-                up = state is None or state == "connected"
-            if not up:
-                waiting.append(f"sink {sink.name}")
+        waiting.extend(f"sink {sink.name}" for sink in self.sinks if not sink.health().ready)
         for name, machine in self.tree.machines.items():
             status = machine.status
             if not (status.is_connected or status.last_error):

@@ -40,7 +40,7 @@ def snapshot(gateway: Observed) -> dict[str, Any]:
         }
         for sub in tree.hub.subscriptions
     }
-    sinks = {sink.name: _sink(sink) for sink in gateway.sinks}
+    sinks = {sink.name: sink.health().figures() for sink in gateway.sinks}
     machines = {}
     for name, machine in tree.machines.items():
         mapped = good = 0
@@ -92,17 +92,3 @@ class GcPauses:
 
 
 GC_PAUSES = GcPauses()
-
-
-def _sink(sink: Any) -> dict[str, Any]:
-    """What a sink exposes publicly about its own queues (attributes it lacks are left out)."""
-    out: dict[str, Any] = {}
-    backlog = getattr(sink, "backlog", None)
-    if backlog is not None:
-        out["backlog"] = len(backlog)
-        out["dropped"] = getattr(backlog, "dropped_total", 0)
-    for name in ("in_flight", "discarded", "coalesced", "socket_queue", "connects", "online", "state"):
-        value = getattr(sink, name, None)
-        if isinstance(value, (int, float, str, bool)):
-            out[name] = value
-    return out

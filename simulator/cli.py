@@ -19,8 +19,10 @@ from simulator.errors import SimulatorError
 from simulator.focas import DEFAULT_PORT as FOCAS_PORT
 from simulator.focas import DEFAULT_SESSIONS as FOCAS_SESSIONS
 from simulator.haas_mdc import DEFAULT_PORT as HAAS_PORT
+from simulator.modbus import DEFAULT_PORT as MODBUS_PORT
 from simulator.noise import NoiseSpec, noise_mapping
 from simulator.runner import Simulator
+from simulator.s7_face import DEFAULT_PORT as S7_PORT
 from simulator.shdr import DEFAULT_PORT as SHDR_PORT
 from simulator.variables import NAMESPACE_URI
 
@@ -29,8 +31,10 @@ log = logging.getLogger("simulator")
 SHDR_ENV = "CNC_SIM_SHDR_PORT"
 FOCAS_ENV = "CNC_SIM_FOCAS_PORT"
 HAAS_ENV = "CNC_SIM_HAAS_PORT"
+MODBUS_ENV = "CNC_SIM_MODBUS_PORT"
+S7_ENV = "CNC_SIM_S7_PORT"
 
-NOISY = ("asyncua", "aioftp")
+NOISY = ("asyncua", "aioftp", "snap7")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -97,6 +101,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--haas-port", type=_port_or_off, default=_port_default(HAAS_ENV, HAAS_PORT), metavar="PORT",
         help=f"Haas NGC machine data collection port (default ${HAAS_ENV} or {HAAS_PORT}; 'off')",
+    )  # fmt: skip
+    p.add_argument(
+        "--modbus-port", type=_port_or_off, default=_port_default(MODBUS_ENV, MODBUS_PORT), metavar="PORT",
+        help=f"the chiller's Modbus TCP port (default ${MODBUS_ENV} or {MODBUS_PORT}; 'off')",
+    )  # fmt: skip
+    p.add_argument(
+        "--s7-port", type=_port_or_off, default=_port_default(S7_ENV, S7_PORT), metavar="PORT",
+        help=f"the PLC's S7 (ISO-on-TCP) port (default ${S7_ENV} or {S7_PORT}; 'off')",
     )  # fmt: skip
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     return p
@@ -193,6 +205,8 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         focas_port=args.focas_port,
         focas_sessions=args.focas_sessions,
         haas_port=args.haas_port,
+        modbus_port=args.modbus_port,
+        s7_port=args.s7_port,
     )
     try:
         async with simulator:
@@ -248,6 +262,11 @@ def print_banner(sim: Simulator, args: argparse.Namespace) -> None:
             else []
         ),
         *([f"  Haas MDC {sim.haas.url}  (Q-commands; mappings/haas-sim.yaml reads it)"] if sim.haas else []),
+        *(
+            [f"  Modbus   {sim.modbus.url}  (the chiller, unit 1: mappings/chiller-sim.yaml)"]
+            if sim.modbus
+            else []
+        ),
         "  stop     Ctrl-C",
         "",
     ]

@@ -31,8 +31,10 @@ from simulator.focas import FocasFace
 from simulator.ftp_store import FtpStore
 from simulator.haas_mdc import HaasMdcFace
 from simulator.machine import Machine, MachineState
+from simulator.modbus import Chiller, ModbusFace
 from simulator.noise import Noise, NoiseSpec
 from simulator.opcua_server import PlcServer, utcnow
+from simulator.s7_face import S7Face
 from simulator.shdr import ShdrFace
 from simulator.store import DirectoryStore
 from simulator.variables import Variable, build_variables
@@ -69,6 +71,8 @@ class Simulator:
         focas_port: int | None = None,
         focas_sessions: int = FOCAS_SESSIONS,
         haas_port: int | None = None,
+        modbus_port: int | None = None,
+        s7_port: int | None = None,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -107,6 +111,13 @@ class Simulator:
         # The Haas MDC face (simulator/haas_mdc.py): off unless a port is given (0: any free one).
         self.haas_port = haas_port
         self.haas: HaasMdcFace | None = None
+        # The chiller's Modbus TCP face (simulator/modbus): off unless a port is given (0: any free one).
+        self.chiller = Chiller(ambient=self.machine.ambient)
+        self.modbus_port = modbus_port
+        self.modbus: ModbusFace | None = None
+        # The PLC's S7 face (simulator/s7_face.py): off unless a port is given (0: any free one).
+        self.s7_port = s7_port
+        self.s7: S7Face | None = None
         self._opcua_auth = (opcua_user, opcua_password)
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
@@ -178,6 +189,14 @@ class Simulator:
             self.haas = await stack.enter_async_context(
                 HaasMdcFace(self.machine, host=self.host, port=self.haas_port)
             )
+        if self.modbus_port is not None:
+            self.modbus = await stack.enter_async_context(
+                ModbusFace(self.chiller.image, host=self.host, port=self.modbus_port)
+            )
+        if self.s7_port is not None:
+            self.s7 = await stack.enter_async_context(
+                S7Face(self.machine, host=self.host, port=self.s7_port, clock=self.clock)
+            )
         if self.loop_program:
             try:
                 self.machine.select_program(self.loop_program)
@@ -215,6 +234,10 @@ class Simulator:
             now = time.monotonic()
             try:
                 self.machine.step((now - last) * self.speed)
+                if self.modbus is not None:
+                    self.chiller.step((now - last) * self.speed, self.machine.laser.power_act)
+                if self.s7 is not None:
+                    self.s7.publish()
                 self._keep_looping(now)
                 await self._opcua.publish()
                 if self.shdr is not None:

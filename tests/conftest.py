@@ -19,6 +19,8 @@ os.environ.setdefault("CNC_SIM_DNC_RFC2217_PORT", "off")
 os.environ.setdefault("CNC_SIM_SHDR_PORT", "off")  # and no fixed SHDR (MTConnect adapter) port either
 os.environ.setdefault("CNC_SIM_FOCAS_PORT", "off")  # nor FOCAS (8193)
 os.environ.setdefault("CNC_SIM_HAAS_PORT", "off")  # nor Haas MDC (5051)
+os.environ.setdefault("CNC_SIM_MODBUS_PORT", "off")  # nor the chiller's Modbus TCP port
+os.environ.setdefault("CNC_SIM_S7_PORT", "off")  # nor the PLC's S7 port
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # so tests can `from tests.waiting import ...`

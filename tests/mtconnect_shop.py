@@ -16,7 +16,7 @@ import yaml
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import AgentConfig
+from gateway.sinks.mtconnect.config import AgentConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 LASER = yaml.safe_load((ROOT / "mappings" / "laser-sim.yaml").read_text(encoding="utf-8"))

@@ -24,10 +24,10 @@ from dataclasses import replace
 from datetime import datetime
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from gateway.alarms.config import AlarmsConfig
 from gateway.alarms.records import AlarmChange, AlarmRecord, Kind, Quality
 from gateway.alarms.sources import Reading, diff, source_for
 from gateway.alarms.store import AlarmStore
-from gateway.config.alarms import AlarmsConfig
 from gateway.errors import AlarmStoreError, CallError, InvalidState, RequestError
 from gateway.model.audit import as_text
 from gateway.model.context import WriteContext

@@ -11,14 +11,14 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Self, TypeVar
+from typing import Any, Protocol, Self, TypeVar
 
+from gateway.alarms.config import AlarmsConfig
 from gateway.alarms.manager import AlarmManager, UnknownAlarm
 from gateway.alarms.store import AlarmStore, store_path
-from gateway.config.mapping import MachineMapping
 from gateway.errors import AlarmStoreError, SinkError
 from gateway.model.context import WriteContext
 from gateway.model.tree import VariableTree
@@ -28,8 +28,18 @@ log = logging.getLogger("gateway.alarms")
 T = TypeVar("T")
 
 
+class AlarmsMapping(Protocol):
+    """What the alarm managers read of a machine's mapping (gateway/config/mapping.py MachineMapping fits)."""
+
+    @property
+    def alarms(self) -> AlarmsConfig | None: ...
+
+    @property
+    def variables(self) -> Sequence[Any]: ...
+
+
 class AlarmService:
-    def __init__(self, tree: VariableTree, mappings: Mapping[str, MachineMapping], state_dir: Path) -> None:
+    def __init__(self, tree: VariableTree, mappings: Mapping[str, AlarmsMapping], state_dir: Path) -> None:
         self.tree = tree
         self.store = AlarmStore(store_path(state_dir))
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="alarms-db")
@@ -63,7 +73,7 @@ class AlarmService:
             await self.db(self.store.close)
         await asyncio.to_thread(self._pool.shutdown, True)
 
-    # --- the web console's port (gateway/sinks/web/ports.py AlarmsPort) ----------------------------
+    # --- the web console's port (gateway/sinks/ports.py AlarmsPort) ----------------------------
 
     @property
     def alarm_machines(self) -> list[str]:

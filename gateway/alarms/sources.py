@@ -3,7 +3,7 @@
 `read_parallel` and `diff` are pure. `ArrayAlarmSource` reads the mapped parallel
 arrays from the tree (the simulator's `ActiveAlarms/Ids|Texts|Severities`, and
 most PLCs' alarm buffers); a driver that reports alarms its own way adds a class
-with the same two members (`nodes`, `read()`) and a `type` in gateway/config/alarms.py.
+with the same two members (`nodes`, `read()`) and a `type` in gateway/alarms/config.py.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import TYPE_CHECKING, Any, Protocol
 
+from gateway.alarms.config import AlarmsConfig, ArraySource, ConditionSource, condition_variables
 from gateway.alarms.records import ActiveAlarm, AlarmRecord
 from gateway.codecs.mtconnect.conditions import parse_condition_text
-from gateway.config.alarms import AlarmsConfig, ArraySource, ConditionSource, condition_variables
 
 if TYPE_CHECKING:
     from gateway.model.tree import Machine, VariableNode

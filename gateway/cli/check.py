@@ -12,11 +12,11 @@ import sys
 from pathlib import Path
 from typing import Any, TextIO
 
-from gateway.config.commands import CommandSpec, Condition
-from gateway.config.copydata import CopydataTarget
+from gateway.commands.config import CommandSpec, Condition
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ConfigError
+from gateway.sinks.copydata.config import CopydataTarget
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -48,9 +48,12 @@ def print_config(config: Config, out: TextIO) -> None:
     default_role = gw.access.default_write_role if enabled else None
     for mapping in config.machines:
         print_tree(mapping, out, default_role)
+        if (describe_plan := getattr(mapping.driver, "describe_plan", None)) is not None:  # a polled driver
+            print("\n".join(describe_plan(mapping.variables, mapping.sampling_interval)), file=out)
         print_commands(mapping, out)
         copydata_role = gw.access.copydata_role or "none: refused"  # never implied, users or not
         print_copydata(mapping, out, copydata_role if gw.access.checks_roles() else None)
+        print_sections(mapping, out)
     print(
         f"OK: {len(config.machines)} machine(s), {sum(len(m.variables) for m in config.machines)} variables",
         file=out,
@@ -70,6 +73,15 @@ def print_config(config: Config, out: TextIO) -> None:
             f"{gw.access.copydata_role or 'nobody: refused'} (access.copydata_role)",
             file=out,
         )
+
+
+def print_sections(mapping: MachineMapping, out: TextIO) -> None:
+    """What the adapters' own keys of this mapping amount to (a Section's `report`: the umati view ...)."""
+    for section in mapping.sections:
+        value = mapping.section(section)
+        if value is not None and section.report is not None:
+            for line in section.report(value):
+                print(f"  {line}", file=out)
 
 
 def print_tree(mapping: MachineMapping, out: TextIO, default_role: str | None = None) -> None:

@@ -25,22 +25,23 @@ from typing import Any
 
 from gateway.app import Gateway, run_until_signalled
 from gateway.auth.passwords import hash_password
-from gateway.cli import demo_focas
+from gateway.cli import demo_focas, demo_plc
 from gateway.cli.check import report_config_error
 from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
 from gateway.cli.demo_driver import keep_program_running
-from gateway.config.access import AccessConfig, UserConfig
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
-from gateway.config.http import HttpConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import ControllerSerial, FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
-from gateway.config.mtconnect import AgentConfig
-from gateway.config.sparkplug import SparkplugConfig
 from gateway.errors import ConfigError, SinkError
 from gateway.logconfig import configure
+from gateway.settings.access import AccessConfig, UserConfig
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
+from gateway.sinks.mtconnect.config import AgentConfig
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.sparkplug.config import SparkplugConfig
+from gateway.sinks.web.config import HttpConfig
 from gateway.sources.base import settings_of
 from gateway.sources.opcua.config import OpcUaDriver
 
@@ -116,6 +117,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--sim-dnc-ftp-port", type=int, default=2123, help="the serial machine simulator's FTP port"
     )
     demo_focas.add_arguments(p, _port_or_off)
+    demo_plc.add_arguments(p)
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info")
     p.set_defaults(handler=handle)
 
@@ -162,6 +164,7 @@ def handle(args: argparse.Namespace) -> int:
         files.append(find_mapping(None, "laser-dnc.yaml"))
     if args.sim_focas_port is not None:
         files.append(find_mapping(None, demo_focas.MAPPING))
+    files += [find_mapping(None, name) for name in demo_plc.mapping_names(args)]
     try:
         base = load(files)
     except ConfigError as exc:
@@ -183,7 +186,8 @@ def handle(args: argparse.Namespace) -> int:
             point_at(base.machines[1], opcua_port=args.sim_dnc_opcua_port, dnc_port=args.sim_dnc_port)
         )
     if args.sim_focas_port is not None:
-        machines.append(demo_focas.point_at(base.machines[-1], args.sim_focas_port))
+        machines.append(demo_focas.point_at(base.machines[len(machines)], args.sim_focas_port))
+    machines += demo_plc.point(list(base.machines[len(machines) :]), args)  # the chiller, the PLC
     gateway = GatewayConfig(
         opcua=OpcUaServerConfig(endpoint=f"opc.tcp://0.0.0.0:{args.opcua_port}/cnc-gateway"),
         state_dir=str(args.state_dir),
@@ -354,6 +358,7 @@ class SimulatorSwitch:
             store=self.store,
             shdr_port=args.sim_shdr_port,
             focas_port=args.sim_focas_port,
+            **demo_plc.simulator_ports(args),
         )
         await sim.__aenter__()
         self._sim = sim
@@ -457,6 +462,7 @@ def print_banner(
     lines += web_banner(gw)
     lines += copydata_banner(mapping, str(args.mapping or "mappings/laser-sim.yaml"))
     lines += mtconnect_banner(gw, args, external)
+    lines += demo_plc.banner(args, None if mqtt is None else mqtt.prefix)
     if not external:
         lines.append(
             "  outage drill     press Enter (or kill -USR1 <pid>) to stop the simulator, again to restart it"

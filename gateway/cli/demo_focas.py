@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from gateway.config.focas import ControllerFocas
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt
+from gateway.sinks.mqtt.config import MachineMqtt
 from gateway.sources.focas.config import FocasDriver
 
 DEFAULT_PORT = 8193

@@ -27,11 +27,11 @@ from gateway.codecs.copydata import (
     Variable,
     VariableTable,
 )
-from gateway.config.copydata import CopydataTarget, check_encoding
 from gateway.config.loader import load_mapping
 from gateway.config.mapping import MachineMapping
 from gateway.errors import ConfigError, GatewayError
 from gateway.model.types import TypeSpec
+from gateway.sinks.copydata.config import CopydataTarget, check_encoding
 from gateway.sinks.copydata.feedback import plain
 
 DWDATA_NAMES = {1: "one variable", 2: "several variables"}

@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from gateway.config.commands import Condition, render
+from gateway.commands.config import Condition, render
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,11 +21,10 @@ import asyncio
 import logging
 import time
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from gateway.commands.conditions import Check, bind
-from gateway.config.commands import CommandSpec, render
-from gateway.config.mapping import MachineMapping
+from gateway.commands.config import CommandSpec, render
 from gateway.errors import CallError, ConfirmTimeout, InvalidState
 from gateway.model.context import WriteContext
 from gateway.model.hub import Subscription
@@ -148,12 +147,19 @@ class CommandRunner:
         return text
 
 
-def command_methods(machine: Machine, mapping: MachineMapping) -> list[Method]:
+class CommandsMapping(Protocol):
+    """What the commands read of a machine's mapping (gateway/config/mapping.py MachineMapping fits)."""
+
+    @property
+    def commands(self) -> Mapping[str, CommandSpec] | None: ...
+
+
+def command_methods(machine: Machine, mapping: CommandsMapping) -> list[Method]:
     commands = mapping.commands or {}
     return [CommandRunner(machine, name, spec).method() for name, spec in commands.items()]
 
 
-def install_commands(tree: VariableTree, mappings: Mapping[str, MachineMapping]) -> int:
+def install_commands(tree: VariableTree, mappings: Mapping[str, CommandsMapping]) -> int:
     """Register every machine's commands (before the sinks start, which expose them). Returns how many."""
     count = 0
     for name, mapping in mappings.items():

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from gateway.auth.ratelimit import LoginLimiter
 from gateway.auth.users import UserDirectory
-from gateway.config.access import (
+from gateway.config.jobs import InboxConfig
+from gateway.settings.access import (
     DEFAULT_ROLES,
     REFUSE,
     AccessConfig,
@@ -18,52 +19,16 @@ from gateway.config.access import (
     check_users,
     unknown_role,
 )
-from gateway.config.http import HttpConfig
-from gateway.config.jobs import InboxConfig
-from gateway.config.mqtt import MqttConfig
-from gateway.config.mtconnect import AgentConfig
-from gateway.config.security import Profile, SecurityName, check_security, endpoints_for
-from gateway.config.sparkplug import SparkplugConfig
-from gateway.settings.base import Strict
-from gateway.settings.urls import check_endpoint
-
-SecurityMode = SecurityName
+from gateway.settings.sections import Sectioned, with_sections
+from gateway.sinks import registry as sinks
+from gateway.sinks.mqtt.config import MqttConfig
+from gateway.sinks.mtconnect.config import AgentConfig
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.sparkplug.config import SparkplugConfig
+from gateway.sinks.web.config import HttpConfig
 
 
-class OpcUaServerConfig(Strict):
-    """The OPC UA server that SCADA clients connect to."""
-
-    endpoint: str = "opc.tcp://0.0.0.0:4840/cnc-gateway"
-    name: str = "cnc-gateway"
-    namespace: str = Field(default="urn:cnc-gateway", description="Namespace URI of the gateway's nodes")
-    security: list[SecurityMode] | None = Field(
-        default=None,
-        min_length=1,
-        description="Endpoints offered, e.g. [Basic256Sha256_SignAndEncrypt, None]; default: the profile's",
-    )
-    profile: Profile | None = Field(
-        default=None,
-        description="standard (default): None plus every signed and encrypted endpoint; "
-        "secure: without None; open: None only",
-    )
-
-    @field_validator("endpoint")
-    @classmethod
-    def _endpoint(cls, url: str) -> str:
-        return check_endpoint(url)
-
-    @model_validator(mode="after")
-    def _security(self) -> OpcUaServerConfig:
-        check_security(self.security, self.profile)
-        return self
-
-    @property
-    def endpoints(self) -> tuple[str, ...]:
-        """The security endpoints to offer (names from gateway.config.security)."""
-        return endpoints_for(self.security, self.profile)
-
-
-class GatewayConfig(Strict):
+class GatewayConfig(Sectioned):
     """Gateway-wide settings. A mapping file run on its own gets these defaults."""
 
     opcua: OpcUaServerConfig = OpcUaServerConfig()
@@ -85,7 +50,7 @@ class GatewayConfig(Strict):
     mtconnect: AgentConfig | None = Field(
         default=None, description="The MTConnect agent (HTTP, port 5000 by default); absent: none"
     )
-    # --- users, roles and access control (gateway/config/access.py) ---
+    # --- users, roles and access control (gateway/settings/access.py) ---
     roles: list[str] = Field(
         default_factory=lambda: list(DEFAULT_ROLES),
         min_length=1,
@@ -101,7 +66,7 @@ class GatewayConfig(Strict):
     )
     http: HttpConfig | None = Field(
         default_factory=HttpConfig,
-        description="The web console, REST API and /metrics (gateway/config/http.py); null: off",
+        description="The web console, REST API and /metrics (gateway/sinks/web/config.py); null: off",
     )
 
     @field_validator("roles")
@@ -158,3 +123,7 @@ class GatewayConfig(Strict):
             anonymous_allowed=not refuse,
             limiter=limiter if limiter is not None else self.login_limiter(),
         )
+
+
+if not TYPE_CHECKING:  # with the keys sinks registered after the registry came add
+    GatewayConfig = with_sections(GatewayConfig, sinks.gateway_sections())

@@ -20,14 +20,15 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from gateway.alarms.config import SOURCE_TAGS
 from gateway.auth.known_passwords import is_known, known_passwords_of
-from gateway.config.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
-from gateway.config.alarms import SOURCE_TAGS
 from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import CONTROLLER_TAGS
 from gateway.config.mapping import MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
+from gateway.settings.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
+from gateway.settings.masking import masked
 from gateway.sources import registry
 
 Loc = tuple[str | int, ...]
@@ -248,6 +249,14 @@ class Config:
     def mappings(self) -> dict[str, MachineMapping]:
         """Each machine's mapping by machine name: what the components read beside the tree."""
         return {m.machine: m for m in self.machines}
+
+    def effective(self) -> dict[str, Any]:
+        """Every file's settings as JSON data, secrets masked (the console's Gateway page)."""
+        return {
+            "gateway": masked(self.gateway),
+            "machines": {name: masked(mapping) for name, mapping in self.mappings.items()},
+            "files": [str(f) for f in self.files],
+        }
 
     def definitions(self) -> list[MachineDefinition]:
         """The machines as the variable tree knows them (`VariableTree(config.definitions())`)."""

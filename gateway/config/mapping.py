@@ -17,17 +17,19 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
-from gateway.config.access import check_role_name
-from gateway.config.alarms import AlarmsConfig, alarms_issues
-from gateway.config.commands import CommandName, CommandSpec, command_issues, located_errors
-from gateway.config.copydata import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.alarms.config import AlarmsConfig, alarms_issues
+from gateway.commands.config import CommandName, CommandSpec, command_issues
 from gateway.config.jobs import JobsConfig
-from gateway.config.mqtt import MachineMqtt, VariableMqtt
 from gateway.model.definitions import MachineDefinition, Range, VariableDefinition
 from gateway.model.types import TypeSpec
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict, TypeField
 from gateway.settings.mtconnect import VariableMTConnect
 from gateway.settings.names import MACHINE_RE, RESERVED_SEGMENTS, SEGMENT_RE
+from gateway.settings.sections import Sectioned, located_errors, with_sections
+from gateway.sinks import registry as sinks
+from gateway.sinks.copydata.config import MachineCopydata, VariableCopydata, copydata_issues
+from gateway.sinks.mqtt.config import MachineMqtt, VariableMqtt
 from gateway.sources import registry
 from gateway.sources.base import DriverSettings, VariableSettings
 
@@ -83,7 +85,7 @@ class EURange(Strict):
         return self
 
 
-class VariableSpec(Strict):
+class VariableSpec(Sectioned):
     """One mapped variable: where it lives on the controller and how it looks upstream."""
 
     path: Annotated[
@@ -223,6 +225,10 @@ class VariableSpec(Strict):
         )
 
 
+if not TYPE_CHECKING:  # with the keys sinks registered after the registry came add per variable
+    VariableSpec = with_sections(VariableSpec, sinks.variable_sections())
+
+
 def _driver_type(value: Any) -> str:
     """Which driver model a `driver:` section is; files from before the other drivers have no `type`."""
     if isinstance(value, dict):
@@ -257,7 +263,7 @@ class VariableDefaults(Strict):
         return None if value is None else check_role_name(value)
 
 
-class MachineMapping(Strict):
+class MachineMapping(Sectioned):
     """One machine: its name, its controller, and the variables mirrored upstream."""
 
     machine: Annotated[str, Field(description="Machine name: lower-case letters, digits, '-' and '_'")]
@@ -302,6 +308,9 @@ class MachineMapping(Strict):
         if spec is not None and spec.read_only is not None:
             message = f"a {spec.type} driver is read-only ({spec.read_only}): use access: read"
             located_errors([((i, "access"), message) for i, var in enumerate(variables) if var.writable])
+        check = getattr(driver, "variable_issues", None)  # a driver's own checks across its variables
+        if check is not None:
+            located_errors(check(variables))
         return variables
 
     @field_validator("jobs")
@@ -373,6 +382,10 @@ class MachineMapping(Strict):
 
     def queue_size(self, var: VariableSettings) -> int:
         return self.defaults.queue_size if var.queue_size is None else var.queue_size
+
+
+if not TYPE_CHECKING:  # with the keys sinks and OPC UA extensions add per machine (umati: ...)
+    MachineMapping = with_sections(MachineMapping, sinks.machine_sections())
 
 
 def tree_conflicts(paths: list[str]) -> list[tuple[int, str]]:

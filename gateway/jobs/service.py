@@ -579,7 +579,7 @@ class JobService:
                     self.queue.reject, job.seq, "the upload was lost when the gateway stopped; send it again"
                 )
 
-    # --- the web console's port (gateway/sinks/web/ports.py JobsPort) -----------------------------------
+    # --- the web console's port (gateway/sinks/ports.py JobsPort) -----------------------------------
     # The same staging folder, the same submit() and so the same validation and queue as the FTP inbox.
 
     @property

@@ -40,8 +40,8 @@ from typing import Any
 
 from aiohttp import web
 
-from gateway.config.http import ConnectionLimits
 from gateway.errors import SinkError
+from gateway.sinks.http_limits import ConnectionLimits
 
 log = logging.getLogger("gateway.http")
 

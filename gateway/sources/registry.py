@@ -9,47 +9,29 @@ driver shipped as a package of its own adds itself without a line here, through 
 
 from __future__ import annotations
 
-from importlib.metadata import entry_points
-
 from gateway.model.tree import Machine
+from gateway.plugins import installed
 from gateway.sources.base import DriverMapping, DriverSpec, Source
 from gateway.sources.focas import SPEC as FOCAS
 from gateway.sources.haas_mdc import SPEC as HAAS_MDC
+from gateway.sources.modbus import SPEC as MODBUS
 from gateway.sources.mtconnect import AGENT as MTCONNECT
 from gateway.sources.mtconnect import SHDR
 from gateway.sources.opcua import SPEC as OPCUA
+from gateway.sources.s7 import SPEC as S7
 
 BUILT_IN: tuple[DriverSpec, ...] = (
     FOCAS,
     HAAS_MDC,
+    MODBUS,
     MTCONNECT,
     OPCUA,
+    S7,
     SHDR,
 )
 
 GROUP = "cnc_gateway.drivers"
-
-
-def installed(built_in: tuple[DriverSpec, ...] = BUILT_IN) -> tuple[DriverSpec, ...]:
-    """The drivers other packages declare under the entry point group `cnc_gateway.drivers`.
-
-    A value that is not a DriverSpec, or a type that another driver has, stops the start with a
-    TypeError naming the entry point: two drivers for one `type` would make mapping files ambiguous."""
-    taken = {spec.type: "cnc-gateway" for spec in built_in}
-    found = []
-    for point in sorted(entry_points(group=GROUP), key=lambda p: p.name):
-        spec = point.load()
-        where = f"entry point {point.name} = {point.value}"
-        if not isinstance(spec, DriverSpec):
-            raise TypeError(f"{where} ({GROUP}) is a {type(spec).__name__}, not a DriverSpec")
-        if spec.type in taken:
-            raise TypeError(f"{where}: driver type {spec.type!r} is already {taken[spec.type]}'s")
-        taken[spec.type] = where
-        found.append(spec)
-    return tuple(found)
-
-
-DRIVERS: tuple[DriverSpec, ...] = BUILT_IN + installed()
+DRIVERS: tuple[DriverSpec, ...] = BUILT_IN + installed(GROUP, DriverSpec, BUILT_IN, lambda spec: spec.type)
 
 # The driver of a `driver:` section without a `type` (mapping files from before the other drivers).
 DEFAULT = OPCUA.type

@@ -22,7 +22,7 @@ from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from simulator.runner import Simulator
 from tests.waiting import free_port, wait_until
 

@@ -27,7 +27,7 @@ from typing import Any
 import pytest
 from asyncua import Client, ua
 
-from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto
+from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, Recorder, subscriber
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -105,6 +105,8 @@ async def demo(tmp_path: Path, broker: Mosquitto) -> AsyncIterator[str]:
         "--sim-dnc-opcua-port",
         "--sim-dnc-ftp-port",
         "--sim-focas-port",
+        "--sim-modbus-port",
+        "--sim-s7-port",
     )
     ports = {flag: free_port() for flag in flags}
     env = {k: v for k, v in os.environ.items() if k != "CNC_DEMO_PASSWORD"}  # the README's passwords
@@ -314,3 +316,34 @@ async def acknowledge(client: Client, alarms: Alarms, occurrence: int, watch: Wa
         message=f"round {round_}: the acknowledgement on MQTT",
     )
     assert acked[0]["user"] == "operator" and acked[0]["active"] is True
+
+
+async def test_the_demo_shows_the_chiller_and_the_plc_in_opc_ua_and_mqtt(
+    demo: str, broker: Mosquitto, recorders: list[Recorder]
+) -> None:
+    """The README's PLC section: the demo's Modbus chiller and S7 PLC are machines in OPC UA and MQTT."""
+    rec = subscriber(recorders, broker.port, topics=["cnc/chiller/#", "cnc/laser-plc/#"])
+    client = Client(demo, timeout=5)
+    try:
+        await wait_until(_connects(client), timeout=30, interval=0.2, message="the demo's OPC UA server")
+
+        async def value(path: str) -> Any:
+            node = client.get_node(f"ns=2;s={path}")
+            dv = await node.read_data_value(raise_on_bad_status=False)
+            return dv.Value.Value if dv.StatusCode.is_good() else None
+
+        async def both_good() -> bool:
+            return (
+                await value("chiller/Model") == "LX-CHILL5"
+                and await value("laser-plc/Program/Name") == "demo.nc"
+            )
+
+        await wait_until(
+            both_good, timeout=30, interval=0.2, message="the chiller and the PLC Good in OPC UA"
+        )
+        assert 10 < await value("chiller/Temperatures/Supply") < 30
+        await wait_until(lambda: (rec.last_json("cnc/chiller/setpoint") or {}).get("quality") == "good"
+                         and (rec.last_json("cnc/laser-plc/laser/power") or {}).get("quality") == "good",
+                         timeout=15, message="both on MQTT")  # fmt: skip
+    finally:
+        await client.disconnect()

@@ -17,10 +17,11 @@ import yaml
 from asyncua import Client, ua
 
 from gateway.app import Gateway
-from gateway.config.access import AccessConfig
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
+from gateway.settings.access import AccessConfig
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from simulator.runner import Simulator
 from tests.waiting import free_port, wait_until
 

@@ -15,10 +15,10 @@ from gateway.auth.passwords import hash_password
 from gateway.commands.runner import install_commands
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
 from gateway.errors import AccessDenied
 from gateway.model.context import WriteContext
 from gateway.model.reach import reach
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from gateway.sinks.mqtt.routes import Routes
 from gateway.sinks.mqtt.writes import report_writers
 from tests.trees import MappedTree

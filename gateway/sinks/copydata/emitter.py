@@ -19,12 +19,11 @@ from collections.abc import Callable
 from typing import Any, Self
 
 from gateway.codecs.copydata import Frame, Layout
-from gateway.config.copydata import CopydataTarget
-from gateway.config.mapping import MachineMapping
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import Sample
 from gateway.model.tree import Machine, VariableNode
 from gateway.sinks.copydata.channel import Channel, OutFrame, RateLimiter
+from gateway.sinks.copydata.config import CopydataMachineEntry, CopydataTarget
 from gateway.sinks.copydata.encoder import TargetEncoder, sendable
 from gateway.sinks.copydata.feedback import Feedback
 from gateway.sinks.copydata.port import Transport, TransportPort
@@ -40,7 +39,7 @@ TransportFactory = Callable[[TransportPort], Transport]
 
 
 def target_nodes(
-    machine: Machine, mapping: MachineMapping, target: CopydataTarget
+    machine: Machine, mapping: CopydataMachineEntry, target: CopydataTarget
 ) -> list[tuple[VariableNode, int]]:
     """The (node, id) pairs a target sends, in mapping order; the connection flag first if asked for."""
     pairs: list[tuple[VariableNode, int]] = []
@@ -70,7 +69,7 @@ class Emitter:
     def __init__(
         self,
         machine: Machine,
-        mapping: MachineMapping,
+        mapping: CopydataMachineEntry,
         target: CopydataTarget,
         status: CopydataStatus,
         make_transport: TransportFactory,

@@ -19,8 +19,8 @@ from __future__ import annotations
 from typing import Protocol
 
 from gateway.codecs.copydata import Frame, Layout
-from gateway.config.copydata import CopydataTarget
 from gateway.sinks.copydata.channel import Channel
+from gateway.sinks.copydata.config import CopydataTarget
 from gateway.sinks.copydata.throttle import LogThrottle
 
 

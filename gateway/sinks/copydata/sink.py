@@ -21,9 +21,10 @@ from collections.abc import Mapping
 from contextlib import AsyncExitStack
 from typing import Self
 
-from gateway.config.mapping import MachineMapping
 from gateway.errors import SinkError
 from gateway.model.tree import VariableTree
+from gateway.sinks.base import SinkHealth
+from gateway.sinks.copydata.config import CopydataMachineEntry
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.port import Transport, TransportPort
 from gateway.sinks.copydata.status import CopydataStatus
@@ -31,7 +32,7 @@ from gateway.sinks.copydata.status import CopydataStatus
 log = logging.getLogger("gateway.sinks.copydata")
 
 
-def has_targets(mappings: Mapping[str, MachineMapping]) -> bool:
+def has_targets(mappings: Mapping[str, CopydataMachineEntry]) -> bool:
     return any(m.copydata is not None for m in mappings.values())
 
 
@@ -40,7 +41,7 @@ class CopydataSink:
 
     name = "copydata"
 
-    def __init__(self, tree: VariableTree, mappings: Mapping[str, MachineMapping]) -> None:
+    def __init__(self, tree: VariableTree, mappings: Mapping[str, CopydataMachineEntry]) -> None:
         self.tree = tree
         self.statuses: dict[str, CopydataStatus] = {}
         self.emitters: list[Emitter] = []
@@ -80,6 +81,11 @@ class CopydataSink:
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self._stack.aclose()
+
+    def health(self) -> SinkHealth:
+        """Always ready: a receiver may come at any time, and each target says its state in
+        Status/CopydataTargets."""
+        return SinkHealth(ready=True)
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:

@@ -60,8 +60,8 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
-from gateway.config.mqtt import MqttTls
 from gateway.errors import BrokerError, BrokerRefused, SinkError
+from gateway.sinks.mqtt.config import MqttTls
 
 # paho's Properties() has no annotations, which mypy --strict will not call; this is its signature.
 _properties = cast(Callable[[int], Properties], Properties)

@@ -29,8 +29,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.errors import (
     AccessDenied,
     ArgumentsMissing,
@@ -43,6 +41,7 @@ from gateway.model.context import WriteContext
 from gateway.model.methods import Method
 from gateway.model.tree import Machine, VariableTree
 from gateway.sinks.mqtt.client import Incoming
+from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import plain
 from gateway.sinks.mqtt.topics import ResponseTopics, clean_segment
 from gateway.sinks.mqtt.writes import LogQuota, ResponseTopicRefused, TooManyWrites
@@ -176,7 +175,7 @@ class CommandRequests:
     """Turns command messages into machine method calls and answers every one of them."""
 
     def __init__(
-        self, tree: VariableTree, cfg: MqttConfig, mappings: Mapping[str, MachineMapping], answer: Answer
+        self, tree: VariableTree, cfg: MqttConfig, mappings: Mapping[str, MqttMachineEntry], answer: Answer
     ) -> None:
         self.tree = tree
         self.cfg = cfg

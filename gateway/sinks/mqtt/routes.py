@@ -13,9 +13,14 @@ import contextlib
 from collections.abc import Iterable, Mapping
 
 from gateway.codecs.mqtt_publish import first_byte, topic_field
-from gateway.config.mapping import MachineMapping, VariableSpec
-from gateway.config.mqtt import MachineMqtt, MqttConfig, VariableMqtt
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.sinks.mqtt.config import (
+    MachineMqtt,
+    MqttConfig,
+    MqttMachineEntry,
+    MqttVariableEntry,
+    VariableMqtt,
+)
 from gateway.sinks.mqtt.payloads import unit_suffix
 from gateway.sinks.mqtt.topics import (
     TopicClash,
@@ -115,10 +120,10 @@ def route_for(
 class Routes:
     """Every variable's route, indexed both ways, checked for topics claimed twice."""
 
-    def __init__(self, tree: VariableTree, cfg: MqttConfig, mappings: Mapping[str, MachineMapping]) -> None:
+    def __init__(self, tree: VariableTree, cfg: MqttConfig, mappings: Mapping[str, MqttMachineEntry]) -> None:
         self.cfg = cfg
         self.mappings = mappings
-        self._specs: dict[tuple[str, str], VariableSpec] = {
+        self._specs: dict[tuple[str, str], MqttVariableEntry] = {
             (name, v.path): v for name, mapping in mappings.items() for v in mapping.variables
         }
         self.by_node: dict[VariableNode, Route] = {}

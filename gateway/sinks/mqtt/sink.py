@@ -32,14 +32,13 @@ from typing import Self
 
 from gateway import __version__
 from gateway.codecs.mqtt_publish import remaining_length
-from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.errors import BrokerError, BrokerRefused, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
 from gateway.sinks.mqtt.client import (
     BrokerSettings,
@@ -51,6 +50,7 @@ from gateway.sinks.mqtt.client import (
     tls_context,
 )
 from gateway.sinks.mqtt.commands import CommandRequests
+from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
@@ -83,7 +83,7 @@ class MqttSink:
         tree: VariableTree,
         config: MqttConfig,
         state_dir: Path,
-        mappings: Mapping[str, MachineMapping],
+        mappings: Mapping[str, MqttMachineEntry],
         *,
         base_dir: Path | None = None,
     ) -> None:
@@ -270,6 +270,23 @@ class MqttSink:
         while self._inflight and self._online and loop.time() < deadline:  # noqa: ASYNC110 - as above
             await asyncio.sleep(0.01)
         await client.disconnect()
+
+    def health(self) -> SinkHealth:
+        """Ready while the broker connection is up; the queues as the diagnostics show them."""
+        backlog = self.backlog
+        return SinkHealth(
+            ready=self.state == STATE_CONNECTED,
+            state=self.state,
+            backlog=len(backlog) if backlog is not None else None,
+            dropped=backlog.dropped_total if backlog is not None else None,
+            in_flight=self.in_flight,
+            discarded=self.discarded,
+            coalesced=self.coalesced,
+            socket_queue=self.socket_queue,
+            connects=self.connects,
+            online=self.online,
+            last_error=self.last_error,
+        )
 
     async def run(self) -> None:
         """Keep the broker connection, mirror the changes, carry out writes; until cancelled."""

@@ -22,8 +22,6 @@ import logging
 import time
 from collections.abc import Callable, Mapping
 
-from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.errors import (
     AccessDenied,
     MalformedRequest,
@@ -36,6 +34,7 @@ from gateway.model.context import WriteContext
 from gateway.model.reach import reach
 from gateway.model.tree import VariableTree
 from gateway.sinks.mqtt.client import Incoming
+from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import decode_set, encode_result
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.topics import RESULT, SET, ResponseTopics, result_topic, target_of_set
@@ -43,7 +42,7 @@ from gateway.sinks.mqtt.topics import RESULT, SET, ResponseTopics, result_topic,
 log = logging.getLogger(__name__)
 
 
-def report_writers(tree: VariableTree, routes: Routes, mappings: Mapping[str, MachineMapping]) -> None:
+def report_writers(tree: VariableTree, routes: Routes, mappings: Mapping[str, MqttMachineEntry]) -> None:
     """Say at start-up, per machine, which `/set` writes and commands the mapping opens to MQTT and the
     role they act with; or that they are refused for want of a role."""
     access = tree.access

@@ -38,11 +38,11 @@ from gateway.codecs.mtconnect.queries import Request, parse_request, resolve_dev
 from gateway.codecs.mtconnect.timestamps import format_timestamp
 from gateway.codecs.mtconnect.vocabulary import UNAVAILABLE, RawValue
 from gateway.codecs.mtconnect.xmltext import xml_attr, xml_text
-from gateway.config.mtconnect import AgentConfig
 from gateway.model.events import Event
 from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import VariableNode
 from gateway.settings.mtconnect import value_key
+from gateway.sinks.mtconnect.config import AgentConfig
 from gateway.sinks.mtconnect.profile import Binding, DeviceItems, Profile
 
 log = logging.getLogger("gateway.sinks.mtconnect")

@@ -1,7 +1,7 @@
 """The tree as MTConnect devices: one Device per machine, its components and data items, and how values map.
 
 Built once when the sink is made, from the machines' definitions and their mappings'
-`mtconnect:` keys (gateway/config/mtconnect.py):
+`mtconnect:` keys (gateway/sinks/mtconnect/config.py):
 
 - each machine is a Device (`uuid` urn:cnc-gateway:<machine>) with an AVAILABILITY item
   (from `Status/Connected`), a SYSTEM condition on its Controller when it has alarms, and
@@ -21,10 +21,9 @@ from dataclasses import dataclass, field
 
 from gateway.codecs.mtconnect.model import Category, Component, DataItem, Description, Device, Representation
 from gateway.codecs.mtconnect.units import factor, native_units, standard_units
-from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import AgentConfig
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.settings.mtconnect import VariableMTConnect
+from gateway.sinks.mtconnect.config import AgentConfig, AgentMachineEntry
 
 UUID_PREFIX = "urn:cnc-gateway:"
 _NOT_ID = re.compile(r"[^A-Za-z0-9_.\-]")
@@ -103,7 +102,9 @@ class _Tree:
         )
 
 
-def build_profile(tree: VariableTree, mappings: Mapping[str, MachineMapping], config: AgentConfig) -> Profile:
+def build_profile(
+    tree: VariableTree, mappings: Mapping[str, AgentMachineEntry], config: AgentConfig
+) -> Profile:
     devices: list[Device] = []
     machines: dict[str, DeviceItems] = {}
     bindings: dict[VariableNode, Binding] = {}
@@ -119,7 +120,7 @@ def build_profile(tree: VariableTree, mappings: Mapping[str, MachineMapping], co
 
 
 def _device(
-    machine: Machine, mapping: MachineMapping | None, config: AgentConfig
+    machine: Machine, mapping: AgentMachineEntry | None, config: AgentConfig
 ) -> tuple[Device, DeviceItems, dict[VariableNode, Binding]]:
     dev_id = ncname(machine.name)
     root = _Tree("Device", dev_id, machine.name)

@@ -21,14 +21,14 @@ from typing import Any, Self, TypeVar
 
 from gateway.codecs.mtconnect.buffer import Entry
 from gateway.codecs.mtconnect.errors import ModelError
-from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import AgentConfig
 from gateway.errors import SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Subscription
 from gateway.model.tree import VariableNode, VariableTree
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.http_listener import Limits
 from gateway.sinks.mtconnect.agent import Agent
+from gateway.sinks.mtconnect.config import AgentConfig, AgentMachineEntry
 from gateway.sinks.mtconnect.http import AgentServer
 from gateway.sinks.mtconnect.profile import build_profile
 from gateway.sinks.mtconnect.store import ObservationStore, Row, store_path
@@ -46,7 +46,7 @@ class MTConnectSink:
         self,
         tree: VariableTree,
         config: AgentConfig,
-        mappings: Mapping[str, MachineMapping],
+        mappings: Mapping[str, AgentMachineEntry],
         state_dir: Path,
     ) -> None:
         self.tree = tree
@@ -196,6 +196,10 @@ class MTConnectSink:
                     log.error("MTConnect: observations not written to the buffer file: %s", exc)
 
     # --- running ---------------------------------------------------------------------------------
+
+    def health(self) -> SinkHealth:
+        """Ready once entered: the agent's port is bound there, or the start stopped."""
+        return SinkHealth(ready=True)
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:

@@ -42,9 +42,9 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from gateway.config.security import is_secure
 from gateway.errors import NotFound, SinkError
 from gateway.shims.ua import new_status_code
+from gateway.sinks.opcua.endpoints import is_secure
 
 log = logging.getLogger(__name__)
 

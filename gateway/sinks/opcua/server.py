@@ -40,7 +40,6 @@ from asyncua.server.address_space import AddressSpace, AttributeService
 
 from gateway import __version__
 from gateway.auth.users import UserDirectory
-from gateway.config.gateway import OpcUaServerConfig
 from gateway.errors import SinkError
 from gateway.model.context import WriteContext
 from gateway.model.hub import Change, Subscription
@@ -54,9 +53,11 @@ from gateway.shims.asyncua_server import (
     slim_attribute_values,
 )
 from gateway.shims.ua import new_node_id, new_status_code
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.opcua.address_space import AddressSpacePlan
 from gateway.sinks.opcua.asyncua_tuning import SharedAttributes
 from gateway.sinks.opcua.bulk import NodeWriter
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from gateway.sinks.opcua.identity import (
     CLIENT_ADDRESS,
     GatewayUserManager,
@@ -530,6 +531,10 @@ class OpcUaSink:
         if self._sub is not None:
             self._sub.close()
             self._sub = None
+
+    def health(self) -> SinkHealth:
+        """Ready once the server listens (from the start: clients browse while controllers connect)."""
+        return SinkHealth(ready=self._server is not None)
 
     async def run(self) -> None:
         """Mirror every change from the hub into the address space, until cancelled."""

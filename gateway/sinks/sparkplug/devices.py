@@ -38,13 +38,13 @@ from gateway.codecs.sparkplug import (
     metric_properties,
     quality_of_status,
 )
-from gateway.config.mapping import MachineMapping
 from gateway.errors import InvalidArgument
 from gateway.model.methods import Method
 from gateway.model.sample import Sample
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import DataType, TypeSpec
 from gateway.sinks.mqtt.commands import arguments, read_body
+from gateway.sinks.mqtt.config import MqttMachineEntry
 
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 MS = timedelta(milliseconds=1)
@@ -84,7 +84,7 @@ def value_of(sample: Sample) -> Any:
     return None if sample.status == WAITING else sample.value
 
 
-def dcmd_writable(node: VariableNode, mapping: MachineMapping | None) -> bool:
+def dcmd_writable(node: VariableNode, mapping: MqttMachineEntry | None) -> bool:
     """Whether the mapping opens `node` to writes over MQTT (mqtt.writable of the machine or variable),
     which DCMD writes follow: Sparkplug reaches the machine through the same broker."""
     spec = node.definition
@@ -210,7 +210,7 @@ class Device:
         group_id: str,
         edge_node_id: str,
         aliases: Aliases,
-        mapping: MachineMapping | None,
+        mapping: MqttMachineEntry | None,
     ) -> None:
         self.machine = machine
         self.name = machine.name

@@ -65,13 +65,12 @@ from gateway.codecs.sparkplug import (
     state_topic,
 )
 from gateway.codecs.sparkplug.aliases import Aliases
-from gateway.config.mapping import MachineMapping
-from gateway.config.sparkplug import SUFFIX, SparkplugBroker, SparkplugConfig
 from gateway.errors import BrokerError, BrokerRefused
 from gateway.model.hub import Change, Subscription
 from gateway.model.reach import reach
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
 from gateway.sinks.mqtt.client import (
     BrokerSettings,
@@ -82,9 +81,11 @@ from gateway.sinks.mqtt.client import (
     default_client_id,
     tls_context,
 )
+from gateway.sinks.mqtt.config import MqttMachineEntry
 from gateway.sinks.sparkplug.bdseq import FILE as BDSEQ_FILE
 from gateway.sinks.sparkplug.bdseq import BdSeqStore
 from gateway.sinks.sparkplug.commands import Outcomes, Requests
+from gateway.sinks.sparkplug.config import SUFFIX, SparkplugBroker, SparkplugConfig
 from gateway.sinks.sparkplug.devices import (
     QUALITY_PROPERTY,
     CommandMetric,
@@ -139,7 +140,7 @@ class SparkplugSink:
         config: SparkplugConfig,
         broker: SparkplugBroker,
         state_dir: Path,
-        mappings: Mapping[str, MachineMapping],
+        mappings: Mapping[str, MqttMachineEntry],
         *,
         base_dir: Path | None = None,
     ) -> None:
@@ -362,6 +363,21 @@ class SparkplugSink:
             except TimeoutError:
                 pass
         await client.disconnect()
+
+    def health(self) -> SinkHealth:
+        """Ready once the edge node is online: connected, and its NBIRTH and DBIRTHs published (connected
+        alone, or waiting for the primary host, is not yet serving Sparkplug consumers)."""
+        backlog = self.backlog
+        return SinkHealth(
+            ready=self.state == STATE_ONLINE,
+            state=self.state,
+            backlog=len(backlog) if backlog is not None else None,
+            dropped=backlog.dropped_total if backlog is not None else None,
+            in_flight=self.in_flight,
+            connects=self.connects,
+            online=self.online,
+            last_error=self.last_error,
+        )
 
     async def run(self) -> None:
         """Keep the session, publish the changes, carry out commands; until cancelled."""

@@ -23,8 +23,6 @@ from typing import Any
 
 from gateway import __version__
 from gateway.codecs.since import parse_since
-from gateway.config.http import HttpConfig, masked
-from gateway.config.loader import Config
 from gateway.errors import (
     AccessDenied,
     ConfirmTimeout,
@@ -39,8 +37,9 @@ from gateway.model.audit import AuditEntry, as_text
 from gateway.model.methods import Method
 from gateway.model.sample import quality_of, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.sinks.ports import Ports
+from gateway.sinks.web.config import ConsoleConfig, HttpConfig
 from gateway.sinks.web.http import HttpRequest, HttpResponse, json_response, plain, refused
-from gateway.sinks.web.ports import Ports
 from gateway.sinks.web.routes import Router
 from gateway.sinks.web.sessions import Caller
 
@@ -134,7 +133,7 @@ class Api:
     """The /api handlers; `register(router)` adds them."""
 
     def __init__(
-        self, tree: VariableTree, config: Config, http: HttpConfig, ports: Ports, *, started: float
+        self, tree: VariableTree, config: ConsoleConfig, http: HttpConfig, ports: Ports, *, started: float
     ) -> None:
         self.tree = tree
         self.config = config
@@ -509,11 +508,7 @@ class Api:
             raise AccessDenied(f"an anonymous caller may not {what} (access.enabled is false: log in)")
 
     def effective(self) -> dict[str, Any]:
-        return {
-            "gateway": masked(self.config.gateway),
-            "machines": {name: masked(mapping) for name, mapping in self.config.mappings.items()},
-            "files": [str(f) for f in self.config.files],
-        }
+        return self.config.effective()
 
     async def effective_config(self, req: HttpRequest, caller: Caller) -> HttpResponse:
         self._admin(caller, "read the effective configuration")

@@ -28,15 +28,16 @@ from urllib.parse import quote, urlsplit
 from gateway import __version__
 from gateway.auth.ratelimit import LoginLimiter
 from gateway.auth.tokens import TokenStore, tokens_path
-from gateway.config.http import HttpConfig
-from gateway.config.loader import Config
 from gateway.errors import NotFound, RequestError, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.sample import quality_of
 from gateway.model.tree import VariableTree
 from gateway.reconnect import Backoff, OutageLog
+from gateway.sinks.base import SinkHealth
 from gateway.sinks.http_listener import Limits
+from gateway.sinks.ports import Ports
 from gateway.sinks.web.api import Api
+from gateway.sinks.web.config import ConsoleConfig, HttpConfig
 from gateway.sinks.web.http import (
     Admitted,
     HttpRequest,
@@ -51,7 +52,6 @@ from gateway.sinks.web.live import Live
 from gateway.sinks.web.metrics import CONTENT_TYPE, MachineFigures, Metrics, Scrape
 from gateway.sinks.web.openapi import document
 from gateway.sinks.web.pages import Pages, drip_of
-from gateway.sinks.web.ports import Ports
 from gateway.sinks.web.routes import Route, Router
 from gateway.sinks.web.server import HttpServer, LiveSocket
 from gateway.sinks.web.sessions import Caller, LoginRequired, Sessions
@@ -74,7 +74,7 @@ class WebSink:
     def __init__(
         self,
         tree: VariableTree,
-        config: Config,
+        config: ConsoleConfig,
         http: HttpConfig,
         ports: Ports,
         *,
@@ -171,6 +171,10 @@ class WebSink:
         self.listening = False
         if self._events is not None:
             self._events.close()
+
+    def health(self) -> SinkHealth:
+        """Ready while the console's port is bound (a taken port is tried again with backoff)."""
+        return SinkHealth(ready=self.listening, last_error=self._bind_error)
 
     async def run(self) -> None:
         async with asyncio.TaskGroup() as tg:

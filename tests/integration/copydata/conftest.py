@@ -18,16 +18,17 @@ import pytest
 
 from gateway.app import Gateway
 from gateway.codecs.copydata import Frame, FrameDecoder, Item, Layout, VariableTable, pack_tcp
-from gateway.config.access import AccessConfig
-from gateway.config.copydata import MachineCopydata
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.mqtt import MqttConfig
 from gateway.model.context import WriteContext
 from gateway.model.tree import Machine
+from gateway.settings.access import AccessConfig
+from gateway.sinks.copydata.config import MachineCopydata
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.sink import CopydataSink
 from gateway.sinks.copydata.tcp import TcpServerTransport
+from gateway.sinks.mqtt.config import MqttConfig
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber  # noqa: F401 - for this folder's tests, which import them from here
 from tests.waiting import free_port, wait_until

@@ -9,9 +9,10 @@ from pathlib import Path
 from typing import Any
 
 from gateway.app import Gateway
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from tests.integration.dnc.rig import Mode, drip_program, face, simulator
 from tests.integration.dnc.test_jobs import serial_mapping
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber

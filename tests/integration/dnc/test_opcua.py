@@ -10,13 +10,14 @@ from typing import Any
 from asyncua import Client, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.jobs.queue.store import JobState
 from gateway.jobs.service import JobService
 from gateway.model.tree import VariableTree
-from gateway.sinks.opcua import OpcUaSink
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.opcua.server import OpcUaSink
 from tests.integration.dnc.rig import Mode, drip_program, face, simulator
 from tests.integration.dnc.test_jobs import serial_mapping
 from tests.waiting import free_port, wait_until

@@ -25,9 +25,9 @@ import yaml
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.sparkplug import SparkplugConfig
 from gateway.sinks.copydata.emitter import Emitter
 from gateway.sinks.copydata.tcp import TcpServerTransport
+from gateway.sinks.sparkplug.config import SparkplugConfig
 from simulator.runner import Simulator
 from tests.integration.drills.processes import ROOT, write_yaml
 from tests.integration.jobs.conftest import PASSWORD_HASH, USER

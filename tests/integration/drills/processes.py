@@ -136,6 +136,16 @@ def laser_sim(sim_port: int, **changes: Any) -> dict[str, Any]:
     return data
 
 
+def chiller_sim(modbus_port: int) -> dict[str, Any]:
+    """The shipped mappings/chiller-sim.yaml as data, pointed at a simulator's Modbus face on `modbus_port`,
+    with the drills' quick reconnects."""
+    data = yaml.safe_load((ROOT / "mappings" / "chiller-sim.yaml").read_text())
+    data["driver"].update(
+        host="127.0.0.1", port=modbus_port, reconnect={"initial": 0.2, "max": 2.0, "factor": 2}
+    )
+    return data
+
+
 def write_yaml(path: Path, data: Any) -> Path:
     path.write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True), encoding="utf-8")
     return path

@@ -45,10 +45,10 @@ import pytest
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
-from gateway.config.sparkplug import SparkplugConfig
 from gateway.model.hub import Change
 from gateway.sinks.mqtt.payloads import encode_json
 from gateway.sinks.mqtt.sink import MqttSink
+from gateway.sinks.sparkplug.config import SparkplugConfig
 from gateway.sinks.sparkplug.devices import millis
 from gateway.sinks.sparkplug.sink import SparkplugSink
 from simulator.runner import Simulator

@@ -1,11 +1,12 @@
 """Drill: the controller dies (SIGKILL) and comes back, again and again.
 
 The simulator runs as a process of its own, so it can be killed like a PLC that
-loses power; the gateway runs as a process of its own, so its memory can be read
-from /proc. N times (3; 30 in soak): kill the simulator; within 2 s the machine's
-values must turn Bad on OPC UA (a real asyncua subscription to the gateway) and on
-MQTT; start the simulator again on the same ports; within 5 s of it listening the
-values must be Good again on both.
+loses power (`opcua`: the laser read over OPC UA; `modbus`: its chiller, read
+over Modbus TCP with mappings/chiller-sim.yaml); the gateway runs as a process of
+its own, so its memory can be read from /proc. N times (3; 30 in soak): kill the
+simulator; within 2 s the machine's values must turn Bad on OPC UA (a real asyncua
+subscription to the gateway) and on MQTT; start the simulator again on the same
+ports; within 5 s of it listening the values must be Good again on both.
 
 Memory: the gateway's RSS is read after each cycle, once everything is Good. The
 drill fails if the floor of those samples rises after a warm-up (see memory.py):
@@ -33,8 +34,10 @@ from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
 from tests.waiting import free_port, wait_until
 
 RESTARTS = count("controller_restarts")
-MACHINE = "laser-sim"
-WATCHED = ("Axes/X/Position", "Program/Block", "Feed/Override", "Machine/State")
+WATCHED = {
+    "opcua": ("laser-sim", ("Axes/X/Position", "Program/Block", "Feed/Override", "Machine/State")),
+    "modbus": ("chiller", ("Temperatures/Supply", "Flow", "Setpoint", "PumpOn", "Faults/Any")),
+}
 BAD_WITHIN = 2.0  # s after the kill: the drill's requirement
 GOOD_WITHIN = 5.0  # s after the controller listens again
 WARMUP = 2  # cycles before memory must be flat (caches, asyncua type tables, allocator arenas)
@@ -61,19 +64,24 @@ def mqtt_quality(rec: Recorder, topics: list[str], quality: str) -> bool:
     return all((rec.last_json(t) or {}).get("quality") == quality for t in topics)
 
 
+@pytest.mark.parametrize("device", ["opcua", "modbus"])
 @pytest.mark.timeout(90 + 15 * RESTARTS)
 async def test_controller_restarts_turn_values_bad_then_good_without_growing_memory(
-    mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path, drill_report: Report
+    device: str, mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path, drill_report: Report
 ) -> None:
-    sim_port, sim_ftp, gw_port = free_port(), free_port(), free_port()
+    machine, watched = WATCHED[device]
+    sim_port, sim_ftp, gw_port, modbus_port = free_port(), free_port(), free_port(), free_port()
     processes.write_yaml(tmp_path / "laser-sim.yaml", processes.laser_sim(sim_port))
+    processes.write_yaml(tmp_path / "chiller-sim.yaml", processes.chiller_sim(modbus_port))
     mqtt = {"port": mosquitto.port, "client_id": f"drill-{uuid.uuid4().hex[:8]}", "keepalive": 5,
             "reconnect": {"initial": 0.1, "max": 1}}  # fmt: skip
-    gw_file = processes.gateway_file(tmp_path, ["laser-sim.yaml"], opcua_port=gw_port, inbox_port=free_port(),
+    mappings = ["laser-sim.yaml"] + (["chiller-sim.yaml"] if device == "modbus" else [])
+    gw_file = processes.gateway_file(tmp_path, mappings, opcua_port=gw_port, inbox_port=free_port(),
                                      mqtt=mqtt)  # fmt: skip
-    sim = processes.simulator(tmp_path, sim_port, sim_ftp, "--loop", "demo.nc", "--speed", "20")
+    sim = processes.simulator(tmp_path, sim_port, sim_ftp, "--loop", "demo.nc", "--speed", "20",
+                              "--modbus-port", str(modbus_port) if device == "modbus" else "off")  # fmt: skip
     gateway = processes.gateway(tmp_path, gw_file)
-    topics = [f"cnc/{MACHINE}/{path.lower()}" for path in WATCHED]
+    topics = [f"cnc/{machine}/{path.lower()}" for path in watched]
     rec = subscriber(recorders, mosquitto.port, topics=topics)
     quality = Quality()
     client = Client(f"opc.tcp://127.0.0.1:{gw_port}/cnc-gateway", timeout=5)
@@ -86,7 +94,7 @@ async def test_controller_restarts_turn_values_bad_then_good_without_growing_mem
         await asyncio.to_thread(gateway.start)
         await asyncio.to_thread(processes.wait_for_port, gateway, gw_port)
         await client.connect()
-        nodes = [client.get_node(f"ns=2;s={MACHINE}/{path}") for path in WATCHED]
+        nodes = [client.get_node(f"ns=2;s={machine}/{path}") for path in watched]
         subscription = await client.create_subscription(100, quality)
         await subscription.subscribe_data_change(nodes, queuesize=1)
 
@@ -125,7 +133,7 @@ async def test_controller_restarts_turn_values_bad_then_good_without_growing_mem
     warmup = min(WARMUP, max(0, len(rss) - 2))
     growth = floor_growth(rss, warmup=warmup)
     drill_report(
-        "controller restarts", restarts=RESTARTS, bad_after_max=f"{max(to_bad):.2f}s",
+        f"controller restarts ({device})", restarts=RESTARTS, bad_after_max=f"{max(to_bad):.2f}s",
         good_after_max=f"{max(to_good):.2f}s", opcua_notifications=quality.notifications,
         mqtt_messages=len(rec.messages), rss=mib(rss), rss_floor_growth=f"{growth / MIB:.1f}MiB",
     )  # fmt: skip

@@ -16,10 +16,11 @@ from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.cli.demo import DEMO_INBOX_PASSWORD, DEMO_INBOX_USER, demo_inbox, demo_jobs, find_mapping
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load
 from gateway.jobs.queue.store import JobState
 from gateway.model.events import Event
+from gateway.sinks.opcua.config import OpcUaServerConfig
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, subscriber
 from tests.waiting import free_port, wait_until

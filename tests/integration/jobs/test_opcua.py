@@ -11,13 +11,14 @@ import pytest
 from asyncua import Client, Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.jobs import InboxConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.jobs.queue.store import JobState
 from gateway.jobs.service import JobService
 from gateway.model.tree import VariableTree
-from gateway.sinks.opcua import OpcUaSink
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.opcua.server import OpcUaSink
 from tests.integration.jobs.conftest import GOOD, Store, mapping_text
 from tests.waiting import free_port, wait_until
 

@@ -29,7 +29,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
+from gateway.sinks.mqtt.config import MqttConfig
 from tests.loops import LoopFactory, both
 from tests.waiting import free_port, wait_until_sync
 

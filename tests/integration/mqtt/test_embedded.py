@@ -10,7 +10,7 @@ from gateway.cli.demo import _ensure_broker
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
+from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mqtt.embedded import broker_reachable
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
 from tests.integration.mqtt.test_sink import MAPPING, ingest, running

@@ -8,7 +8,7 @@ from typing import Any
 
 from gateway.app import Gateway
 from gateway.config.loader import load_mapping
-from gateway.config.mqtt import VariableMqtt
+from gateway.sinks.mqtt.config import VariableMqtt
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, gateway_config, mqtt_config, subscriber
 from tests.waiting import free_port, wait_until

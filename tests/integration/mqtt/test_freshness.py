@@ -15,9 +15,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.diagnostics import snapshot
 from gateway.model.tree import Machine
+from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mqtt.sink import MqttSink
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
 from tests.trees import MappedTree

@@ -19,9 +19,9 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.errors import SinkError
 from gateway.model.tree import Machine
+from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mqtt.sink import MqttSink
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
 from tests.trees import MappedTree

@@ -24,7 +24,7 @@ from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import AgentConfig
+from gateway.sinks.mtconnect.config import AgentConfig
 from gateway.sinks.mtconnect.sink import MTConnectSink
 from gateway.sources.mtconnect.agent_source import MTConnectSource
 from gateway.sources.mtconnect.discover import discover_agent

@@ -15,8 +15,8 @@ from typing import Any
 import pytest
 
 from gateway.codecs.mtconnect.errors import HTTP_STATUS, ErrorCode
-from gateway.config.mtconnect import AgentConfig
 from gateway.sinks.mtconnect.agent import Agent
+from gateway.sinks.mtconnect.config import AgentConfig
 from gateway.sinks.mtconnect.http import AgentServer
 from gateway.sinks.mtconnect.profile import Profile
 from tests.integration.mtconnect.conftest import assert_valid, schemas  # noqa: F401

@@ -19,7 +19,7 @@ from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mapping import MachineMapping
-from gateway.config.mtconnect import AgentConfig
+from gateway.sinks.mtconnect.config import AgentConfig
 from simulator.alarms import soft_limit
 from simulator.runner import Simulator
 from tests.unit.codecs.mtconnect.test_corpus import cases

@@ -25,14 +25,14 @@ import pytest
 import pytest_asyncio
 from asyncua import Client, ua
 
-from gateway.config.gateway import OpcUaServerConfig
 from gateway.config.loader import load_mapping
 from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
 from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
 from gateway.shims.asyncua_ns0 import LazyNodes, cache_file
-from gateway.sinks.opcua import OpcUaSink
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.opcua.server import OpcUaSink
 from tests.waiting import free_port, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

@@ -20,12 +20,12 @@ import pytest_asyncio
 from asyncua import Client, Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
-from gateway.config.gateway import OpcUaServerConfig
 from gateway.config.loader import load_mapping
 from gateway.config.mapping import MachineMapping
 from gateway.errors import ControllerRefused, ControllerUnavailable, SinkError
 from gateway.model.tree import Machine, VariableNode, VariableTree
-from gateway.sinks.opcua import OpcUaSink
+from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.sinks.opcua.server import OpcUaSink
 from gateway.sinks.opcua.values import unece_unit_id
 from tests.waiting import free_port, wait_until
 

@@ -19,8 +19,8 @@ from asyncua import Client, ua
 
 from gateway.app import Gateway
 from gateway.audit.store import AuditStore, audit_path
-from gateway.config.access import AccessConfig
 from gateway.config.loader import Config, load
+from gateway.settings.access import AccessConfig
 from simulator.machine import MachineState
 from simulator.runner import Simulator
 from tests.waiting import free_port, wait_until

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from gateway.audit.store import AuditStore, audit_path
-from gateway.config.mqtt import MachineMqtt
+from gateway.sinks.mqtt.config import MachineMqtt
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
 from tests.integration.security.conftest import MACHINE, secure_gateway
 from tests.waiting import wait_until

@@ -22,10 +22,10 @@ from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
-from gateway.config.sparkplug import SparkplugConfig
 from gateway.model.sample import ReadBack
 from gateway.model.tree import VariableNode, VariableTree
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
+from gateway.sinks.sparkplug.config import SparkplugConfig
 from gateway.sinks.sparkplug.sink import SparkplugSink
 from simulator.runner import Simulator
 from tests.integration.laser_rig import laser_mapping

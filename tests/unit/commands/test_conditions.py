@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from gateway.commands.conditions import bind, same
-from gateway.config.commands import Condition, placeholders, render, whole_reference
+from gateway.commands.config import Condition, placeholders, render, whole_reference
 
 STATES = {0: "Idle", 1: "Running", 2: "Paused", 3: "Alarm"}
 

@@ -8,9 +8,10 @@ import pytest
 from pydantic import ValidationError
 
 from gateway.auth.passwords import hash_password
-from gateway.config.gateway import GatewayConfig, OpcUaServerConfig
+from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import load
 from gateway.errors import ConfigError
+from gateway.sinks.opcua.config import OpcUaServerConfig
 
 HASH = hash_password("x", n=2**4)
 

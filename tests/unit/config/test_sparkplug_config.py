@@ -9,8 +9,8 @@ from pydantic import ValidationError
 
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import load
-from gateway.config.sparkplug import SparkplugBroker, SparkplugConfig
 from gateway.errors import ConfigError
+from gateway.sinks.sparkplug.config import SparkplugBroker, SparkplugConfig
 
 
 def test_without_the_section_nothing_sparkplug_is_configured() -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import grimp
 import pytest
 
+from gateway import plugins
 from gateway.config.mapping import MachineMapping
 from gateway.sources import registry
 from gateway.sources.base import DriverSpec
@@ -25,7 +26,7 @@ def test_each_driver_model_is_tagged_with_its_type(spec: DriverSpec) -> None:
 
 
 def test_the_default_driver_comes_first_then_by_type() -> None:
-    assert registry.types() == ("opcua", "focas", "haas-mdc", "mtconnect", "shdr")
+    assert registry.types() == ("opcua", "focas", "haas-mdc", "modbus", "mtconnect", "s7", "shdr")
     assert registry.find("opcua") is OPCUA and registry.find("modbus-typo") is None
 
 
@@ -40,24 +41,22 @@ def test_a_driver_section_without_type_is_the_default_driver() -> None:
     assert mapping.driver.type == "opcua"
 
 
-def _point(name: str, value: str) -> EntryPoint:
-    return EntryPoint(name=name, value=value, group=registry.GROUP)
+def _installed(monkeypatch: pytest.MonkeyPatch, name: str, value: str) -> tuple[DriverSpec, ...]:
+    found = [EntryPoint(name=name, value=value, group=registry.GROUP)]
+    monkeypatch.setattr(plugins, "entry_points", lambda group: found)
+    return plugins.installed(registry.GROUP, DriverSpec, registry.BUILT_IN, lambda spec: spec.type)
 
 
 def test_an_installed_driver_may_not_take_a_type_already_taken(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(
-        registry, "entry_points", lambda group: [_point("mine", "gateway.sources.opcua:SPEC")]
-    )
-    with pytest.raises(TypeError, match="driver type 'opcua' is already cnc-gateway's"):
-        registry.installed()
+    with pytest.raises(TypeError, match="'opcua' is already cnc-gateway's"):
+        _installed(monkeypatch, "mine", "gateway.sources.opcua:SPEC")
 
 
 def test_an_installed_driver_must_be_a_driver_spec(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(
-        registry, "entry_points", lambda group: [_point("x", "gateway.sources.registry:GROUP")]
-    )
-    with pytest.raises(TypeError, match=r"entry point x = gateway.sources.registry:GROUP .* is a str"):
-        registry.installed()
+    with pytest.raises(
+        TypeError, match=r"entry point x = gateway.sources.registry:GROUP \(cnc_gateway.drivers\) is"
+    ):
+        _installed(monkeypatch, "x", "gateway.sources.registry:GROUP")
 
 
 def test_driver_folders_import_no_other_driver_and_nothing_of_the_configuration_files() -> None:
@@ -70,6 +69,8 @@ def test_driver_folders_import_no_other_driver_and_nothing_of_the_configuration_
         "gateway.sources.mtconnect",
         "gateway.sources.focas",
         "gateway.sources.haas_mdc",
+        "gateway.sources.modbus",
+        "gateway.sources.s7",
     }
     for folder in folders:
         modules = {folder} | graph.find_descendants(folder)

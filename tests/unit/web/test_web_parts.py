@@ -16,12 +16,12 @@ from gateway.auth.ratelimit import LoginLimiter
 from gateway.auth.tokens import TokenStore
 from gateway.auth.users import UserDirectory
 from gateway.config.gateway import GatewayConfig
-from gateway.config.http import MASK, masked
 from gateway.errors import AccessDenied, MalformedRequest, UnknownVariable
 from gateway.model.definitions import MachineDefinition, VariableDefinition
 from gateway.model.sample import Sample
 from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
+from gateway.settings.masking import MASK, masked
 from gateway.sinks.web.http import HttpRequest
 from gateway.sinks.web.live import Client, encode, parse_watch, row
 from gateway.sinks.web.openapi import document

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from gateway.config.copydata import CopydataTarget, check_encoding
 from gateway.config.loader import load_mapping
 from gateway.errors import SinkError
+from gateway.sinks.copydata.config import CopydataTarget, check_encoding
 from tests.unit.sinks.copydata.helpers import copydata_sink, mapping
 
 ROOT = Path(__file__).resolve().parents[4]

@@ -163,7 +163,7 @@ def test_the_readme_worked_example_is_the_docs_example(capsys: pytest.CaptureFix
 def test_the_readme_target_example_is_a_valid_configuration() -> None:
     import yaml
 
-    from gateway.config.copydata import MachineCopydata
+    from gateway.sinks.copydata.config import MachineCopydata
 
     section = readme_section()
     block = section.split("```yaml\ncopydata:\n", 1)[1].split("```", 1)[0]

@@ -11,7 +11,6 @@ import pytest
 
 from gateway.commands.runner import install_commands
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MachineMqtt, MqttConfig
 from gateway.errors import ArgumentsMissing, ConfirmTimeout, MalformedRequest, TooManyArguments
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.mqtt.client import Incoming
@@ -23,6 +22,7 @@ from gateway.sinks.mqtt.commands import (
     encode_reply,
     read_body,
 )
+from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 

@@ -8,9 +8,9 @@ import pytest
 
 from gateway.config.loader import load
 from gateway.config.mapping import MachineMapping
-from gateway.config.mqtt import MqttConfig
 from gateway.errors import ConfigError
 from gateway.model.tree import VariableTree
+from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mqtt.routes import Routes
 
 ROOT = Path(__file__).resolve().parents[4]
@@ -107,7 +107,7 @@ def test_response_topics_and_max_packet_size_are_checked_with_their_line(tmp_pat
 
 def test_max_packet_size_defaults_above_what_each_face_decodes() -> None:
     from gateway.codecs.sparkplug.wire import MAX_PAYLOAD
-    from gateway.config.sparkplug import SparkplugConfig
+    from gateway.sinks.sparkplug.config import SparkplugConfig
 
     cfg = MqttConfig()
     assert cfg.max_packet_size == 1024 * 1024 > cfg.max_set_payload and cfg.response_topics == []

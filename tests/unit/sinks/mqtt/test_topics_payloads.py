@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gateway.config.mqtt import MqttConfig, VariableMqtt
 from gateway.errors import MalformedRequest, OutOfRange, RequestError, TypeMismatch
 from gateway.model.sample import Sample
 from gateway.model.types import TypeSpec
+from gateway.sinks.mqtt.config import MqttConfig, VariableMqtt
 from gateway.sinks.mqtt.payloads import decode_set, encode_json, encode_raw, encode_result, iso, unit_suffix
 from gateway.sinks.mqtt.topics import (
     TopicClash,

@@ -13,10 +13,10 @@ from datetime import UTC, datetime
 from typing import Any
 
 from gateway.codecs.mtconnect.documents import namespace
-from gateway.config.mtconnect import AgentConfig
 from gateway.model.events import Event
 from gateway.model.tree import VariableTree
 from gateway.sinks.mtconnect.agent import Agent
+from gateway.sinks.mtconnect.config import AgentConfig
 from gateway.sinks.mtconnect.profile import build_profile
 from tests.mtconnect_shop import shop
 from tests.unit.codecs.mtconnect.conftest import assert_valid, schemas  # noqa: F401 - the fixture

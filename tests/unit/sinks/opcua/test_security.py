@@ -14,7 +14,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from gateway.config.security import SecurityName
+from gateway.sinks.opcua.endpoints import SecurityName
 from gateway.sinks.opcua.security import (
     POLICY_TYPES,
     ClientCertificates,

@@ -21,8 +21,8 @@ from pydantic import BeforeValidator, Field, SecretStr, field_validator
 from gateway.codecs.sparkplug.errors import SparkplugError
 from gateway.codecs.sparkplug.topics import check_id
 from gateway.codecs.sparkplug.wire import MAX_PAYLOAD
-from gateway.config.mqtt import MAX_PACKET_SIZE, MIB, MqttConfig, MqttReconnect, MqttTls
 from gateway.settings.base import Strict
+from gateway.sinks.mqtt.config import MAX_PACKET_SIZE, MIB, MqttConfig, MqttReconnect, MqttTls
 
 SUFFIX = "-sparkplug"  # appended to the mqtt: section's client id
 

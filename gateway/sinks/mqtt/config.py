@@ -9,7 +9,8 @@ whether writes over MQTT are allowed (they are off unless a mapping says so).
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any, Literal
+from collections.abc import Sequence
+from typing import Annotated, Any, Literal, Protocol
 
 from pydantic import (
     AfterValidator,
@@ -20,7 +21,7 @@ from pydantic import (
     model_validator,
 )
 
-from gateway.config.access import check_role_name
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Backoff, Strict
 
 QoS = Literal[0, 1, 2]
@@ -249,3 +250,24 @@ class VariableMqtt(Strict):
         if levels[0] in ("commands", "alarms"):
             raise ValueError(f"topic {topic!r} would clash with the gateway's own {levels[0]}/… topics")
         return topic
+
+
+class MqttVariableEntry(Protocol):
+    """What the MQTT and Sparkplug sinks read of a variable's mapping entry."""
+
+    @property
+    def path(self) -> str: ...
+
+    @property
+    def mqtt(self) -> VariableMqtt | None: ...
+
+
+class MqttMachineEntry(Protocol):
+    """What the MQTT and Sparkplug sinks read of a machine's mapping file (gateway/config/mapping.py
+    `MachineMapping` fits it; mypy checks that where gateway/app.py hands the mappings over)."""
+
+    @property
+    def mqtt(self) -> MachineMqtt | None: ...
+
+    @property
+    def variables(self) -> Sequence[MqttVariableEntry]: ...

@@ -26,13 +26,17 @@ that matters.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any, Protocol
 
-from pydantic import BaseModel, Field, SecretStr, field_validator
+from pydantic import Field, field_validator
 
-from gateway.config.access import check_role_name
+from gateway.auth.ratelimit import LoginLimiter
+from gateway.auth.users import UserDirectory
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict
+from gateway.sinks.http_limits import ConnectionLimits
 
 
 class HttpTls(Strict):
@@ -42,40 +46,6 @@ class HttpTls(Strict):
         default="http-cert.pem", description="PEM certificate (chain), relative to the state directory"
     )
     key: str = Field(default="http-key.pem", description="PEM private key, relative to the state directory")
-
-
-class ConnectionLimits(Strict):
-    """How many connections an HTTP face (the console, the MTConnect agent) holds, and how long a connection
-    may keep its place without a request. Slow-loris crowds are closed, not served, and the other doors
-    keep their descriptors."""
-
-    max: Annotated[int, Field(ge=1, le=100_000)] | None = Field(
-        default=None,
-        description="Connections at once; null: a quarter of the process's open-file limit (ulimit -n) less "
-        "32, at most 1024. A larger value is lowered to that share (warned). At the cap, the oldest "
-        "connection that waits (no request yet, or idle) makes room; when all are busy, new ones get 503",
-    )
-    per_address: int = Field(
-        default=32,
-        ge=1,
-        le=100_000,
-        description="Connections from one address at once; more are refused (503). Behind a reverse proxy "
-        "every client comes from the proxy's address: raise it",
-    )
-    header_timeout: float = Field(
-        default=10.0,
-        gt=0,
-        le=3600,
-        description="Seconds a new connection has to send its request line and headers (its TLS handshake "
-        "included); then it is closed (408)",
-    )
-    keepalive: float = Field(
-        default=30.0,
-        gt=0,
-        le=3600,
-        description="Seconds a connection stays open after a response, waiting for its next request "
-        "(headers included)",
-    )
 
 
 class HttpConfig(Strict):
@@ -139,23 +109,24 @@ class HttpConfig(Strict):
         return self.audit_role or self.admin(roles)
 
 
-SECRET_WORDS = ("password", "secret", "token", "passphrase")
-MASK = "********"
+class ConsoleGateway(Protocol):
+    """What the console reads of the gateway file (gateway/config/gateway.py `GatewayConfig` fits it)."""
+
+    @property
+    def roles(self) -> Sequence[str]: ...
+
+    def user_directory(self, limiter: LoginLimiter | None = None) -> UserDirectory: ...
 
 
-def masked(model: BaseModel) -> dict[str, Any]:
-    """A configuration as plain JSON data, every secret masked (for the console's Gateway page)."""
-    return _mask(model.model_dump(mode="json"))  # type: ignore[no-any-return]
+class ConsoleConfig(Protocol):
+    """What the console reads of the whole configuration (gateway/config/loader.py `Config` fits it)."""
 
+    @property
+    def gateway(self) -> ConsoleGateway: ...
 
-def _mask(value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return {
-            k: (MASK if v is not None and any(w in str(k).lower() for w in SECRET_WORDS) else _mask(v))
-            for k, v in value.items()
-        }
-    if isinstance(value, list):
-        return [_mask(v) for v in value]
-    if isinstance(value, SecretStr):  # pragma: no cover - model_dump(mode="json") has already hidden it
-        return MASK
-    return value
+    @property
+    def state_dir(self) -> Path: ...
+
+    def effective(self) -> dict[str, Any]:
+        """Every file's settings as JSON data, secrets masked (the console's Gateway page)."""
+        ...

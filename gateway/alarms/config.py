@@ -28,7 +28,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Discriminator, Field, Tag, field_validator
 
-from gateway.config.access import check_role_name
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict
 
 SEVERITY_MIN, SEVERITY_MAX = 1, 1000

@@ -33,12 +33,11 @@ import string
 from collections.abc import Mapping, Sequence
 from typing import Annotated, Any
 
-from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, field_validator, model_validator
-from pydantic_core import InitErrorDetails, PydanticCustomError
+from pydantic import AfterValidator, BeforeValidator, Field, field_validator, model_validator
 
-from gateway.config.access import check_role_name
 from gateway.errors import RequestError
 from gateway.model.types import TypeSpec, coerce
+from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict, TypeField
 
 NAME_RE = re.compile(r"^[a-z][a-z0-9_\-]{0,62}$")
@@ -298,21 +297,3 @@ def _value_issues(value: Any, var: Any, args: Mapping[str, TypeSpec], *, scalar:
 def _unknown(ref: str, args: Mapping[str, TypeSpec]) -> str:
     known = ", ".join(args) if args else "none"
     return f"{{{ref}}} names no argument of this command (arguments: {known})"
-
-
-def located_errors(issues: Sequence[tuple[Loc, str]]) -> None:
-    """Raise cross-check issues from a field validator as one ValidationError whose errors sit at their own
-    keys (pydantic prefixes the field's location), so that the loader reports file:line:key for each."""
-    if not issues:
-        return
-    raise ValidationError.from_exception_data(
-        "MachineMapping",
-        [
-            InitErrorDetails(
-                type=PydanticCustomError("value_error", "{message}", {"message": message}),
-                loc=loc,
-                input=None,
-            )
-            for loc, message in issues
-        ],
-    )

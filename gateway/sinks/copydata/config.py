@@ -22,7 +22,7 @@ from __future__ import annotations
 import codecs
 import re
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 from pydantic import Field, ModelWrapValidatorHandler, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
@@ -376,3 +376,24 @@ def _target_issues(
                 _issue((*where, "connected_id"), f"{cid} is already the copydata id of {owner.path}", cid)
             )
     return issues
+
+
+class CopydataVariableEntry(Protocol):
+    """What the COPYDATA sink reads of a variable's mapping entry."""
+
+    @property
+    def path(self) -> str: ...
+
+    @property
+    def copydata(self) -> VariableCopydata | None: ...
+
+
+class CopydataMachineEntry(Protocol):
+    """What the COPYDATA sink reads of a machine's mapping file (gateway/config/mapping.py
+    `MachineMapping` fits it)."""
+
+    @property
+    def copydata(self) -> MachineCopydata | None: ...
+
+    @property
+    def variables(self) -> Sequence[CopydataVariableEntry]: ...

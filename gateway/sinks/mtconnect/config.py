@@ -26,12 +26,15 @@ gateway/sources/mtconnect/config.py.
 
 from __future__ import annotations
 
-from typing import Literal
+from collections.abc import Sequence
+from typing import Literal, Protocol
 
 from pydantic import Field
 
-from gateway.config.http import ConnectionLimits
+from gateway.alarms.config import AlarmsConfig
 from gateway.settings.base import Strict
+from gateway.settings.mtconnect import VariableMTConnect
+from gateway.sinks.http_limits import ConnectionLimits
 
 DEFAULT_AGENT_PORT = 5000
 DEFAULT_BUFFER = 131_072
@@ -69,3 +72,31 @@ class AgentConfig(Strict):
         default="variables",
         description="Variables without an mtconnect key: served as EVENT VARIABLE items, or left out",
     )
+
+
+class AgentVariableEntry(Protocol):
+    """What the agent reads of a variable's mapping entry: its MTConnect words."""
+
+    @property
+    def path(self) -> str: ...
+
+    @property
+    def mtconnect(self) -> VariableMTConnect | None: ...
+
+
+class AgentMachineEntry(Protocol):
+    """What the agent reads of a machine's mapping file (gateway/config/mapping.py `MachineMapping` fits)."""
+
+    @property
+    def description(self) -> str: ...
+
+    @property
+    def variables(self) -> Sequence[AgentVariableEntry]: ...
+
+    @property
+    def jobs(self) -> object | None:
+        """Present: the machine takes jobs, whose programs the agent serves as assets."""
+        ...
+
+    @property
+    def alarms(self) -> AlarmsConfig | None: ...
