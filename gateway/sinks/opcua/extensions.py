@@ -18,6 +18,9 @@ from typing import TYPE_CHECKING, Any
 from gateway.model.tree import VariableTree
 from gateway.plugins import installed
 from gateway.settings.sections import Section
+from gateway.sinks.opcua.umati.config import UmatiView
+from gateway.sinks.opcua.umati.config import check as umati_check
+from gateway.sinks.opcua.umati.config import report as umati_report
 
 if TYPE_CHECKING:  # port.py imports asyncua, the alarm service SQLite: loading a configuration does not
     from gateway.alarms.service import AlarmService
@@ -59,7 +62,30 @@ ALARMS = ExtensionSpec(
     create=_alarms,
 )
 
-BUILT_IN: tuple[ExtensionSpec, ...] = (ALARMS,)
+
+def _umati(context: ExtensionContext) -> ServerExtension | None:
+    if not context.machines:
+        return None
+    from gateway.sinks.opcua.umati.install import UmatiExtension
+
+    return UmatiExtension(context.machines, context.tree, context.alarms)
+
+
+UMATI = ExtensionSpec(
+    name="umati",
+    summary="the umati view: each machine with a `umati:` section as an OPC 40501-1 MachineTool under "
+    "the Machinery Machines folder (identification, monitoring, production, notifications)",
+    create=_umati,
+    machine_section=Section(
+        "umati",
+        UmatiView,
+        "The machine as an OPC 40501-1 MachineTool (umati) under the Machinery Machines folder",
+        check=umati_check,
+        report=umati_report,
+    ),
+)
+
+BUILT_IN: tuple[ExtensionSpec, ...] = (ALARMS, UMATI)
 
 GROUP = "cnc_gateway.opcua_extensions"
 EXTENSIONS: tuple[ExtensionSpec, ...] = BUILT_IN + installed(GROUP, ExtensionSpec, BUILT_IN, lambda s: s.name)

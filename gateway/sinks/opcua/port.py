@@ -11,15 +11,29 @@ the server nor asyncua's server API.
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable, Sequence
+from datetime import datetime
+from pathlib import Path
 from typing import Protocol
 
 from asyncua import ua
 from asyncua.common.events import Event
 
 from gateway.model.context import WriteContext
+from gateway.model.sample import Sample
+from gateway.model.tree import VariableNode
 
 MethodCallback = Callable[..., Awaitable[ua.CallMethodResult]]
 """Serves a Method node: called with the object's NodeId and the input Variants."""
+
+
+class Shown(Protocol):
+    """How a view shows a tree variable's sample at a node of its own (values.ValueKind is one)."""
+
+    def datavalue(self, sample: Sample, server_ts: datetime) -> ua.DataValue:
+        """The DataValue for the sample; raises values.ValueMismatch when it cannot be shown."""
+        ...
+
+    def mismatch(self, sample: Sample, server_ts: datetime) -> ua.DataValue: ...
 
 
 class ServerPort(Protocol):
@@ -66,6 +80,34 @@ class ServerPort(Protocol):
 
     def has_subscription(self, subscription: int) -> bool:
         """Whether a subscription of that id exists (ConditionRefresh's argument check)."""
+        ...
+
+    # --- views built on companion specifications (umati) ----------------------------------------
+
+    async def import_nodesets(self, files: Sequence[Path]) -> None:
+        """Load NodeSet2 files (types of companion specifications), in order, once per server."""
+        ...
+
+    def namespace_of(self, uri: str) -> int:
+        """The index of a namespace URI in the server's NamespaceArray (-1: absent)."""
+        ...
+
+    def references(self, nodeid: ua.NodeId) -> Sequence[ua.ReferenceDescription]:
+        """A node's references, both directions (empty for an unknown node)."""
+        ...
+
+    def attribute(self, nodeid: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue | None:
+        """One attribute of a node, as held (None: no such node or attribute)."""
+        ...
+
+    def show(self, nodeid: ua.NodeId, node: VariableNode, shown: Shown, *, writable: bool = False) -> None:
+        """Serve the tree variable's samples at another Variable node too: the same sample, in the same
+        publish step, through `shown`. `writable`: client writes there go to the variable through the
+        gateway's one write path (then `shown` must be the variable's own ValueKind)."""
+        ...
+
+    async def set_value(self, nodeid: ua.NodeId, value: ua.DataValue) -> None:
+        """Set the Value of a node that no tree variable feeds (a constant of a view)."""
         ...
 
 

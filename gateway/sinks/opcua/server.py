@@ -68,7 +68,7 @@ from gateway.sinks.opcua.identity import (
     user_executable,
 )
 from gateway.sinks.opcua.methods import call_result, plan_methods
-from gateway.sinks.opcua.port import MethodCallback, ServerExtension
+from gateway.sinks.opcua.port import MethodCallback, ServerExtension, Shown
 from gateway.sinks.opcua.security import ClientCertificates, Pki, secure_server
 from gateway.sinks.opcua.values import ValueKind, ValueMismatch, value_kind
 from gateway.sinks.opcua.writes import write_node
@@ -308,6 +308,7 @@ class OpcUaSink:
         self._sub: Subscription[VariableNode] | None = None
         self._vars: dict[VariableNode, _Variable] = {}
         self._by_id: dict[ua.NodeId, _Variable] = {}
+        self._views: dict[VariableNode, list[_Variable]] = {}  # other nodes showing a variable (show)
         self._owned: set[ua.NodeId] = set()
         self._mismatched: set[VariableNode] = set()  # holding a value their type cannot carry
         self._unplaceable: set[VariableNode] = set()  # late variables the server refused
@@ -417,6 +418,42 @@ class OpcUaSink:
     def has_subscription(self, subscription: int) -> bool:
         return subscription in self.server.iserver.subscription_service.subscriptions
 
+    async def import_nodesets(self, files: Sequence[Path]) -> None:
+        """Load NodeSet2 files in order; a file whose model is already there is skipped. asyncua's
+        Python classes for their structures are not generated (the views write no such values)."""
+        server = self.server
+        for path in files:
+            await server.import_xml(str(path), auto_load_definitions=False)
+
+    def namespace_of(self, uri: str) -> int:
+        array = self.server.iserver.aspace.read_attribute_value(
+            new_node_id(ua.ObjectIds.Server_NamespaceArray), ua.AttributeIds.Value
+        )
+        uris = array.Value.Value if array.Value is not None else []
+        return uris.index(uri) if uri in uris else -1
+
+    def references(self, nodeid: ua.NodeId) -> Sequence[ua.ReferenceDescription]:
+        record = self.server.iserver.aspace._nodes.get(nodeid)
+        return () if record is None else record.references
+
+    def attribute(self, nodeid: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue | None:
+        record = self.server.iserver.aspace._nodes.get(nodeid)
+        held = None if record is None else record.attributes.get(attribute)
+        return None if held is None else held.value
+
+    def show(self, nodeid: ua.NodeId, node: VariableNode, shown: Shown, *, writable: bool = False) -> None:
+        """Serve `node`'s samples at `nodeid` too (a view's node): `_push` brings it the same sample in
+        the same step as the variable's own node, lazily while nobody monitors it, as for our own."""
+        held = self.server.iserver.aspace._nodes[nodeid].attributes[ua.AttributeIds.Value]
+        view = _Variable(node, nodeid, shown, held)  # type: ignore[arg-type]
+        self._views.setdefault(node, []).append(view)
+        self._by_id[nodeid] = view
+        if writable:
+            self._owned.add(nodeid)
+
+    async def set_value(self, nodeid: ua.NodeId, value: ua.DataValue) -> None:
+        await self.server.iserver.aspace.write_attribute_value(nodeid, ua.AttributeIds.Value, value)
+
     # --- lifecycle ---------------------------------------------------------------------------
 
     async def __aenter__(self) -> Self:
@@ -437,7 +474,7 @@ class OpcUaSink:
         return self
 
     async def _start(self) -> None:
-        self._vars, self._by_id, self._owned = {}, {}, set()
+        self._vars, self._by_id, self._owned, self._views = {}, {}, set(), {}
         self._mismatched, self._unplaceable, self._failing = set(), set(), set()
         keep_written_values()  # no deep copy of every value per subscribed item (shims/asyncua_server.py)
         slim_attribute_values()  # slotted attribute records, no empty dict apiece (before init: ns0 too)
@@ -616,9 +653,13 @@ class OpcUaSink:
         mismatched = self._mismatched
         variables = self._vars
         read_value = self._read_value
+        views = self._views
         now = utcnow()
         count = 0
         for node, sample in batch:
+            if views and node in views:
+                for view in views[node]:
+                    await self._push_view(view, sample, now)
             var = variables.get(node)
             if var is None:
                 var = await self._place(node)
@@ -652,6 +693,25 @@ class OpcUaSink:
                 if node not in self._failing:
                     self._failing.add(node)
                     log.exception("cannot update %s in the OPC UA address space", node.full_path)
+
+    async def _push_view(self, view: _Variable, sample: Sample, now: datetime) -> None:
+        """One view's node (show): as `_push` does for our own, with the same sample and time."""
+        held = view.held
+        if not held.datachange_callbacks and held.value_setter is None:
+            view.sample, view.pushed_at = sample, now
+            if held.value_callback is not self._read_value:
+                held.value = None
+                held.value_callback = self._read_value
+            return
+        view.sample = view.pushed_at = None
+        try:
+            await self.server.iserver.aspace.write_attribute_value(
+                view.nodeid, ua.AttributeIds.Value, self._datavalue(view, sample, now)
+            )
+        except Exception:  # not expected; one node must not stop the others
+            if view.node not in self._failing:
+                self._failing.add(view.node)
+                log.exception("cannot update %s in the OPC UA address space", view.nodeid.to_string())
 
     def _datavalue(self, var: _Variable, sample: Sample, now: datetime) -> ua.DataValue:
         """The DataValue clients see for a sample (BadTypeMismatch, logged once, if it does not fit)."""
@@ -699,6 +759,8 @@ class OpcUaSink:
             var = self._by_id.get(nodeid)
             if var is None:
                 return None
+            if nodeid not in self._owned:  # a view's node that is not writable (show)
+                return ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte))
             level = user_access_level(var.node, role, policy)
             return ua.DataValue(ua.Variant(level, ua.VariantType.Byte))
         entry = self._methods.get(nodeid)
