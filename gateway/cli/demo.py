@@ -429,6 +429,7 @@ def print_banner(
             "Feed/Override (operators write), Status/..."
         ),
         f"  node ids         ns=2;s={mapping.machine}/Axes/X/Position",
+        *umati_banner(mapping),
         (
             f"  simulator        {mapping.driver.endpoint} (OPC UA), "
             f"ftp://127.0.0.1:{args.sim_ftp_port}/DATA/Programs "
@@ -469,6 +470,21 @@ def print_banner(
         )
     lines += ["  stop             Ctrl-C", ""]
     print("\n".join(lines), flush=True)
+
+
+def umati_banner(mapping: MachineMapping) -> list[str]:
+    """The umati view's line, when the mapping has a `umati:` section (docs/umati.md)."""
+    view = getattr(mapping, "umati", None)
+    if view is None:
+        return []
+    parts = [c.name for c in view.channels] + ([f"{view.laser.name} (LaserMonitoring)"] if view.laser else [])
+    return [
+        (
+            f"  umati            Objects/Machines/{mapping.machine}: an OPC 40501 MachineTool (Machinery ns, "
+            f"ns=2;s=umati:{mapping.machine}): Identification, Monitoring/{', '.join(parts)}, "
+            "Production/ActiveProgram, Notification/Messages (docs/umati.md)"
+        )
+    ]
 
 
 def dnc_banner(serial: tuple[MachineMapping, ...], mqtt: MqttConfig | None) -> list[str]:
