@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint unit integration install system-deps schema soak bench clean sparkplug-proto
+.PHONY: demo test lint unit integration install system-deps node-deps schema soak bench clean sparkplug-proto
 
 # setup.py builds gateway/jobs/validation/_plain.c (validation's compiled reader) and gateway/sources/opcua/_publish.c
 # (the OPC UA source's PublishResponse reader) in place; a change to either reinstalls.
@@ -31,6 +31,21 @@ $(PEER_STAMP): $(PEER)/package.json $(PEER)/package-lock.json
 	cd $(PEER) && npm ci --no-audit --no-fund --loglevel=error
 	touch $(PEER_STAMP)
 
+# node-opcua, the independent OPC UA client of the umati view's test (tests/integration/umati/test_node_opcua.py),
+# pinned by tests/node/package-lock.json and installed by npm into tests/node/node_modules; again only when the
+# lock changes. Without npm the test is skipped, and this says so.
+NODE_TESTS := tests/node
+NODE_STAMP := $(NODE_TESTS)/node_modules/.installed
+
+$(NODE_STAMP): $(NODE_TESTS)/package.json $(NODE_TESTS)/package-lock.json
+	@if command -v npm >/dev/null 2>&1; then \
+		cd $(NODE_TESTS) && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed; \
+	else \
+		echo "npm is absent: the node-opcua client test (tests/integration/umati/test_node_opcua.py) will be skipped (apt-get install npm)"; \
+	fi
+
+node-deps: $(NODE_STAMP)
+
 install: $(STAMP)
 
 # Mosquitto is a real broker the MQTT tests start on a free loopback port; Chromium runs the web console's
@@ -42,7 +57,7 @@ demo: $(STAMP)
 	$(BIN)/cnc-gateway demo
 
 # The checks first: a finding fails `make test` (and so CI) before any test runs.
-test: $(STAMP) system-deps
+test: $(STAMP) system-deps node-deps
 	@$(MAKE) --no-print-directory lint || { echo "make test: stopped, the checks above failed (run make lint)"; exit 1; }
 	$(BIN)/pytest tests
 
@@ -67,7 +82,7 @@ lint: $(STAMP)
 unit: $(STAMP)
 	$(BIN)/pytest tests --ignore=tests/integration
 
-integration: $(STAMP) system-deps
+integration: $(STAMP) system-deps node-deps
 	$(BIN)/pytest tests/integration
 
 # The fault drills with their soak counts: 30 broker restarts, 30 controller restarts, 50 gateway kills,
