@@ -37,6 +37,7 @@ from bench.scenarios import (
     plc,
     scale,
     sparkplug,
+    umati,
     web,
 )
 from bench.targets import judge
@@ -56,6 +57,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "dnc": dnc.run,
     "focas": focas.run,
     "plc": plc.run,
+    "umati": umati.run,
 }
 
 

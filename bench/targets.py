@@ -135,6 +135,7 @@ def judge(ctx: Context) -> None:
     r.targets_22 = judge_22(ctx)
     r.targets_25 = judge_25(ctx)
     r.targets_26 = judge_26(ctx)
+    r.targets_27 = judge_27(ctx)
 
 
 def _dnc_runs(ctx: Context) -> list[tuple[str, dict[str, Any]]]:
@@ -531,5 +532,22 @@ def judge_26(ctx: Context) -> list[Target]:
             value=gateway / raw if gateway and raw else None,
             source=f"{gateway or 0:,.0f} vs {raw or 0:,.0f} var/s at 100 ms, 2,000 variables over 5 PLCs; "
             f"flat out {flat.get('gateway') or 0:,.0f} vs {flat.get('raw') or 0:,.0f}",
+        ))  # fmt: skip
+    return targets
+
+
+def judge_27(ctx: Context) -> list[Target]:
+    """Issue 27 (the umati view), from bench/scenarios/umati.py; nothing when it did not run."""
+    u: dict[str, Any] = ctx.results.details.get("umati", {})
+    if not u:
+        return []
+    tag = f"{u.get('machines')} machines × {u.get('per_machine')} variables"
+    targets: list[Target] = []
+    for key, what, unit, scale in (("startup", "start-up", "s", 1.0), ("rss", "RSS", "MB", 1e-6)):
+        without, with_ = u.get(f"{key}_without"), u.get(f"{key}_with")
+        targets.append(Target(
+            f"{tag}: {what} with the umati view relative to without", 1.3, 1.1, "×",
+            higher_is_better=False, value=_ratio(with_, without),
+            source=f"{(with_ or 0) * scale:.2f} vs {(without or 0) * scale:.2f} {unit} (medians, same run)",
         ))  # fmt: skip
     return targets

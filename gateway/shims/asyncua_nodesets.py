@@ -5,9 +5,11 @@ missing reverse references, node by node), about as long as the rest of a 10,000
 nodes it makes are constant data for given files, asyncua, Python and namespaces already registered,
 as the standard namespace is (asyncua_ns0.py): the first server imports the files while recording what the
 import added (the new nodes whole, and the references it appended to nodes that were there) and pickles
-that; the next ones register the same namespaces (at the same indices, checked) and put the recorded
-nodes in place. The file is trusted as the standard namespace's is (this user's, in a folder nobody else
-may write, since it is unpickled); anything wrong with it, and the files are imported as before.
+that, each node's record apiece; the next ones register the same namespaces (at the same indices,
+checked) and read a recorded node the first time something asks for it, as the standard namespace's
+are (most are types no client browses), appending the recorded references. The file is trusted as
+the standard namespace's is (this user's, in a folder nobody else may write, since it is unpickled);
+anything wrong with it, and the files are imported as before.
 """
 
 from __future__ import annotations
@@ -26,12 +28,12 @@ from typing import Any
 
 from asyncua import ua
 
-from gateway.shims.asyncua_ns0 import _trusted
+from gateway.shims.asyncua_ns0 import LazyNodes, _trusted
 from gateway.shims.ua import new_node_id
 
 log = logging.getLogger(__name__)
 
-FORMAT = 1
+FORMAT = 2
 _MAGIC = b"cnc-gateway nodesets cache\n"
 _NAMESPACE_ARRAY = new_node_id(ua.ObjectIds.Server_NamespaceArray)
 _UNREADABLE = (OSError, EOFError, ValueError, TypeError, AttributeError, ImportError, pickle.UnpicklingError)
@@ -119,44 +121,72 @@ async def import_nodesets(
         if key not in recording.added and key != _NAMESPACE_ARRAY and len(nodes[key].references) > count
     }
     added = {key: nodes[key] for key in recording.added}
-    _save(path, {"namespaces": after[len(namespaces) :], "added": added, "appended": appended})
+    _save(path, added, after[len(namespaces) :], appended)
     return False
 
 
-async def _apply(server: Any, aspace: Any, cached: dict[str, Any]) -> bool:
-    nodes = aspace._nodes
+async def _apply(server: Any, aspace: Any, cached: _Cached) -> bool:
     base = len(await server.get_namespace_array())
-    for offset, uri in enumerate(cached["namespaces"]):
+    for offset, uri in enumerate(cached.namespaces):
         if await server.register_namespace(uri) != base + offset:
             log.warning("NodeSets cache not used: namespace %s is not where it was", uri)
+            cached.close()
             return False
-    for key, record in cached["added"].items():
-        nodes[key] = record
-    for key, references in cached["appended"].items():
+    nodes = aspace._nodes
+    if isinstance(nodes, LazyNodes):  # read a node the first time something asks for it, as the standard's
+        nodes.add_file(cached.fd, cached.index)
+    else:
+        for key, (offset, size) in cached.index.items():
+            nodes[key] = pickle.loads(os.pread(cached.fd, size, offset))
+        cached.close()
+    for key, references in cached.appended.items():
         record = nodes.get(key)
         if record is not None:
             record.references.extend(references)
     return True
 
 
-def _load(path: Path) -> dict[str, Any] | None:
+class _Cached:
+    """An open cache file: the index of its node records, and what else the import did."""
+
+    def __init__(self, fd: int, table: dict[str, Any]) -> None:
+        self.fd = fd
+        self.index: dict[Any, tuple[int, int]] = table["index"]
+        self.namespaces: list[str] = table["namespaces"]
+        self.appended: dict[Any, list[Any]] = table["appended"]
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
+def _load(path: Path) -> _Cached | None:
     try:
         if not path.is_file() or not _trusted(path):
             return None
-        data = path.read_bytes()
-        if not data.startswith(_MAGIC):
+        fd = os.open(path, os.O_RDONLY)
+    except OSError as exc:
+        log.debug("NodeSets cache %s not used: %s", path, exc)
+        return None
+    try:
+        head = os.pread(fd, len(_MAGIC) + 16, 0)
+        if not head.startswith(_MAGIC):
             raise ValueError("not a NodeSets cache file")
-        cached = pickle.loads(data[len(_MAGIC) :])
-        if not isinstance(cached, dict):
+        at = int.from_bytes(head[len(_MAGIC) : len(_MAGIC) + 8], "little")
+        size = int.from_bytes(head[len(_MAGIC) + 8 :], "little")
+        table = pickle.loads(os.pread(fd, size, at))
+        if not isinstance(table, dict) or not {"index", "namespaces", "appended"} <= set(table):
             raise ValueError("not a NodeSets cache file")
-        return cached
+        return _Cached(fd, table)
     except _UNREADABLE as exc:
+        os.close(fd)
         log.warning("NodeSets cache %s not used: %s", path, exc)
         return None
 
 
-def _save(path: Path, cached: dict[str, Any]) -> None:
-    """Written to a temporary file and linked into place; failures are logged, never raised."""
+def _save(path: Path, added: dict[Any, Any], namespaces: list[str], appended: dict[Any, list[Any]]) -> None:
+    """Each node's record pickled apiece (read lazily, as the standard namespace's cache), then a table:
+    where each is, the namespaces, the references appended. Written to a temporary file and linked into
+    place; failures are logged, never raised."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
         if path.exists():
@@ -167,7 +197,19 @@ def _save(path: Path, cached: dict[str, Any]) -> None:
         return
     try:
         with os.fdopen(fd, "wb") as out:
-            out.write(_MAGIC + pickle.dumps(cached, pickle.HIGHEST_PROTOCOL))
+            out.write(_MAGIC + bytes(16))
+            index: dict[Any, tuple[int, int]] = {}
+            at = len(_MAGIC) + 16
+            for key, record in added.items():
+                blob = pickle.dumps(record, pickle.HIGHEST_PROTOCOL)
+                out.write(blob)
+                index[key] = (at, len(blob))
+                at += len(blob)
+            table = {"index": index, "namespaces": namespaces, "appended": appended}
+            blob = pickle.dumps(table, pickle.HIGHEST_PROTOCOL)
+            out.write(blob)
+            out.seek(len(_MAGIC))
+            out.write(at.to_bytes(8, "little") + len(blob).to_bytes(8, "little"))
         with contextlib.suppress(FileExistsError):
             os.link(tmp, path)
     except _UNWRITABLE as exc:

@@ -74,7 +74,8 @@ class LazyNodes(MutableMapping[Any, Any]):
 
     Everything asyncua does with its `_nodes` works as with a dict: get, set, delete,
     `in`, and iteration, which yields the nodes not loaded yet too (without loading
-    them). Nodes added later (ours) live in `cache` only.
+    them). Nodes added later (ours) live in `cache` only. `add_file` adds the nodes of another file of
+    the same shape (the NodeSets' cache, asyncua_nodesets.py).
     """
 
     __slots__ = ("__weakref__", "_fd", "_index", "cache")
@@ -82,7 +83,7 @@ class LazyNodes(MutableMapping[Any, Any]):
     def __init__(self, fd: int, index: dict[Any, tuple[int, int]]) -> None:
         self.cache: dict[Any, Any] = {}
         self._fd = fd
-        self._index = index
+        self._index: dict[Any, tuple[int, ...]] = dict(index)  # (offset, size[, fd of another file])
         weakref.finalize(self, os.close, fd)
 
     def __getitem__(self, key: Any) -> Any:
@@ -99,9 +100,17 @@ class LazyNodes(MutableMapping[Any, Any]):
             return self._load(key)
         return default
 
+    def add_file(self, fd: int, index: dict[Any, tuple[int, int]]) -> None:
+        """Nodes read from another file (open at `fd`, closed with this mapping), as from the first."""
+        weakref.finalize(self, os.close, fd)
+        for key, (offset, size) in index.items():
+            if key not in self.cache:
+                self._index[key] = (offset, size, fd)
+
     def _load(self, key: Any) -> Any:
-        offset, size = self._index[key]  # KeyError: not a node
-        node = pickle.loads(os.pread(self._fd, size, offset))
+        entry = self._index[key]  # KeyError: not a node
+        fd = entry[2] if len(entry) > 2 else self._fd
+        node = pickle.loads(os.pread(fd, entry[1], entry[0]))
         del self._index[key]
         self.cache[key] = node
         return node

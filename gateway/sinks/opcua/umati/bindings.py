@@ -27,6 +27,10 @@ class Bound:
 def bindings(view: UmatiView) -> list[Bound]:
     """Which umati node (by path below the instance) each value of the section fills."""
     out = [Bound(f"Identification/{key}", source) for key, source in view.identification.items()]
+    for software in view.software:
+        base = f"Identification/SoftwareIdentification/{software.name}"
+        out.append(Bound(f"{base}/Identifier", software.identifier))
+        out.append(Bound(f"{base}/SoftwareRevision", software.revision))
     out.append(Bound("Monitoring/MachineTool/OperationMode", view.operation_mode, OPERATION_MODE))
     if view.power_on_duration is not None:
         out.append(Bound("Monitoring/MachineTool/PowerOnDuration", view.power_on_duration))

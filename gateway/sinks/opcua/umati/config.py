@@ -74,6 +74,14 @@ class Binding(Strict):
 Source = Binding | Constant
 
 
+class Software(Strict):
+    """A SoftwareIdentificationType under Identification/SoftwareIdentification (a controller's …)."""
+
+    name: str = Field(min_length=1, description="Its BrowseName (Controller …)")
+    identifier: Binding | str = Field(description="Identifier: what the software is")
+    revision: Binding | str = Field(description="SoftwareRevision")
+
+
 class Channel(Strict):
     """A ChannelMonitoringType under Monitoring: one NC channel (a path)."""
 
@@ -121,6 +129,9 @@ class UmatiView(Strict):
         description="MachineToolIdentificationType properties: Manufacturer, SerialNumber, "
         "ProductInstanceUri (mandatory), Model, SoftwareRevision, YearOfConstruction …"
     )
+    software: list[Software] = Field(
+        default_factory=list, description="Identification/SoftwareIdentification: the software installed"
+    )
     operation_mode: Binding | str = Field(
         default="Other", description="Monitoring/MachineTool/OperationMode (MachineOperationMode)"
     )
@@ -153,6 +164,9 @@ def bindings(view: UmatiView) -> Iterator[tuple[Loc, Source, tuple[str, ...] | N
     """Every value of the section, where it is, and the names its `values` may use (enumerations)."""
     for key, source in view.identification.items():
         yield ("identification", key), source, None
+    for i, software in enumerate(view.software):
+        yield ("software", i, "identifier"), software.identifier, None
+        yield ("software", i, "revision"), software.revision, None
     yield ("operation_mode",), view.operation_mode, OPERATION_MODE
     if view.power_on_duration is not None:
         yield ("power_on_duration",), view.power_on_duration, None
@@ -210,6 +224,8 @@ def conformance_units(view: UmatiView) -> list[str]:
     extra = set(view.identification) - set(MANDATORY_IDENTIFICATION)
     if extra & {"Model", "YearOfConstruction", "MonthOfConstruction", "SoftwareRevision", "HardwareRevision"}:
         units.append("MachineTool Identification Machinery additional")
+    if view.software:
+        units.append("MachineTool Identification SoftwareInformation")
     if view.channels:
         units.append("MachineTool Monitoring Basic - Channels")
     if view.power_on_duration is not None:

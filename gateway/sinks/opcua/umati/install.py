@@ -50,6 +50,7 @@ CHANNEL_MONITORING_TYPE = 16
 LASER_MONITORING_TYPE = 36
 SPINDLE_MONITORING_TYPE = 29
 PROGRAM_STATE_MACHINE_TYPE = 15
+SOFTWARE_TYPE = 43
 
 
 def nodeset_paths() -> list[Path]:
@@ -88,6 +89,8 @@ class UmatiExtension:
             wanted.append("Notification/Messages")
         plan = InstancePlan(model, server, server.namespace_index, name, wanted)
         self.instances[name] = plan.root(folder, new_node_id(MACHINE_TOOL_TYPE, mt), name)
+        for software in view.software:
+            plan.add("Identification/SoftwareIdentification", software.name, new_node_id(SOFTWARE_TYPE, mt))
         for channel in view.channels:
             plan.add("Monitoring", channel.name, new_node_id(CHANNEL_MONITORING_TYPE, mt))
         if view.laser is not None:
