@@ -65,9 +65,13 @@ class Binding(Strict):
     """A umati node that shows a variable of the mapping."""
 
     variable: str = Field(description="A variable of this mapping (its path)")
-    values: dict[str | int | bool, str] | None = Field(
+    values: dict[str | int | bool, str | int | float | bool] | None = Field(
         default=None,
-        description="The machine's values -> the umati enumeration's names (for enumerations and states)",
+        description="The machine's values -> the umati node's: an enumeration's or a state's names, else "
+        "constants of the node's type (a value not listed shows BadTypeMismatch)",
+    )
+    scale: float | None = Field(
+        default=None, description="A factor for numbers (seconds to PowerOnDuration's hours: 0.000277778)"
     )
 
 
@@ -209,8 +213,6 @@ def check(view: UmatiView, earlier: Mapping[str, Any]) -> Iterable[tuple[Loc, st
         if isinstance(source, Binding):
             if source.variable not in variables:
                 yield (*loc, "variable"), f"{source.variable!r} is not a variable of this mapping"
-            if source.values is not None and enum is None:
-                yield (*loc, "values"), "only enumerations and states translate values"
             for code, name in (source.values or {}).items():
                 if enum is not None and name not in enum:
                     yield (*loc, "values", str(code)), (f"{name!r} is not one of {', '.join(enum)}")

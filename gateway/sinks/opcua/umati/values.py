@@ -122,8 +122,11 @@ class Converted:
         source = bound.source
         assert isinstance(source, Binding)
         table = source.values
+        factor = source.scale
 
         def translated(value: Any) -> Any:
+            if factor is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+                value = value * factor
             if table is None:
                 return value
             key = value
