@@ -16,9 +16,12 @@ from pathlib import Path
 
 from asyncua import Client, ua
 
+from gateway.app import Gateway
+from gateway.config.gateway import GatewayConfig
+from gateway.config.loader import Config, load_mapping
 from gateway.sinks.opcua.umati import config as umati_config
 from gateway.sinks.opcua.umati.install import MACHINE_TOOL, MACHINERY, nodeset_paths
-from tests.integration.laser_rig import laser_rig
+from tests.integration.laser_rig import ROOT, laser_rig
 from tests.integration.umati.reference import (
     HAS_MODELLING_RULE,
     HAS_SUBTYPE,
@@ -32,6 +35,7 @@ from tests.integration.umati.reference import (
     NodeSets,
     Reference,
 )
+from tests.waiting import free_port
 
 MACHINE_TOOL_TYPE = (MACHINE_TOOL, "i=13")
 
@@ -118,6 +122,7 @@ class Checker:
         self.checked = 0
         self.mandatory_seen = 0
         self.types: set[Id] = set()
+        self.names: dict[Id, str] = {}  # the types instantiated that the NodeSets define, by name
 
     async def instance(self, nodeid: ua.NodeId, type_id: Id, path: str) -> None:
         self.types.add(type_id)
@@ -160,41 +165,70 @@ class Checker:
             await self.children(ref.NodeId, self.ref.children(declaration), where)
 
 
-async def test_every_machine_tool_has_every_mandatory_node_as_the_nodesets_declare(tmp_path: Path) -> None:
+async def check_machine_tools(client: Client, names: list[str]) -> Checker:
+    """Find the MachineTools the standard way and check each against the NodeSets; returns the checker."""
     sets = NodeSets(nodeset_paths())
+    uris = await client.get_namespace_array()
+    assert set(sets.uris) <= set(uris), f"NamespaceArray {uris} lacks a model of the NodeSets"
+    browser = Browser(client, uris)
+    # The Machinery entry point: Objects/Machines, NodeId i=1001 of the Machinery namespace.
+    machines = client.get_node(ua.NodeId(1001, uris.index(MACHINERY)))
+    assert browser.name(await machines.read_browse_name()) == (MACHINERY, "Machines")
+    objects = await browser.references(ua.NodeId(ua.ObjectIds.ObjectsFolder))
+    assert any(r.IsForward and r.NodeId == machines.nodeid for r in objects), (
+        "Objects does not organize Machines"
+    )
+    found = [
+        r
+        for r in await browser.references(machines.nodeid)
+        if r.IsForward and browser.pair(r.TypeDefinition) == MACHINE_TOOL_TYPE
+    ]
+    assert sorted(browser.name(r.BrowseName)[1] for r in found) == sorted(names)
+    reference = Reference(sets, await browser.ns0(ua_ids(sets) | {(UA, "i=58"), (UA, "i=63"), (UA, "i=68")}))
+    checker = Checker(browser, reference)
+    for machine in found:
+        before = checker.mandatory_seen
+        await checker.instance(machine.NodeId, MACHINE_TOOL_TYPE, browser.name(machine.BrowseName)[1])
+        assert checker.mandatory_seen - before >= 25
+    checker.names = {t: sets.nodes[t].browse_name[1] for t in checker.types if t in sets.nodes}
+    return checker
+
+
+async def test_every_machine_tool_has_every_mandatory_node_as_the_nodesets_declare(tmp_path: Path) -> None:
     async with laser_rig(tmp_path) as rig:
-        client = await rig.client()
-        uris = await client.get_namespace_array()
-        assert set(sets.uris) <= set(uris), f"NamespaceArray {uris} lacks a model of the NodeSets"
-        browser = Browser(client, uris)
-        # The Machinery entry point: Objects/Machines, NodeId i=1001 of the Machinery namespace.
-        machines = client.get_node(ua.NodeId(1001, uris.index(MACHINERY)))
-        assert browser.name(await machines.read_browse_name()) == (MACHINERY, "Machines")
-        objects = await browser.references(ua.NodeId(ua.ObjectIds.ObjectsFolder))
-        assert any(r.IsForward and r.NodeId == machines.nodeid for r in objects), (
-            "Objects does not organize Machines"
-        )
-        found = [
-            r
-            for r in await browser.references(machines.nodeid)
-            if r.IsForward and browser.pair(r.TypeDefinition) == MACHINE_TOOL_TYPE
-        ]
-        assert [browser.name(r.BrowseName)[1] for r in found] == ["laser-sim"]
-        reference = Reference(
-            sets, await browser.ns0(ua_ids(sets) | {(UA, "i=58"), (UA, "i=63"), (UA, "i=68")})
-        )
-        checker = Checker(browser, reference)
-        for machine in found:
-            await checker.instance(machine.NodeId, MACHINE_TOOL_TYPE, "laser-sim")
-        assert checker.mandatory_seen >= 25 and checker.checked >= checker.mandatory_seen
-        # The types the mapping asked for, instantiated: channels, the laser, the messages.
+        checker = await check_machine_tools(await rig.client(), ["laser-sim"])
+        # The types the mapping asked for, instantiated: a channel, the laser, software, the messages.
         for name in (
             "ChannelMonitoringType",
             "LaserMonitoringType",
+            "SoftwareIdentificationType",
             "MessagesType",
             "ProductionProgramStateMachineType",
         ):
-            assert any(sets.nodes[t].browse_name[1] == name for t in checker.types if t in sets.nodes), name
+            assert name in checker.names.values(), name
+
+
+async def test_the_fanuc_and_haas_mappings_are_machine_tools_as_the_nodesets_declare(tmp_path: Path) -> None:
+    """Their structure, from the shipped mappings, with no controller reachable (the values are Bad)."""
+    closed = {"FANUC_SIM_PORT": str(free_port()), "HAAS_SIM_PORT": str(free_port())}
+    mappings = tuple(
+        load_mapping(ROOT / "mappings" / name, environ=closed).model_copy(update={"jobs": None})
+        for name in ("fanuc-sim.yaml", "haas-sim.yaml")
+    )
+    gateway = GatewayConfig.model_validate(
+        {
+            "opcua": {"endpoint": f"opc.tcp://127.0.0.1:{free_port()}/cnc-gateway"},
+            "state_dir": str(tmp_path / "state"),
+            "inbox": {"enabled": False},
+            "http": None,
+        }
+    )
+    async with Gateway(Config(gateway, mappings, tmp_path)) as gw:
+        async with Client(gw.config.gateway.opcua.endpoint, timeout=5) as client:
+            checker = await check_machine_tools(client, ["fanuc-sim", "haas-sim"])
+    assert {"SpindleMonitoringType", "LaserMonitoringType", "ChannelMonitoringType"} <= set(
+        checker.names.values()
+    )
 
 
 def test_the_enumerations_the_mapping_names_are_the_nodesets() -> None:
