@@ -223,9 +223,9 @@ async def test_the_fanuc_and_haas_mappings_are_machine_tools_as_the_nodesets_dec
             "http": None,
         }
     )
-    async with Gateway(Config(gateway, mappings, tmp_path)) as gw:
-        async with Client(gw.config.gateway.opcua.endpoint, timeout=5) as client:
-            checker = await check_machine_tools(client, ["fanuc-sim", "haas-sim"])
+    endpoint = gateway.opcua.endpoint
+    async with Gateway(Config(gateway, mappings, tmp_path)), Client(endpoint, timeout=5) as client:
+        checker = await check_machine_tools(client, ["fanuc-sim", "haas-sim"])
     assert {"SpindleMonitoringType", "LaserMonitoringType", "ChannelMonitoringType"} <= set(
         checker.names.values()
     )
