@@ -110,3 +110,13 @@ async def test_client_finds_the_machine_tool_the_standard_way(tmp_path: Path) ->
             [f"{await client.get_namespace_index('http://opcfoundation.org/UA/DI/')}:SerialNumber"]
         )
         assert await serial.read_value() == "LS-SIM-0001"
+
+
+async def test_feed_override_is_in_percent_within_the_variables_range(tmp_path: Path) -> None:
+    async with laser_rig(tmp_path) as rig:
+        client = await rig.client()
+        base = f"{UMATI}/Monitoring/Channel1/FeedOverride"
+        units = await client.get_node(f"{base}/EngineeringUnits").read_value()
+        limits = await client.get_node(f"{base}/EURange").read_value()
+        assert units.UnitId == int.from_bytes(b"P1", "big") and units.DisplayName.Text == "%"
+        assert (limits.Low, limits.High) == (0, 150)  # Feed/Override's range in laser-sim.yaml

@@ -14,6 +14,7 @@ import logging
 from collections.abc import Awaitable, Callable, Mapping
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from asyncua import ua
 
@@ -30,6 +31,7 @@ from gateway.sinks.opcua.umati.events import notification_event
 from gateway.sinks.opcua.umati.instance import InstancePlan
 from gateway.sinks.opcua.umati.model import TypeModel
 from gateway.sinks.opcua.umati.values import Converted, constant_variant, states
+from gateway.sinks.opcua.values import eu_information
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +111,9 @@ class UmatiExtension:
             if isinstance(item.source, Binding):
                 node = machine.nodes[item.source.variable]
                 server.show(nodeid, node, Converted.of(data_type, item, program_states))
+                await _analog(server, planned.ids, item.path, node.definition.range)
             else:
+                await _analog(server, planned.ids, item.path, None)
                 await server.set_value(
                     nodeid, ua.DataValue(constant_variant(data_type, item.source, item.enum))
                 )
@@ -129,3 +133,15 @@ class UmatiExtension:
                 await server.trigger_event(emitted_by(event, notifier))
 
         return listener
+
+
+async def _analog(server: ServerPort, ids: dict[str, ua.NodeId], path: str, bounds: Any) -> None:
+    """An override (AnalogUnitRangeType) is in percent; its EURange is the bound variable's range, when the
+    mapping gives one (else it stays null: no guess)."""
+    units, limits = ids.get(f"{path}/EngineeringUnits"), ids.get(f"{path}/EURange")
+    if units is not None:
+        value = ua.Variant(eu_information("%"), ua.VariantType.ExtensionObject)
+        await server.set_value(units, ua.DataValue(value))
+    if limits is not None and bounds is not None:
+        value = ua.Variant(ua.Range(Low=bounds.min, High=bounds.max), ua.VariantType.ExtensionObject)
+        await server.set_value(limits, ua.DataValue(value))
