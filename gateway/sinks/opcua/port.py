@@ -88,6 +88,10 @@ class ServerPort(Protocol):
         """Load NodeSet2 files (types of companion specifications), in order, once per server."""
         ...
 
+    async def register_namespace(self, uri: str) -> int:
+        """Add a namespace URI to the NamespaceArray (if it is not there yet); returns its index."""
+        ...
+
     def namespace_of(self, uri: str) -> int:
         """The index of a namespace URI in the server's NamespaceArray (-1: absent)."""
         ...

@@ -438,6 +438,10 @@ class OpcUaSink:
             time.perf_counter() - started,
         )
 
+    async def register_namespace(self, uri: str) -> int:
+        index: int = await self.server.register_namespace(uri)
+        return index
+
     def namespace_of(self, uri: str) -> int:
         array = self.server.iserver.aspace.read_attribute_value(
             new_node_id(ua.ObjectIds.Server_NamespaceArray), ua.AttributeIds.Value

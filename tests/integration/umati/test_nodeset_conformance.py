@@ -123,6 +123,7 @@ class Checker:
         self.mandatory_seen = 0
         self.types: set[Id] = set()
         self.names: dict[Id, str] = {}  # the types instantiated that the NodeSets define, by name
+        self.instances: dict[str, Id] = {}  # the MachineTools found, by name
 
     async def instance(self, nodeid: ua.NodeId, type_id: Id, path: str) -> None:
         self.types.add(type_id)
@@ -191,6 +192,7 @@ async def check_machine_tools(client: Client, names: list[str]) -> Checker:
         await checker.instance(machine.NodeId, MACHINE_TOOL_TYPE, browser.name(machine.BrowseName)[1])
         assert checker.mandatory_seen - before >= 25
     checker.names = {t: sets.nodes[t].browse_name[1] for t in checker.types if t in sets.nodes}
+    checker.instances = {browser.name(r.BrowseName)[1]: browser.pair(r.NodeId) for r in found}
     return checker
 
 
@@ -226,6 +228,9 @@ async def test_the_fanuc_and_haas_mappings_are_machine_tools_as_the_nodesets_dec
     endpoint = gateway.opcua.endpoint
     async with Gateway(Config(gateway, mappings, tmp_path)), Client(endpoint, timeout=5) as client:
         checker = await check_machine_tools(client, ["fanuc-sim", "haas-sim"])
+    # haas-sim.yaml gives its instance a namespace of its own (umati.namespace); fanuc-sim the gateway's.
+    assert checker.instances["haas-sim"][0] == "urn:cnc-gateway:simulator:haas-sim"
+    assert checker.instances["fanuc-sim"][0] == "urn:cnc-gateway"
     assert {"SpindleMonitoringType", "LaserMonitoringType", "ChannelMonitoringType"} <= set(
         checker.names.values()
     )

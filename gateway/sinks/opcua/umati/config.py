@@ -129,6 +129,12 @@ class Program(Strict):
 class UmatiView(Strict):
     """The machine as an OPC 40501 MachineTool under the Machinery Machines folder."""
 
+    namespace: str | None = Field(
+        default=None,
+        min_length=1,
+        description="The namespace URI of this machine's instance nodes (umati's showcase asks one per "
+        "machine); default: the gateway's own namespace",
+    )
     identification: dict[str, Source] = Field(
         description="MachineToolIdentificationType properties: Manufacturer, SerialNumber, "
         "ProductInstanceUri (mandatory), Model, SoftwareRevision, YearOfConstruction …"

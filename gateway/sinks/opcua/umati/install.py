@@ -89,7 +89,8 @@ class UmatiExtension:
         wanted = [b.path for b in bound]
         if view.messages:
             wanted.append("Notification/Messages")
-        plan = InstancePlan(model, server, server.namespace_index, name, wanted)
+        ns = await server.register_namespace(view.namespace) if view.namespace else server.namespace_index
+        plan = InstancePlan(model, server, ns, name, wanted)
         self.instances[name] = plan.root(folder, new_node_id(MACHINE_TOOL_TYPE, mt), name)
         for software in view.software:
             plan.add("Identification/SoftwareIdentification", software.name, new_node_id(SOFTWARE_TYPE, mt))
