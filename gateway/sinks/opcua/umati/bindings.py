@@ -58,6 +58,8 @@ def bindings(view: UmatiView) -> list[Bound]:
     program = "Production/ActiveProgram"
     out.append(Bound(f"{program}/Name", view.program.name))
     out.append(Bound(f"{program}/NumberInList", view.program.number_in_list))
+    if view.program.job_identifier is not None:
+        out.append(Bound(f"{program}/JobIdentifier", view.program.job_identifier))
     state = view.program.state
     out.append(Bound(f"{program}/State/CurrentState", state, PROGRAM_STATES))
     out.append(Bound(f"{program}/State/CurrentState/Id", state, PROGRAM_STATES))

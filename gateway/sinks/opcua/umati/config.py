@@ -57,8 +57,10 @@ MANDATORY_IDENTIFICATION = ("Manufacturer", "SerialNumber", "ProductInstanceUri"
 
 Constant = str | int | float | bool
 
-# The gateway's own variables of every machine (gateway/model/status.py) a view may show too.
+# The gateway's own variables of every machine (gateway/model/status.py) a view may show too, and those of
+# a machine with `jobs:` (gateway/jobs/queue/publish.py).
 GATEWAY_VARIABLES = ("Status/Connected", "Status/State", "Status/LastError", "Status/ReconnectCount")
+JOB_VARIABLES = ("Jobs/Current", "Jobs/LastDelivered", "Jobs/QueueLength", "Jobs/Progress", "Jobs/LastFailed")
 
 
 class Binding(Strict):
@@ -121,8 +123,10 @@ class Program(Strict):
         description="The ProductionProgramStateMachine's state: Initializing, Running, Ended, "
         "Interrupted or Aborted"
     )
-    jobs: bool = Field(
-        default=True, description="JobIdentifier from the gateway's job queue (the job last started)"
+    job_identifier: Binding | None = Field(
+        default=None,
+        description="ActiveProgram/JobIdentifier: the gateway's Jobs/LastDelivered ties it to the job queue "
+        "(with jobs.auto, the job the machine was given to run)",
     )
 
 
@@ -198,11 +202,15 @@ def bindings(view: UmatiView) -> Iterator[tuple[Loc, Source, tuple[str, ...] | N
     yield ("program", "name"), view.program.name, None
     yield ("program", "number_in_list"), view.program.number_in_list, None
     yield ("program", "state"), view.program.state, PROGRAM_STATES
+    if view.program.job_identifier is not None:
+        yield ("program", "job_identifier"), view.program.job_identifier, None
 
 
 def check(view: UmatiView, earlier: Mapping[str, Any]) -> Iterable[tuple[Loc, str]]:
     """The section against the rest of the mapping file (`earlier`: its keys validated before)."""
     variables = {v.path for v in earlier.get("variables", ())} | set(GATEWAY_VARIABLES)
+    if earlier.get("jobs") is not None:
+        variables |= set(JOB_VARIABLES)
     for key in view.identification:
         if key not in IDENTIFICATION:
             yield (

@@ -110,7 +110,10 @@ class UmatiExtension:
                 raise SinkError(f"umati: {name}: no node {item.path} in the MachineTool instance")
             data_type = planned.data_types[item.path]
             if isinstance(item.source, Binding):
-                node = machine.nodes[item.source.variable]
+                node = machine.nodes.get(item.source.variable)
+                if node is None:  # a Jobs/ variable of a machine whose jobs: were taken away after the check
+                    log.warning("umati: %s has no %s: %s stays empty", name, item.source.variable, item.path)
+                    continue
                 server.show(nodeid, node, Converted.of(data_type, item, program_states))
                 await _analog(server, planned.ids, item.path, node.definition.range)
             else:
