@@ -199,7 +199,7 @@ class AuditStoreError(StoreError):
 
 
 class TransferLogError(StoreError):
-    """The DNC transfer log cannot be opened or written (gateway/jobs/dnc/transfers.py)."""
+    """The DNC transfer log cannot be opened or written (gateway/transports/dnc/transfers.py)."""
 
 
 # --- jobs --------------------------------------------------------------------------------------

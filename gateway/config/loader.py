@@ -23,13 +23,13 @@ from pydantic import BaseModel, ValidationError
 from gateway.alarms.config import SOURCE_TAGS
 from gateway.auth.known_passwords import is_known, known_passwords_of
 from gateway.config.gateway import GatewayConfig
-from gateway.config.jobs import CONTROLLER_TAGS
 from gateway.config.mapping import MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
 from gateway.settings.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.settings.masking import masked
 from gateway.sources import registry
+from gateway.transports import registry as transports
 
 Loc = tuple[str | int, ...]
 M = TypeVar("M", bound=BaseModel)
@@ -207,7 +207,7 @@ def _untagged(loc: Loc) -> Loc:
     for at, tags in (
         (("driver",), registry.types()),
         (("alarms", "source"), SOURCE_TAGS),
-        (("jobs", "controller"), CONTROLLER_TAGS),
+        (("jobs", "controller"), transports.types()),
     ):
         n = len(at)
         if len(loc) > n and loc[:n] == at and loc[n] in tags:

@@ -28,9 +28,9 @@ from typing import Any, Protocol
 from gateway.config.jobs import JobsConfig
 from gateway.errors import DeliveryError, JobError
 from gateway.jobs.delivery.autostart import AutoStarter
-from gateway.jobs.delivery.transport import DeliveryTransport, Program, Progress
 from gateway.jobs.queue.publish import JobPublisher
 from gateway.jobs.queue.store import Job, JobQueue, JobState
+from gateway.transports.base import DeliveryTransport, Program, Progress
 
 log = logging.getLogger("gateway.jobs.delivery")
 

@@ -1,8 +1,8 @@
 """The FOCAS2 Ethernet driver (`driver: {type: focas}`): a Fanuc read and written without Fwlib.
 
 config.py its settings; session.py, pool.py and transfer.py the asyncio client (a session, a pool of
-at most N, program transfer), which the FOCAS delivery transport (gateway/jobs/delivery/transports/
-focas.py) shares; source.py the driver (poll groups, changes only, checked writes); discover.py
+at most N, program transfer), which the FOCAS delivery transport (gateway/transports/focas/)
+shares; source.py the driver (poll groups, changes only, checked writes); discover.py
 `cnc-gateway discover focas://host:8193`. The protocol's parsing is gateway/codecs/focas/.
 """
 

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 import yaml
 
-from gateway.jobs.dnc.control import control_dir, take_requests
+from gateway.transports.dnc.control import control_dir, take_requests
 
 CORPUS = Path(__file__).resolve().parents[3] / "corpus" / "dnc" / "control.yaml"
 CASES: list[dict[str, Any]] = yaml.safe_load(CORPUS.read_text(encoding="utf-8"))

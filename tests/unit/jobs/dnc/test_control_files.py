@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from gateway.jobs.dnc import control
-from gateway.jobs.dnc.control import (
+from gateway.transports.dnc import control
+from gateway.transports.dnc.control import (
     ControlReply,
     answer,
     control_dir,

@@ -10,14 +10,16 @@ from pathlib import Path
 import pytest
 
 from gateway.codecs.dnc import not_found
-from gateway.config.punch import PunchSettings, RemoteRequests
 from gateway.config.validation import ValidationRules
-from gateway.jobs.dnc.desk import PunchDesk, QueuedProgram
-from gateway.jobs.dnc.received import ReceivedStore, safe_name
-from gateway.jobs.dnc.transfers import TransferLog
+from gateway.jobs.assembly import validator
 from gateway.model.audit import AuditEntry
 from gateway.model.definitions import MachineDefinition
 from gateway.model.tree import VariableTree
+from gateway.transports.base import QueuedProgram
+from gateway.transports.dnc.desk import PunchDesk
+from gateway.transports.dnc.punch import PunchSettings, RemoteRequests
+from gateway.transports.dnc.received import ReceivedStore, safe_name
+from gateway.transports.dnc.transfers import TransferLog
 from tests.waiting import wait_until
 
 PUNCH = b"\x00" * 10 + b"%\nO4711 (BRACKET)\nG0 X0 Y0\nG1 X10 F100\nM30\n%" + b"\x00" * 4
@@ -36,7 +38,7 @@ def make_desk(
         settings or PunchSettings(),
         store=ReceivedStore(tmp_path),
         transfers=TransferLog.in_state_dir(tmp_path),
-        rules=ValidationRules(),
+        validate=validator(ValidationRules()),
         backups=tmp_path / "backups" / "fanuc-1",
     )
     return desk, tree, audited

@@ -10,13 +10,13 @@ from typing import Any
 import pytest
 import yaml
 
-from gateway.config.punch import PunchSettings, RemoteRequests
-from gateway.jobs.dnc.desk import PunchDesk
-from gateway.jobs.dnc.received import ReceivedStore
-from gateway.jobs.dnc.transfers import TransferLog
 from gateway.model.audit import AuditEntry
 from gateway.model.definitions import MachineDefinition
 from gateway.model.tree import VariableTree
+from gateway.transports.dnc.desk import PunchDesk
+from gateway.transports.dnc.punch import PunchSettings, RemoteRequests
+from gateway.transports.dnc.received import ReceivedStore
+from gateway.transports.dnc.transfers import TransferLog
 
 CORPUS = Path(__file__).resolve().parents[3] / "corpus" / "dnc" / "punch.yaml"
 CASES: list[dict[str, Any]] = yaml.safe_load(CORPUS.read_text(encoding="utf-8"))

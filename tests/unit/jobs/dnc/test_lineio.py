@@ -1,4 +1,4 @@
-"""The serial lines' one I/O thread (gateway/jobs/dnc/lineio.py), with real descriptors: socket pairs."""
+"""The serial lines' one I/O thread (gateway/transports/dnc/lineio.py), on real descriptors: socketpairs."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from gateway.jobs.dnc import lineio
-from gateway.jobs.dnc.lineio import LineLoop
+from gateway.transports.dnc import lineio
+from gateway.transports.dnc.lineio import LineLoop
 from tests.waiting import wait_until_sync
 
 DEADLINE = 10.0

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from gateway.jobs.intake import matches
 from gateway.jobs.queue.store import Job, JobState
-from gateway.jobs.service import Spool, matches
+from gateway.jobs.spool import Spool
 
 
 def job(seq: int, filename: str = "part.nc", program_name: str | None = None, machine: str = "m1") -> Job:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from gateway.codecs.dnc import LineSettings, block_times, frame_program
-from gateway.jobs.dnc.transfer import Timing
+from gateway.transports.dnc.transfer import Timing
 
 PROGRAM = (
     b"%\nO1 (T)\nG21 G90\nG0 X0 Y0\n"

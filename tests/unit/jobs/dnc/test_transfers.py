@@ -10,7 +10,7 @@ import pytest
 
 from gateway.cli.main import main
 from gateway.errors import TransferLogError
-from gateway.jobs.dnc.transfers import TransferLog, TransferRecord, transfers_path
+from gateway.transports.dnc.transfers import TransferLog, TransferRecord, transfers_path
 
 T0 = datetime(2026, 5, 6, 7, 0, tzinfo=UTC)
 

@@ -1,7 +1,7 @@
 """Serial DNC delivery: load a program into the controller's memory, or drip-feed it while it runs.
 
 One `SerialTransport` per machine owns its line (`jobs.controller` with
-`type: serial`): the port (gateway/jobs/dnc/port.py, pyserial) and the operator's
+`type: serial`): the port (gateway/transports/dnc/port.py, pyserial) and the operator's
 hold on a drip-feed (pause, resume, abort). Its transfers are stepped by the one
 I/O thread that serves every serial line of the gateway (the fleet's, lineio.py),
 so that a DC3 is acted on between two small writes (transfer.py); opening and
@@ -46,14 +46,14 @@ from gateway.codecs.dnc import (
     program_costs,
     restart_lines,
 )
-from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError, InvalidState, StoreError
-from gateway.jobs.delivery.transport import Program, Progress, ReportProgress
-from gateway.jobs.dnc.fleet import DripFleet, FleetLine
-from gateway.jobs.dnc.idle import IdleListener
-from gateway.jobs.dnc.port import SerialPort, describe, line_settings
-from gateway.jobs.dnc.transfer import Control, Outcome, Position, Timing, Transfer, TransferFailed
-from gateway.jobs.dnc.transfers import TransferLog, TransferRecord
+from gateway.transports.base import Program, Progress, ReportProgress
+from gateway.transports.dnc.config import ControllerSerial
+from gateway.transports.dnc.fleet import DripFleet, FleetLine
+from gateway.transports.dnc.idle import IdleListener, SendAnswer
+from gateway.transports.dnc.port import SerialPort, describe, line_settings
+from gateway.transports.dnc.transfer import Control, Outcome, Position, Timing, Transfer, TransferFailed
+from gateway.transports.dnc.transfers import TransferLog, TransferRecord
 
 log = logging.getLogger("gateway.jobs.dnc")
 
@@ -124,24 +124,28 @@ class SerialTransport:
         state_dir: Path | None = None,
         transfer_log: TransferLog | None = None,
         fleet: DripFleet | None = None,
+        alarm: Callable[[], str | None] | None = None,
+        on_figures: Callable[[SerialTransport], None] | None = None,
+        listener: Callable[[SendAnswer], IdleListener] | None = None,
     ) -> None:
         self.settings = settings
-        #: The scheduler its drip-feeds take part in: the gateway's one (JobService), or the line's own.
+        #: The scheduler its drip-feeds take part in: the gateway's one (lines.py), or the line's own.
         self.fleet = fleet or DripFleet.for_lines([(machine, settings)])
         self.machine = machine
         self.line = line_settings(settings)
         self.port = SerialPort(settings)
-        self.listener: IdleListener | None = None
+        #: What the line listens for between jobs (the punch desk), made with the line's `send_answer`.
+        self.listener: IdleListener | None = None if listener is None else listener(self.send_answer)
         self.transfer_log = transfer_log
         self.checkpoint_path = None if state_dir is None else progress_path(state_dir, machine or "line")
         self.current: Drip | None = None
-        #: Says why the controller is in alarm, None when it is not (the service reads `alarm_when`).
-        self.alarm: Callable[[], str | None] | None = None
+        #: Says why the controller is in alarm, None when it is not (lines.py reads `alarm_when`).
+        self.alarm = alarm
         self.last: Outcome | None = None  # the last complete transfer (its DC3 figures)
         self.parity_errors = 0  # characters from the controller with a wrong parity bit, since the start
         self.hint = ""  # what they say of the line's settings (empty: nothing to check)
         #: Called after each transfer with the line (its `parity_errors` and `hint`), in the event loop.
-        self.on_figures: Callable[[SerialTransport], None] | None = None
+        self.on_figures = on_figures
         self._lock = asyncio.Lock()
         self._answers: set[asyncio.Task[None]] = set()  # answers waiting for the line (send_answer)
         self._stepping: Future[None] | None = None  # the transfer the I/O thread steps now

@@ -14,11 +14,11 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
-from gateway.jobs.delivery.transports.serial import SerialTransport
 from gateway.model.context import WriteContext
 from gateway.model.methods import Argument, Method
 from gateway.model.tree import Machine
 from gateway.model.types import TypeSpec
+from gateway.transports.dnc.transport import SerialTransport
 
 OBJECT = "Commands"
 ROLE = "operator"

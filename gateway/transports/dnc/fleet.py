@@ -24,8 +24,8 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 
 from gateway.codecs.dnc import BlockCost, DripLine, DripScheduler
-from gateway.config.jobs import ControllerSerial
-from gateway.jobs.dnc.lineio import LineLoop
+from gateway.transports.dnc.config import ControllerSerial
+from gateway.transports.dnc.lineio import LineLoop
 
 NO_GRANT_WAIT = 0.05  # s a line with nothing granted waits at most before it asks again
 MIN_GRANT_WAIT = 0.0005  # s: the soonest it asks again

@@ -15,12 +15,12 @@ import re
 from typing import Literal, Self
 
 from gateway.codecs.focas.errors import EW_DATA, EW_LENGTH, EW_OVRFLOW, EW_PROT
-from gateway.config.focas import ControllerFocas
 from gateway.errors import DeliveryError, ProgramNotFound, SourceError
-from gateway.jobs.delivery.transport import Program, Progress, RemoteFile, ReportProgress
 from gateway.sources.focas import transfer
 from gateway.sources.focas.session import FocasSession
 from gateway.sources.focas.transfer import TransferRefused
+from gateway.transports.base import Program, Progress, RemoteFile, ReportProgress
+from gateway.transports.focas.config import ControllerFocas
 
 NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,31}$")  # a 30i-series file name
 PERMANENT = frozenset({EW_DATA, EW_LENGTH, EW_OVRFLOW, EW_PROT})

@@ -25,9 +25,9 @@ from typing import BinaryIO, Literal, Self, TypeVar
 
 import aioftp
 
-from gateway.config.jobs import ControllerFtp
 from gateway.errors import DeliveryError, ProgramNotFound
-from gateway.jobs.delivery.transport import Program, Progress, RemoteFile, ReportProgress
+from gateway.transports.base import Program, Progress, RemoteFile, ReportProgress
+from gateway.transports.ftp.config import ControllerFtp
 
 BLOCK = 64 * 1024
 Sent = Callable[[int], None]  # bytes sent so far

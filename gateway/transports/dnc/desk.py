@@ -60,38 +60,20 @@ from gateway.codecs.dnc import (
     not_found,
     parse_request,
 )
-from gateway.config.punch import PunchSettings, RemoteRequests
-from gateway.config.validation import ValidationRules
-from gateway.jobs.dnc.received import ReceivedProgram, ReceivedStore
-from gateway.jobs.dnc.transfers import Outcome, TransferLog, TransferRecord
-from gateway.jobs.validation.pipeline import validate_program
 from gateway.model.audit import AuditEntry, as_text
 from gateway.model.events import Event
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine
+from gateway.transports.base import FindJob, QueuedProgram, Submit, Validate
+from gateway.transports.dnc.idle import SendAnswer
+from gateway.transports.dnc.punch import PunchSettings, RemoteRequests
+from gateway.transports.dnc.received import ReceivedProgram, ReceivedStore
+from gateway.transports.dnc.transfers import Outcome, TransferLog, TransferRecord
 
 log = logging.getLogger("gateway.jobs.dnc")
 
 T = TypeVar("T")
 Blocking = Callable[[Callable[[], T]], Awaitable[T]]
-# (machine, file name, program bytes, user, origin) -> a reply whose text says what became of it
-Submit = Callable[[str, str, bytes, str, str], Awaitable[str]]
-
-
-@dataclass(frozen=True, slots=True)
-class QueuedProgram:
-    """A validated program of an accepted job, found for a request (the job service reads the spool)."""
-
-    data: bytes
-    file: str  # the job's file name
-    user: str  # who submitted the job
-    job: str  # its id, J000042
-
-
-# (machine, requested name) -> the newest accepted job's program that matches, or None
-FindJob = Callable[[str, str], Awaitable[QueuedProgram | None]]
-# (program, user for the transfer log, send as a load whatever the line's mode): the line sends it
-SendAnswer = Callable[[bytes, str | None, bool], None]
 MAX_PENDING = 200  # stored punches waiting for the thread; beyond, refused and counted
 ORIGIN = "dnc"
 JUNK_LOG_EVERY = 60.0  # s between log lines about junk on an idle line
@@ -133,7 +115,7 @@ def find_program(requests: RemoteRequests, name: str) -> Path | None:
 
 
 class PunchDesk:
-    """One machine's idle line. Fits `gateway.jobs.dnc.idle.IdleListener`."""
+    """One machine's idle line. Fits `gateway.transports.dnc.idle.IdleListener`."""
 
     def __init__(
         self,
@@ -142,7 +124,7 @@ class PunchDesk:
         *,
         store: ReceivedStore,
         transfers: TransferLog | None = None,
-        rules: ValidationRules | None = None,
+        validate: Validate | None = None,
         backups: Path | None = None,
         submit: Submit | None = None,
         find_job: FindJob | None = None,
@@ -155,8 +137,8 @@ class PunchDesk:
         self.settings = settings
         self.store = store
         self.transfers = transfers
-        self.rules = rules if settings.validate_programs else None
-        self.request_rules = rules  # what answers a request is what validation accepts, always
+        self.validate = validate if settings.validate_programs else None
+        self.request_validate = validate  # what answers a request is what validation accepts, always
         self.backups = backups if settings.backup else None
         self.submit = submit
         self.find_job = find_job
@@ -275,10 +257,10 @@ class PunchDesk:
 
         async def store() -> None:
             verdict = ""
-            if self.rules is not None:
-                rules = self.rules
-                checked = await self.blocking(lambda: validate_program(text, "punch.nc", rules))
-                verdict = "accepted" if checked.accepted else f"rejected: {checked.rejections[0].reason}"
+            if self.validate is not None:
+                validate = self.validate
+                checked = await self.blocking(lambda: validate(text, "punch.nc"))
+                verdict = "accepted" if checked.accepted else f"rejected: {checked.reason}"
             rec = await self.blocking(
                 lambda: self.store.store(
                     self.name,
@@ -501,10 +483,10 @@ class PunchDesk:
             return Answer(
                 request.name, "BadNotReadable", reason, answer_program(reason, number=requests.number)
             )
-        if self.request_rules is not None:  # compiled reader: about 20 ms for 1 MB, so done here
-            verdict = validate_program(data, path.name, self.request_rules)
+        if self.request_validate is not None:  # compiled reader: about 20 ms for 1 MB, so done here
+            verdict = self.request_validate(data, path.name)
             if not verdict.accepted:
-                first = verdict.rejections[0].reason
+                first = verdict.reason
                 log.warning(
                     "%s: remote request for %s refused by validation: %s", self.name, path.name, first
                 )

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 from gateway.codecs.dnc import DncSender, Junk, LineSettings, WireProgram
 from gateway.errors import DeliveryError
-from gateway.jobs.dnc.fleet import FleetLine
-from gateway.jobs.dnc.lineio import GRACE
-from gateway.jobs.dnc.port import SerialPort
+from gateway.transports.dnc.fleet import FleetLine
+from gateway.transports.dnc.lineio import GRACE
+from gateway.transports.dnc.port import SerialPort
 
 log = logging.getLogger("gateway.jobs.dnc")
 

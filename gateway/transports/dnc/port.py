@@ -30,8 +30,8 @@ from typing import Protocol, cast
 import serial
 
 from gateway.codecs.dnc import LineSettings
-from gateway.config.jobs import ControllerSerial
 from gateway.errors import DeliveryError
+from gateway.transports.dnc.config import ControllerSerial
 
 READ_SIZE = 4096
 

@@ -1,6 +1,6 @@
 """What a serial line's owner does with bytes that arrive while no job is sending: `IdleListener`.
 
-The line owner (gateway/jobs/dnc/line.py) keeps the port open between
+The line owner (transport.py, `SerialTransport`) keeps the port open between
 transfers. When nothing is being sent it reads the line and hands every byte to
 its idle listener: the punch desk (an operator's PUNCH, a remote request) plugs
 in here. A listener that wants something sent back (the answer to a remote
@@ -11,7 +11,11 @@ the line's mode says (or always as a load when `answer_load`), naming
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
+
+# (program, user for the transfer log, send as a load whatever the line's mode): the line sends it later
+SendAnswer = Callable[[bytes, str | None, bool], None]
 
 
 class IdleListener(Protocol):
