@@ -1,7 +1,7 @@
 """Every case of tests/corpus/dnc/punch.yaml over a real line: a scripted controller on a raw TCP port
 sends the case's bytes to the gateway's serial transport (real pyserial, socket://), whose idle listener is
 the punch desk; the controller reads back the answer, if any. The same expectations as the unit runner
-(tests/unit/jobs/dnc/test_desk_corpus.py), here with the line's own reads, timers and drops."""
+(tests/unit/transports/dnc/test_desk_corpus.py), here with the line's own reads, timers and drops."""
 
 from __future__ import annotations
 
