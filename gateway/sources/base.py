@@ -18,7 +18,7 @@ from __future__ import annotations
 import builtins
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, Self, TypeVar
+from typing import Any, Protocol, Self, TypeVar, runtime_checkable
 
 from gateway.model.sample import ReadBack
 from gateway.model.tree import Machine, VariableNode
@@ -56,6 +56,21 @@ class DriverSettings(Protocol):
     def endpoint(self) -> str:
         """The controller's address as users know it (`Status/Endpoint`, log lines)."""
         ...
+
+
+@runtime_checkable
+class ChecksVariables(Protocol):
+    """Driver settings that check a mapping's variables together (addresses against types, overlaps,
+    sizes): MachineMapping raises what it answers as `file:line: variables[i].<key>` errors."""
+
+    def variable_issues(self, variables: Sequence[Any]) -> list[tuple[tuple[str | int, ...], str]]: ...
+
+
+@runtime_checkable
+class PlansPolls(Protocol):
+    """Driver settings of a polled device (Modbus, S7): `cnc-gateway check` prints the requests it plans."""
+
+    def describe_plan(self, variables: Sequence[Any], interval_of: Callable[[Any], float]) -> list[str]: ...
 
 
 class VariableSettings(Protocol):
