@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from gateway.codecs.focas.address import parse_address
 from gateway.model.tree import Machine
-from gateway.sources.base import DriverMapping, DriverSpec, Source
+from gateway.sources.base import DiscoverRequest, DriverMapping, DriverSpec, Source
 from gateway.sources.focas.config import FocasDriver
 
 
@@ -20,10 +20,18 @@ def _create(machine: Machine, mapping: DriverMapping) -> Source:
     return FocasSource(machine, mapping)
 
 
+async def _discover(request: DiscoverRequest) -> str:
+    from gateway.sources.focas.discover import discover_focas
+
+    return await discover_focas(request.endpoint, machine=request.machine, timeout=request.timeout)
+
+
 SPEC = DriverSpec(
     type="focas",
     settings=FocasDriver,
     create=_create,
     summary="a Fanuc over FOCAS2 Ethernet (port 8193): status, positions, macros, PMC, alarms, programs",
     check_address=parse_address,
+    discovers=("focas://",),
+    discover=_discover,
 )
