@@ -98,6 +98,8 @@ def build_machine(
     """One machine's worker (with its transport and auto-start) and its `Programs` methods."""
     machine = tree.machines[name]
     delivery = supervisor.deliveries[name]
+    if delivery.keep_delivered > 0:
+        spool.keep[name] = delivery.keep_delivered
     autostart = None if jobs.auto is None else AutoStarter(machine, jobs.auto, delivery.folder)
     worker = DeliveryWorker(
         name,

@@ -77,14 +77,7 @@ class JobService:
             m.machine: m.jobs for m in config.machines if m.jobs is not None
         }
         state = config.state_dir
-        keep = {
-            name: jobs.punch.requests.keep_delivered
-            for name, jobs in self.machines.items()
-            if jobs.punch is not None
-            and jobs.punch.requests is not None
-            and "queue" in jobs.punch.requests.sources
-        }
-        self.spool = Spool(state / "jobs" / "spool", keep)
+        self.spool = Spool(state / "jobs" / "spool")  # what it keeps per machine: the machine's transport
         self.backups_dir = state / "backups"
         self.queue = JobQueue(queue_path(state))
         self.threads = JobThreads()

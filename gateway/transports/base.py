@@ -218,6 +218,7 @@ class Delivery:
     folder: str = ""  # the program folder auto-start's `select_value: path` names ("": none)
     #: Marks a FAILED job's spooled program to start at a line on its next delivery (drip-feed only).
     restart_at: Callable[[Path, int], None] | None = None
+    keep_delivered: int = 0  # delivered programs the spool keeps for the transport (remote requests)
 
 
 class Deliveries(Protocol):

@@ -72,7 +72,9 @@ class SerialLines:
             )
             for method in drip_methods(line, m.restart):
                 m.machine.add_method(method)
-            self.machines[m.name] = Delivery(line, restart_at=request_restart)
+            requests = None if punch is None else punch.requests
+            keep = requests.keep_delivered if requests is not None and "queue" in requests.sources else 0
+            self.machines[m.name] = Delivery(line, restart_at=request_restart, keep_delivered=keep)
 
     def _desk(self, m: MachineJobs, punch: PunchSettings, send_answer: SendAnswer) -> PunchDesk:
         """What an idle line hears (jobs.punch): the line owner takes its machine's desk."""
