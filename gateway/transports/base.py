@@ -25,7 +25,7 @@ from __future__ import annotations
 import builtins
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Protocol, Self, TypeVar
 
@@ -266,7 +266,7 @@ class TransportSpec:
     summary: str  # one line, for docs/architecture.md's table
     store: Callable[[Any], OpenStore] | None = None  # None: the transport has no program store
     # `cnc-gateway` verbs this transport adds, as (verb, module): as DriverSpec.commands.
-    commands: tuple[tuple[str, str], ...] = field(default=())
+    commands: tuple[tuple[str, str], ...] = ()
 
 
 def settings_of(settings: object, model: builtins.type[M]) -> M:
