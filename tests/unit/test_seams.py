@@ -58,7 +58,7 @@ def test_reconnect_loops_use_the_one_helper(module: str) -> None:
     assert "gateway.reconnect" in imported(module)
 
 
-@pytest.mark.parametrize("module", ["gateway.audit.store", "gateway.sinks.mqtt.buffer"])
+@pytest.mark.parametrize("module", ["gateway.audit.store", "gateway.sinks.mqtt_link.buffer"])
 def test_sqlite_files_are_opened_through_sqlite_file(module: str) -> None:
     source = (ROOT / (module.replace(".", "/") + ".py")).read_text()
     assert "gateway.sqlite_file" in imported(module) and "sqlite3.connect" not in source

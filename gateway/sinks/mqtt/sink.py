@@ -39,8 +39,15 @@ from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.base import SinkHealth
-from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
-from gateway.sinks.mqtt.client import (
+from gateway.sinks.mqtt.commands import CommandRequests
+from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
+from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
+from gateway.sinks.mqtt.routes import Route, Routes
+from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
+from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
+from gateway.sinks.mqtt.writes import WriteBack, report_writers
+from gateway.sinks.mqtt_link.buffer import Backlog, Journal, Message
+from gateway.sinks.mqtt_link.client import (
     BrokerSettings,
     Connected,
     Incoming,
@@ -49,13 +56,6 @@ from gateway.sinks.mqtt.client import (
     default_client_id,
     tls_context,
 )
-from gateway.sinks.mqtt.commands import CommandRequests
-from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
-from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
-from gateway.sinks.mqtt.routes import Route, Routes
-from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
-from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
-from gateway.sinks.mqtt.writes import WriteBack, report_writers
 
 log = logging.getLogger(__name__)
 

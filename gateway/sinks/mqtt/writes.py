@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 from collections.abc import Callable, Mapping
 
 from gateway.errors import (
@@ -33,11 +32,12 @@ from gateway.errors import (
 from gateway.model.context import WriteContext
 from gateway.model.reach import reach
 from gateway.model.tree import VariableTree
-from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import decode_set, encode_result
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.topics import RESULT, SET, ResponseTopics, result_topic, target_of_set
+from gateway.sinks.mqtt_link.client import Incoming
+from gateway.sinks.mqtt_link.requests import LogQuota, TooManyWrites
 
 log = logging.getLogger(__name__)
 
@@ -74,38 +74,10 @@ def report_writers(tree: VariableTree, routes: Routes, mappings: Mapping[str, Mq
 Answer = Callable[[str, bytes, "bytes | None"], None]
 
 
-class TooManyWrites(RequestError):
-    status = "BadTooManyOperations"
-
-
 class ResponseTopicRefused(RequestError):
     """An MQTT 5 response topic the gateway will not publish to (topics.ResponseTopics)."""
 
     status = "BadRequestNotAllowed"
-
-
-class LogQuota:
-    """At most `per_minute` lines a minute; the rest are counted and summarised."""
-
-    def __init__(self, per_minute: int = 10) -> None:
-        self.per_minute = per_minute
-        self._window = 0.0
-        self._used = 0
-        self._suppressed = 0
-
-    def allow(self) -> bool:
-        now = time.monotonic()
-        if now - self._window >= 60.0:
-            if self._suppressed:
-                log.warning(
-                    "%d more refused MQTT writes in the last minute (not logged one by one)", self._suppressed
-                )
-            self._window, self._used, self._suppressed = now, 0, 0
-        if self._used < self.per_minute:
-            self._used += 1
-            return True
-        self._suppressed += 1
-        return False
 
 
 class _Request:

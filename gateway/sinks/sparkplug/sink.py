@@ -71,8 +71,8 @@ from gateway.model.reach import reach
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.base import SinkHealth
-from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
-from gateway.sinks.mqtt.client import (
+from gateway.sinks.mqtt_link.buffer import Backlog, Journal, Message
+from gateway.sinks.mqtt_link.client import (
     BrokerSettings,
     Connected,
     Incoming,
@@ -81,7 +81,6 @@ from gateway.sinks.mqtt.client import (
     default_client_id,
     tls_context,
 )
-from gateway.sinks.mqtt.config import MqttMachineEntry
 from gateway.sinks.sparkplug.bdseq import FILE as BDSEQ_FILE
 from gateway.sinks.sparkplug.bdseq import BdSeqStore
 from gateway.sinks.sparkplug.commands import Outcomes, Requests
@@ -90,6 +89,7 @@ from gateway.sinks.sparkplug.devices import (
     QUALITY_PROPERTY,
     CommandMetric,
     Device,
+    DeviceMapping,
     VariableMetric,
     millis,
     now_ms,
@@ -140,7 +140,7 @@ class SparkplugSink:
         config: SparkplugConfig,
         broker: SparkplugBroker,
         state_dir: Path,
-        mappings: Mapping[str, MqttMachineEntry],
+        mappings: Mapping[str, DeviceMapping],
         *,
         base_dir: Path | None = None,
     ) -> None:

@@ -84,7 +84,7 @@ async def test_a_packet_over_max_packet_size_never_reaches_the_gateway(
     tmp_path: Path,
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    caplog.set_level(logging.WARNING, logger="gateway.sinks.mqtt.client")
+    caplog.set_level(logging.WARNING, logger="gateway.sinks.mqtt_link.client")
     tree = make_tree()
     writer = tree.machines["m1"].writer = _Writer()
     rec = subscriber(recorders, mosquitto.port, topics=[RESULT])
@@ -109,7 +109,7 @@ async def test_a_packet_over_max_packet_size_never_reaches_the_gateway(
         if protocol == "5":  # the broker kept it from the gateway, which never lost its connection
             assert sink.connects == 1 and client.oversized_packets == 0
         else:
-            [line] = [r.getMessage() for r in caplog.records if r.name == "gateway.sinks.mqtt.client"]
+            [line] = [r.getMessage() for r in caplog.records if r.name == "gateway.sinks.mqtt_link.client"]
             size = 1 + 4 + 2 + len(SET) + 4 * MIB  # fixed header (4 length bytes), topic, payload
             assert f"a packet of {size} bytes, more than max_packet_size 1048576" in line
             assert "message_size_limit" in line

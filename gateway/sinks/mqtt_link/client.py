@@ -61,7 +61,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway.errors import BrokerError, BrokerRefused, SinkError
-from gateway.sinks.mqtt.config import MqttTls
+from gateway.sinks.mqtt_link.broker import MqttTls
 
 # paho's Properties() has no annotations, which mypy --strict will not call; this is its signature.
 _properties = cast(Callable[[int], Properties], Properties)
