@@ -51,7 +51,7 @@ def test_the_opcua_server_does_not_import_its_alarms_and_they_do_not_import_it()
 
 
 @pytest.mark.parametrize(
-    "module", ["gateway.sources.opcua.client", "gateway.sinks.mqtt.sink", "gateway.sinks.copydata.tcp",
+    "module", ["gateway.sources.opcua.client", "gateway.sinks.mqtt_link.link", "gateway.sinks.copydata.tcp",
                "gateway.sinks.copydata.udp", "gateway.sinks.copydata.win32"],
 )  # fmt: skip
 def test_reconnect_loops_use_the_one_helper(module: str) -> None:
