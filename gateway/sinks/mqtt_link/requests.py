@@ -5,7 +5,7 @@ carried out, and the refusals are logged with a quota (`LogQuota`), so that junk
 log; what is left waits in a bounded queue per machine (`TooManyWrites` beyond it). Commands carry
 a JSON object of their arguments by name (`read_body`, `arguments`), and one machine's commands
 run at most `MAX_RUNNING` at once (`carry_out`): a stop must not wait behind a start that is
-waiting for its deadline.
+waiting for its deadline. At start-up, `report_roles` says what the requests may do, and as whom.
 """
 
 from __future__ import annotations
@@ -14,11 +14,13 @@ import asyncio
 import json
 import logging
 import time
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
 from typing import Any, TypeVar
 
 from gateway.errors import ArgumentsMissing, MalformedRequest, RequestError, TooManyArguments
 from gateway.model.methods import Method
+from gateway.model.reach import reach
+from gateway.model.tree import Machine, VariableNode, VariableTree
 
 log = logging.getLogger(__name__)
 
@@ -119,3 +121,29 @@ async def carry_out(
             job = await queue.get()
             await slots.acquire()
             tg.create_task(one(job), name=name(job))
+
+
+def report_roles(
+    tree: VariableTree,
+    opened: Iterable[tuple[Machine, Sequence[VariableNode], bool]],
+    log: logging.Logger,
+    *,
+    refused: str,
+    acts: str,
+) -> None:
+    """Say at start-up, per machine, what the requests the mapping opens (its writable variables, its
+    commands) may do and the role they act with; or that they are refused for want of a role.
+
+    `opened`: (machine, variables, commands) per machine; `refused` the line with the machine's name
+    (%s), `acts` the line with the machine's name, the role and what it may do (%s each)."""
+    access = tree.access
+    for machine, nodes, commands in opened:
+        objects = {"Commands"} if commands else set()
+        if not nodes and not objects:
+            continue
+        role = access.mqtt_role(machine.name)
+        if access.enabled and role is None:
+            log.info(refused, machine.name)
+            continue
+        found = reach(machine, role, variables=nodes, objects=objects, alarms=False)
+        log.info(acts, machine.name, role or "no role (access.enabled is false)", found.what())

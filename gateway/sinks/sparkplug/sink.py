@@ -67,7 +67,6 @@ from gateway.codecs.sparkplug import (
 from gateway.codecs.sparkplug.aliases import Aliases
 from gateway.errors import BrokerError
 from gateway.model.hub import Change, Subscription
-from gateway.model.reach import reach
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt_link.buffer import Message
@@ -80,6 +79,7 @@ from gateway.sinks.mqtt_link.link import (
     Wording,
     broker_settings,
 )
+from gateway.sinks.mqtt_link.requests import report_roles
 from gateway.sinks.sparkplug.bdseq import FILE as BDSEQ_FILE
 from gateway.sinks.sparkplug.bdseq import BdSeqStore
 from gateway.sinks.sparkplug.commands import Outcomes, Requests
@@ -268,27 +268,21 @@ class SparkplugSink(BrokerLink):
         return self
 
     def _report_writers(self) -> None:
-        access = self.tree.access
-        for device in self.devices.values():
-            nodes = [m.node for m in device.variables.values() if m.writable]
-            objects = {"Commands"} if any(c.enabled for c in device.commands) else set()
-            if not nodes and not objects:
-                continue
-            role = access.mqtt_role(device.name)
-            if access.enabled and role is None:
-                log.info(
-                    "Sparkplug: %s: DCMD writes and commands the mapping opens are refused: they have "
-                    "no role (mapping: mqtt.writer_role, or access.mqtt_writer_role)",
-                    device.name,
+        report_roles(
+            self.tree,
+            (
+                (
+                    device.machine,
+                    [m.node for m in device.variables.values() if m.writable],
+                    any(c.enabled for c in device.commands),
                 )
-                continue
-            opened = reach(device.machine, role, variables=nodes, objects=objects, alarms=False)
-            log.info(
-                "Sparkplug: DCMD to %s acts as %s and may %s",
-                device.name,
-                role or "no role (access.enabled is false)",
-                opened.what(),
-            )
+                for device in self.devices.values()
+            ),
+            log,
+            refused="Sparkplug: %s: DCMD writes and commands the mapping opens are refused: they have "
+            "no role (mapping: mqtt.writer_role, or access.mqtt_writer_role)",
+            acts="Sparkplug: DCMD to %s acts as %s and may %s",
+        )
 
     async def __aexit__(self, *exc_info: object) -> None:
         client = self._client
