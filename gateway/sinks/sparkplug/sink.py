@@ -16,7 +16,7 @@ A session (Sparkplug 3.0, chapter 5):
    a clean stop: NDEATH, then DISCONNECT; a crash: the broker publishes the will.
 
 Store-and-forward: while there is no session (no broker, or the primary host offline), changes
-are kept in the MQTT sink's `Backlog` (with its optional SQLite journal), one stored DDATA per
+are kept in the MQTT link's `Backlog` (with its optional SQLite journal), one stored DDATA per
 machine and cycle, by name and marked historical (the codec's `encode_stored`). After the next
 births they go out oldest first, with this session's aliases and seq (`release_stored`), beside
 the live data, which is never held back for them: every message is either live or historical.
