@@ -1,5 +1,7 @@
 """The attributes of a DataItem, written once: /probe's XML and JSON and the `path=` filter read this table.
 
+(A Description's attributes, the same way: `description_attributes`.)
+
 A row: the attribute's name (the XML attribute and the JSON key, which MTConnect spells alike), its
 value on a `DataItem` (None: the attribute is left out), how the XML writes it, and whether a
 `path=` test can name it (paths.py keeps those of the probe tree). The JSON writes the value as it
@@ -12,7 +14,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from gateway.codecs.mtconnect.model import DataItem, Representation
+from gateway.codecs.mtconnect.model import DataItem, Description, Representation
 from gateway.codecs.mtconnect.vocabulary import format_float
 from gateway.codecs.mtconnect.xmltext import xml_attr
 
@@ -56,3 +58,15 @@ def present(
         value = attribute.value(item)
         if value is not None:
             yield attribute, value
+
+
+def description_attributes(d: Description) -> Iterator[tuple[str, str]]:
+    """A Description's attributes that are set, in the documents' order (its text is not one)."""
+    for name, value in (
+        ("manufacturer", d.manufacturer),
+        ("model", d.model),
+        ("serialNumber", d.serial_number),
+        ("station", d.station),
+    ):
+        if value is not None:
+            yield name, value

@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from gateway.codecs.mtconnect.assets import Asset
-from gateway.codecs.mtconnect.attributes import present
+from gateway.codecs.mtconnect.attributes import description_attributes, present
 from gateway.codecs.mtconnect.buffer import Entry, Window, entry_xml
 from gateway.codecs.mtconnect.errors import RequestError
 from gateway.codecs.mtconnect.model import (
@@ -134,14 +134,8 @@ def _node_xml(node: Node, out: list[str]) -> None:
 
 def _description_xml(d: Description) -> str:
     parts = ["<Description"]
-    for attr, value in (
-        ("manufacturer", d.manufacturer),
-        ("model", d.model),
-        ("serialNumber", d.serial_number),
-        ("station", d.station),
-    ):
-        if value is not None:
-            parts.append(f' {attr}="{xml_attr(value)}"')
+    for attr, value in description_attributes(d):
+        parts.append(f' {attr}="{xml_attr(value)}"')
     if d.text:
         parts.append(f">{xml_text(d.text)}</Description>")
     else:

@@ -25,7 +25,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from gateway.codecs.mtconnect.assets import Asset
-from gateway.codecs.mtconnect.attributes import present
+from gateway.codecs.mtconnect.attributes import description_attributes, present
 from gateway.codecs.mtconnect.buffer import Entry, Window
 from gateway.codecs.mtconnect.documents import SCHEMA_VERSION, DocumentInfo
 from gateway.codecs.mtconnect.errors import RequestError
@@ -110,16 +110,9 @@ def _node_json(node: Node) -> dict[str, Any]:
 
 
 def _description_json(d: Description) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in (
-        ("manufacturer", d.manufacturer),
-        ("model", d.model),
-        ("serialNumber", d.serial_number),
-        ("station", d.station),
-        ("value", d.text),
-    ):
-        if value is not None:
-            out[key] = value
+    out: dict[str, Any] = dict(description_attributes(d))
+    if d.text is not None:
+        out["value"] = d.text
     return out
 
 
