@@ -5,5 +5,5 @@ Not a sink (no SinkSpec): the registry lists only the sinks. `client.py` is the 
 of the gateway file that `mqtt:` and `sparkplug.broker` share; `buffer.py` store-and-forward (the
 `Backlog` and its SQLite `Journal`); `requests.py` the bounds and the log quota of requests from
 the broker. The two sinks import from here and never from each other (pyproject.toml's
-acyclic_siblings contract), as Telegraf's outputs share plugins/common/mqtt.
+mqtt-sinks-independent contract), as Telegraf's outputs share plugins/common/mqtt.
 """
