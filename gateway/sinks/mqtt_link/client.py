@@ -61,12 +61,12 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway.errors import BrokerError, BrokerRefused, SinkError
-from gateway.sinks.mqtt.config import MqttTls
+from gateway.sinks.mqtt_link.broker import MqttTls
 
 # paho's Properties() has no annotations, which mypy --strict will not call; this is its signature.
 _properties = cast(Callable[[int], Properties], Properties)
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("gateway.sinks.mqtt.client")  # the name log filters knew before the link moved here
 
 PUBLISH = MessageType.PUBLISH
 MISC_INTERVAL = 1.0  # s between paho.loop_misc calls (keepalive pings, dead-connection detection)

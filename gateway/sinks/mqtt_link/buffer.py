@@ -27,7 +27,7 @@ from pathlib import Path
 from gateway.errors import SinkError
 from gateway.sqlite_file import SqliteFile
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("gateway.sinks.mqtt.buffer")  # the name log filters knew before the link moved here
 
 
 class Message:

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
+from gateway.sinks.mqtt_link.buffer import Backlog, Journal, Message
 
 
 def msg(
