@@ -20,6 +20,7 @@ from gateway.settings.access import (
     unknown_role,
 )
 from gateway.settings.sections import Sectioned, with_sections
+from gateway.settings.urls import check_queue_url
 from gateway.sinks import registry as sinks
 from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mtconnect.config import AgentConfig
@@ -36,6 +37,11 @@ class GatewayConfig(Sectioned):
         default="state", description="Where the gateway keeps its state; relative to this file"
     )
     machines: list[str] = Field(default_factory=list, description="Mapping files, relative to this file")
+    queue: str | None = Field(
+        default=None,
+        description="The job queue: a PostgreSQL database that shards share (postgresql://user@host/db;"
+        " the password from PGPASSWORD or ~/.pgpass); absent: a SQLite file in the state directory",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
     inbox: InboxConfig = Field(
         default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
@@ -68,6 +74,11 @@ class GatewayConfig(Sectioned):
         default_factory=HttpConfig,
         description="The web console, REST API and /metrics (gateway/sinks/web/config.py); null: off",
     )
+
+    @field_validator("queue")
+    @classmethod
+    def _queue(cls, queue: str | None) -> str | None:
+        return None if queue is None else check_queue_url(queue)
 
     @field_validator("roles")
     @classmethod

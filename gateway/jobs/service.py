@@ -10,7 +10,7 @@ another process are published and acted upon.
 Files under the state directory:
 
     inbox/<machine>/[tmp/]      the FTP inbox's folders (empty when nothing is uploading)
-    jobs/queue.sqlite3          the queue
+    jobs/queue.sqlite3          the queue (unless the gateway file's `queue:` names a PostgreSQL database)
     jobs/spool/<id>.received    an upload between arrival and validation
     jobs/spool/<id>.program     a validated program waiting for delivery (kept for FAILED/CANCELLED: retry)
     jobs/spool/delivered/<machine>/<id>.program
@@ -65,8 +65,10 @@ from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.inbox import STAGING, Inbox, Upload, UploadReply, tls_context
 from gateway.jobs.inbox.paths import check_file_name
 from gateway.jobs.programs import program_methods
+from gateway.jobs.queue.backend import job_store
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.publish import JobPublisher
-from gateway.jobs.queue.store import Job, JobQueue, JobState, Transition, parse_job_id
+from gateway.jobs.queue.store import Job, JobState, Transition, parse_job_id
 from gateway.jobs.threads import JobThreads
 from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, ready, validate_file
@@ -162,7 +164,7 @@ class JobService:
         self.rejected_dir = state / "rejected"
         self.backups_dir = state / "backups"
         self.inbox_root = state / "inbox"
-        self.queue = JobQueue(queue_path(state))
+        self.queue: JobStore = job_store(config.gateway.queue, state)  # gateway file's `queue:`, else SQLite
         self.threads = JobThreads()
         self.publisher = JobPublisher(tree, self.machines)
         self.autostarters: dict[str, AutoStarter] = {}

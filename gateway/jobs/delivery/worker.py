@@ -29,8 +29,9 @@ from gateway.config.jobs import JobsConfig
 from gateway.errors import DeliveryError, JobError
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.transport import DeliveryTransport, Program, Progress
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.publish import JobPublisher
-from gateway.jobs.queue.store import Job, JobQueue, JobState
+from gateway.jobs.queue.records import Job, JobState
 
 log = logging.getLogger("gateway.jobs.delivery")
 
@@ -56,7 +57,7 @@ class Spool(Protocol):
     def delivered(self, job: Job) -> None: ...
 
 
-# Runs a JobQueue method off the event loop (and tells the publisher something may have changed).
+# Runs a JobStore method off the event loop (and tells the publisher something may have changed).
 QueueCall = Callable[..., Awaitable[Any]]
 
 
@@ -67,7 +68,7 @@ class DeliveryWorker:
         self,
         machine: str,
         config: JobsConfig,
-        queue: JobQueue,
+        queue: JobStore,
         spool: Spool,
         publisher: JobPublisher,
         run: QueueCall,
