@@ -91,12 +91,16 @@ class Database:
         error: type[GatewayError] = StoreError,
         connect_timeout: float = 10.0,
         application_name: str = "cnc-gateway",
+        idle_in_transaction: float = 5.0,
     ) -> None:
         self.url = url
         self.noun = noun
         self.error = error
         self.connect_timeout = connect_timeout
         self.application_name = application_name
+        # A process paused inside a transaction (SIGSTOP, a stalled VM) would hold its row locks, and so
+        # block a takeover, for as long as it sleeps: the server ends such a session after this long.
+        self.idle_in_transaction = idle_in_transaction
         self._conn: psycopg.Connection[Row] | None = None
         self._lock = threading.RLock()
 
@@ -144,6 +148,7 @@ class Database:
                 row_factory=dict_row,
                 connect_timeout=max(1, round(self.connect_timeout)),
                 application_name=self.application_name,
+                options=f"-c idle_in_transaction_session_timeout={round(self.idle_in_transaction * 1000)}",
             )
         self._conn = conn
         return conn
