@@ -14,6 +14,7 @@ from pathlib import Path
 
 from gateway.jobs.queue.postgres import PostgresJobQueue
 from gateway.jobs.queue.records import JobState
+from simulator.fleet import SimulatorFleet, machine_name
 from tests.integration.jobs.conftest import GOOD, Store, mapping_text
 from tests.waiting import wait_until
 
@@ -53,3 +54,21 @@ async def test_an_upload_is_queued_in_postgresql_and_delivered_once(
         out, err = await proc.communicate()
         assert proc.returncode == 0, err.decode()
         assert out.decode().splitlines()[1].split()[:4] == ["J000001", "laser", "DELIVERED", "part.nc"]
+
+
+async def test_a_job_for_one_machine_of_the_fleet_reaches_its_store_only(
+    tmp_path: Path, harness, postgres_url: str
+) -> None:
+    async with SimulatorFleet(3, store_root=tmp_path / "stores") as fleet:
+        mappings = [fleet.mapping(i) for i in (1, 2, 3)]
+        async with harness(mappings, queue=postgres_url) as h:
+            reply = await h.stor("laser-002", "part.nc", GOOD)
+            assert reply.startswith("226 J000001 queued for laser-002")
+            await h.wait_state(1, S.DELIVERED)
+        stores = {
+            machine_name(i): (
+                tmp_path / "stores" / machine_name(i) / "DATA" / "Programs" / "part.nc"
+            ).is_file()
+            for i in (1, 2, 3)
+        }
+        assert stores == {"laser-001": False, "laser-002": True, "laser-003": False}
