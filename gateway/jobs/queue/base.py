@@ -8,7 +8,7 @@ a new revision, and let a reader follow changes by revision (`marks`, `changes_s
 `transitions_since`, `data_version`). Methods are synchronous; the async side calls them in
 a worker thread (gateway/jobs/threads.py).
 
-`fence`: the claim of a job (`start_sending`) and its delivery (`delivered`) can carry the
+`fence`: the claim of a job (`start_sending`) and its outcome (`delivered`, `send_failed`) can carry the
 fencing token of the claimer's lease on the machine; a store that holds leases checks it in
 the same transaction and refuses a stale one (JobError). The SQLite store holds no leases
 and refuses a fence: one process owns a SQLite queue.
@@ -69,7 +69,9 @@ class JobStore(Protocol):
 
     def delivered(self, seq: int, name: str, reason: str = "", *, fence: Fence | None = None) -> Job: ...
 
-    def send_failed(self, seq: int, reason: str, *, retry_at: float | None) -> Job: ...
+    def send_failed(
+        self, seq: int, reason: str, *, retry_at: float | None, fence: Fence | None = None
+    ) -> Job: ...
 
     def note(self, seq: int, reason: str) -> Job: ...
 

@@ -11,7 +11,7 @@ write it at once, so:
   late), and two writers never deadlock on each other's rows. A job is then locked
   (FOR UPDATE) and compare-and-set on its state: of two processes that try to start sending
   the same job, one gets SENDING and the other a JobError, as with the SQLite file.
-- A claim (`start_sending`) or a delivery (`delivered`) may carry a fencing token
+- A claim (`start_sending`) or its outcome (`delivered`, `send_failed`) may carry a fencing token
   (gateway/shards/fence.py); it is checked in the same transaction against the machine's
   lease (gateway/shards/leases.py), so a process that lost its lease cannot claim.
 - Times are the database's TIMESTAMPTZ; `data_version` is the revision (it also moves with
@@ -327,9 +327,13 @@ class PostgresJobQueue:
                 next_attempt_at=None,
             )
 
-    def send_failed(self, seq: int, reason: str, *, retry_at: float | None) -> Job:
-        """A failed attempt: back to QUEUED until `retry_at`, or FAILED (dead letter) when None."""
+    def send_failed(
+        self, seq: int, reason: str, *, retry_at: float | None, fence: Fence | None = None
+    ) -> Job:
+        """A failed attempt: back to QUEUED until `retry_at`, or FAILED (dead letter) when None. Fenced like
+        the claim: a holder that lost the machine must not put back a job the new holder is sending."""
         with self._write() as tx:
+            self._fenced(tx, fence, self._get(tx, seq, lock=True), "record a failed attempt of")
             if retry_at is None:
                 return self._move(tx, seq, S.FAILED, reason, expect=(S.SENDING,), next_attempt_at=None)
             return self._move(tx, seq, S.QUEUED, reason, expect=(S.SENDING,), next_attempt_at=retry_at)

@@ -281,8 +281,11 @@ class JobQueue(SqliteFile):
                 next_attempt_at=None,
             )
 
-    def send_failed(self, seq: int, reason: str, *, retry_at: float | None) -> Job:
+    def send_failed(
+        self, seq: int, reason: str, *, retry_at: float | None, fence: Fence | None = None
+    ) -> Job:
         """A failed attempt: back to QUEUED until `retry_at`, or FAILED (dead letter) when None."""
+        _no_fence(fence)
         with self._write() as db:
             if retry_at is None:
                 return self._move(db, seq, S.FAILED, reason, expect=(S.SENDING,), next_attempt_at=None)
