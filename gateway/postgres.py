@@ -7,7 +7,9 @@ this file. One connection per `Database`, shared by threads under a lock, like
 the SQLite files (gateway/sqlite_file.py); autocommit, with an explicit
 transaction per operation. A connection the server dropped (a restart) is
 opened again by the next operation, so a queue waits for its database instead
-of dying with it.
+of dying with it; one that has been idle for `ping_after` seconds is tried
+first (a round trip), so that an idle gateway finds a restarted server without
+failing the operation that comes next.
 
 Schemas are versioned per component in `schema_versions`: `migrate()` applies
 the steps a database lacks, under an advisory lock so that two gateways that
@@ -21,6 +23,7 @@ Passwords come from the URL or from libpq's environment (PGPASSWORD,
 from __future__ import annotations
 
 import threading
+import time
 import zlib
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -92,6 +95,7 @@ class Database:
         connect_timeout: float = 10.0,
         application_name: str = "cnc-gateway",
         idle_in_transaction: float = 5.0,
+        ping_after: float = 5.0,
     ) -> None:
         self.url = url
         self.noun = noun
@@ -101,6 +105,8 @@ class Database:
         # A process paused inside a transaction (SIGSTOP, a stalled VM) would hold its row locks, and so
         # block a takeover, for as long as it sleeps: the server ends such a session after this long.
         self.idle_in_transaction = idle_in_transaction
+        self.ping_after = ping_after
+        self._used = 0.0  # time.monotonic() of the last transaction
         self._conn: psycopg.Connection[Row] | None = None
         self._lock = threading.RLock()
 
@@ -139,7 +145,14 @@ class Database:
     def _connection(self) -> psycopg.Connection[Row]:
         conn = self._conn
         if conn is not None and not conn.closed and not conn.broken:
-            return conn
+            now = time.monotonic()
+            if now - self._used < self.ping_after:
+                return conn
+            try:
+                conn.execute(b"SELECT 1")
+                return conn
+            except psycopg.Error:  # dropped while idle (a restart): open another below
+                conn.close()
         self._conn = None
         with self.translated():
             conn = psycopg.connect(
@@ -158,6 +171,7 @@ class Database:
         """One transaction (READ COMMITTED), committed when the block ends, rolled back if it raises."""
         with self._lock:
             conn = self._connection()
+            self._used = time.monotonic()
             try:
                 with conn.transaction(), conn.cursor() as cur:
                     yield Transaction(cur, self)

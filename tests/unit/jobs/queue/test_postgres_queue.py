@@ -157,6 +157,7 @@ def test_the_schema_is_versioned_and_a_newer_one_is_refused(postgres_url: str) -
 
 def test_a_dropped_connection_is_opened_again(queue: PostgresJobQueue, postgres_url: str) -> None:
     seq = queue.receive("laser", "a.nc", 1, "a").seq
+    queue.db.ping_after = 3600.0  # a connection in use: not tried before each operation
     with psycopg.connect(postgres_url, autocommit=True) as admin:
         admin.execute(
             "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
@@ -165,6 +166,18 @@ def test_a_dropped_connection_is_opened_again(queue: PostgresJobQueue, postgres_
     with pytest.raises(JobStoreError):  # the call that finds the connection gone says so
         queue.get(seq)
     assert queue.get(seq).filename == "a.nc"  # and the next one reconnects
+
+
+def test_an_idle_connection_the_server_dropped_is_replaced_before_use(postgres_url: str) -> None:
+    with PostgresJobQueue(postgres_url) as queue:
+        seq = queue.receive("laser", "a.nc", 1, "a").seq
+        queue.db.ping_after = 0.0  # as if idle for longer than ping_after
+        with psycopg.connect(postgres_url, autocommit=True) as admin:
+            admin.execute(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+                " WHERE datname = current_database() AND pid <> pg_backend_pid()"
+            )
+        assert queue.get(seq).filename == "a.nc"  # no error: the dead connection was found and replaced
 
 
 def test_an_unreachable_database_is_a_clear_error_without_the_password(unused_port: int) -> None:
