@@ -28,6 +28,7 @@ COMMANDS = (
     "dnc",
     "sparkplug",
     "tokens",
+    "shards",
 )
 MODULE_OF = {name: name for name in COMMANDS if name != "passwords"} | {"hash-password": "passwords"}
 

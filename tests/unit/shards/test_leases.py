@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import psycopg
 import pytest
@@ -151,3 +152,34 @@ def test_a_lease_table_from_a_newer_gateway_is_refused(postgres_url: str) -> Non
         conn.execute("UPDATE schema_versions SET version = 7 WHERE component = %s", (COMPONENT,))
     with pytest.raises(LeaseError, match="newer cnc-gateway"):
         LeaseTable(postgres_url).open()
+
+
+def test_the_shards_command_shows_who_holds_what(table: LeaseTable, postgres_url: str, tmp_path) -> None:
+    import json
+    import subprocess
+    import sys
+
+    lease = table.acquire("laser", "gw-a")
+    table.join("gw-a")
+    assert lease is not None
+    gateway = tmp_path / "gateway.yaml"
+    mapping = Path(__file__).resolve().parents[3] / "mappings" / "laser-sim.yaml"
+    gateway.write_text(f"machines: [{mapping}]\nqueue: {postgres_url}\n")
+    run = [sys.executable, "-m", "gateway.cli.main", "shards", "-c", str(gateway)]
+    proc = subprocess.run(run, capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0] == "members: gw-a" and lines[2].split()[:3] == ["laser", "gw-a", str(lease.token)]
+    proc = subprocess.run([*run, "--json"], capture_output=True, text=True, timeout=60, check=False)
+    shown = json.loads(proc.stdout)
+    assert shown["leases"][0]["holder"] == "gw-a" and shown["leases"][0]["token"] == lease.token
+    unreachable = "postgresql://gw:s3cret@127.0.0.1:1/plant"
+    proc = subprocess.run(
+        [sys.executable, "-m", "gateway.cli.main", "shards", "--database", unreachable],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 2 and "cannot reach the lease table" in proc.stderr
+    assert "s3cret" not in proc.stderr and "Traceback" not in proc.stderr
