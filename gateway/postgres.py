@@ -161,7 +161,9 @@ class Database:
                 row_factory=dict_row,
                 connect_timeout=max(1, round(self.connect_timeout)),
                 application_name=self.application_name,
-                options=f"-c idle_in_transaction_session_timeout={round(self.idle_in_transaction * 1000)}",
+                # UTC, as the SQLite stores write times: a record's times never depend on the server's zone
+                options=f"-c idle_in_transaction_session_timeout={round(self.idle_in_transaction * 1000)}"
+                " -c TimeZone=UTC",
             )
         self._conn = conn
         return conn

@@ -172,8 +172,10 @@ class LeaseTable:
     # --- members ------------------------------------------------------------------------------------
 
     def join(self, holder: str) -> None:
-        """Say (again) that `holder` is alive and shares the machines, for another lease_time."""
+        """Say (again) that `holder` is alive and shares the machines, for another lease_time. (Members gone
+        for a day are forgotten: every process start is a new holder name.)"""
         with self.db.transaction() as tx:
+            tx.execute("DELETE FROM shard_members WHERE expires_at < now() - interval '1 day'")
             tx.execute(
                 "INSERT INTO shard_members (holder, joined_at, expires_at)"
                 " VALUES (%s, now(), now() + make_interval(secs => %s))"

@@ -139,13 +139,16 @@ class DeliveryWorker:
             await self._fenced(self.deliver(job, fence), job)
 
     async def _fenced(self, step: Awaitable[None], job: Job) -> None:
-        """A step that a lease holder may lose midway: a refusal of its fencing token ends it, logged."""
-        if self.lease is None:
-            await step
-            return
+        """A step that a lease holder may lose midway (a refusal of its fencing token ends it, logged), or
+        that meets a PostgreSQL queue that is away (the job stays where it is; the worker waits)."""
         try:
             await step
+        except JobStoreError as exc:
+            log.warning("%s: %s waits for the job queue: %s", self.machine, job.id, exc)
+            await self._sleep(LEASE_POLL)
         except JobError as exc:
+            if self.lease is None:
+                raise
             log.warning("%s: %s left to the machine's next holder: %s", self.machine, job.id, exc)
 
     # --- one job ------------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from gateway.shards.leases import LeaseTable
 from tests.integration.drills.conftest import Report, count
 
 ROOT = Path(__file__).resolve().parents[3]
-LEASE = 1.0
+LEASE = 2.0  # s: long enough that a loaded machine renews in time, short enough for 30 tries
 
 
 def read_until(proc: subprocess.Popen[str], prefix: str, seen: list[str]) -> str:

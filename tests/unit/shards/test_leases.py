@@ -154,11 +154,12 @@ def test_a_lease_table_from_a_newer_gateway_is_refused(postgres_url: str) -> Non
         LeaseTable(postgres_url).open()
 
 
-def test_the_shards_command_shows_who_holds_what(table: LeaseTable, postgres_url: str, tmp_path) -> None:
+def test_the_shards_command_shows_who_holds_what(postgres_url: str, tmp_path) -> None:
     import json
     import subprocess
     import sys
 
+    table = LeaseTable(postgres_url, lease_time=600).open()  # outlives the commands' start-up
     lease = table.acquire("laser", "gw-a")
     table.join("gw-a")
     assert lease is not None
@@ -183,3 +184,4 @@ def test_the_shards_command_shows_who_holds_what(table: LeaseTable, postgres_url
     )
     assert proc.returncode == 2 and "cannot reach the lease table" in proc.stderr
     assert "s3cret" not in proc.stderr and "Traceback" not in proc.stderr
+    table.close()

@@ -188,3 +188,14 @@ def test_an_unreachable_database_is_a_clear_error_without_the_password(unused_po
     assert "cannot reach the job queue" in message and "127.0.0.1" in message
     assert "s3cret" not in message and "***" in message
     assert isinstance(info.value, JobError)  # the service refuses to start on it as on a bad queue file
+
+
+def test_times_come_back_in_utc_whatever_the_servers_zone(postgres_url: str) -> None:
+    with psycopg.connect(postgres_url, autocommit=True) as admin:
+        name = admin.execute("SELECT current_database()").fetchone()
+        assert name is not None
+        admin.execute(f"ALTER DATABASE \"{name[0]}\" SET timezone = 'Asia/Tokyo'".encode())
+    with PostgresJobQueue(postgres_url) as q:
+        job = q.receive("laser", "a.nc", 1, "a")
+        assert job.received_at.utcoffset() is not None and job.received_at.utcoffset().total_seconds() == 0
+        assert job.as_dict()["received_at"].endswith("+00:00")
