@@ -5,9 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gateway.jobs.queue.base import JobStore
-from gateway.jobs.queue.postgres import PostgresJobQueue
 from gateway.jobs.queue.store import JobQueue
-from gateway.postgres import is_postgres_url
 
 
 def sqlite_path(state_dir: Path) -> Path:
@@ -16,7 +14,9 @@ def sqlite_path(state_dir: Path) -> Path:
 
 def job_store(queue: str | None, state_dir: Path) -> JobStore:
     """The queue the gateway file names (not opened yet): PostgreSQL for `queue: postgresql://…`, else the
-    SQLite file in the state directory (the embedded default)."""
-    if queue is not None and is_postgres_url(queue):
+    SQLite file in the state directory (the embedded default). psycopg is imported only for the first."""
+    if queue is not None:  # checked by the gateway file's model: a PostgreSQL URL
+        from gateway.jobs.queue.postgres import PostgresJobQueue
+
         return PostgresJobQueue(queue)
     return JobQueue(sqlite_path(state_dir))
