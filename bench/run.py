@@ -35,6 +35,7 @@ from bench.scenarios import (
     naive,
     peer,
     plc,
+    queue,
     scale,
     sparkplug,
     web,
@@ -56,6 +57,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "dnc": dnc.run,
     "focas": focas.run,
     "plc": plc.run,
+    "queue": queue.run,
 }
 
 

@@ -30,6 +30,7 @@ from typing import Any, TextIO
 
 from gateway.cli.state_dir import add_state_dir_options, load_config, resolve_state_dir
 from gateway.errors import JobError
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.store import Job, JobQueue, JobState, parse_job_id
 
 PASSWORD_ENV = "CNC_INBOX_PASSWORD"
@@ -129,9 +130,17 @@ def _last_written(state: Path) -> float:
     return max(f.stat().st_mtime for f in files if f.exists())
 
 
-def open_queue(args: argparse.Namespace) -> JobQueue:
+def open_queue(args: argparse.Namespace) -> JobStore:
+    from gateway.jobs.queue.postgres import PostgresJobQueue
     from gateway.jobs.spool import queue_path
 
+    config = load_config(args) if args.state_dir is None else None
+    if config is not None and config.gateway.queue is not None:  # the shards' shared queue (PostgreSQL)
+        try:
+            return PostgresJobQueue(config.gateway.queue).open()
+        except JobError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
     path = queue_path(state_dir(args))
     if not path.is_file():
         print(f"error: no job queue at {path} (give -c FILE or --state-dir)", file=sys.stderr)

@@ -28,6 +28,7 @@ COMMANDS = (
     "dnc",  # serial DNC's transfer log: here, not in gateway/transports/dnc/, as it reads the gateway file
     "sparkplug",
     "tokens",
+    "shards",
 )
 MODULE_OF = {name: name for name in COMMANDS if name != "passwords"} | {"hash-password": "passwords"}
 

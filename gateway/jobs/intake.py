@@ -23,7 +23,8 @@ from gateway.errors import JobError, PathRefused
 from gateway.jobs.delivery.supervisor import DeliverySupervisor
 from gateway.jobs.inbox.inbox import STAGING, Upload, UploadReply
 from gateway.jobs.inbox.paths import check_file_name
-from gateway.jobs.queue.store import Job, JobQueue, JobState
+from gateway.jobs.queue.base import JobStore
+from gateway.jobs.queue.store import Job, JobState
 from gateway.jobs.spool import Spool
 from gateway.jobs.threads import JobThreads
 from gateway.jobs.validation.file_check import ISOLATE_ABOVE, Checked, link_durably, validate_file
@@ -50,7 +51,7 @@ class Intake:
         self,
         machines: Mapping[str, JobsConfig],
         *,
-        queue: JobQueue,
+        queue: JobStore,
         spool: Spool,
         threads: JobThreads,
         supervisor: DeliverySupervisor,

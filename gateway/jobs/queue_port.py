@@ -17,7 +17,8 @@ from gateway.jobs.delivery.supervisor import DeliverySupervisor
 from gateway.jobs.inbox.inbox import STAGING, Upload, UploadReply
 from gateway.jobs.inbox.paths import check_file_name
 from gateway.jobs.intake import Intake
-from gateway.jobs.queue.store import Job, JobQueue, JobState, Transition, parse_job_id
+from gateway.jobs.queue.base import JobStore
+from gateway.jobs.queue.store import Job, JobState, Transition, parse_job_id
 from gateway.jobs.threads import JobThreads
 
 
@@ -27,7 +28,7 @@ class QueuePort:
 
     def __init__(
         self,
-        queue: JobQueue,
+        queue: JobStore,
         threads: JobThreads,
         intake: Intake,
         supervisor: DeliverySupervisor,

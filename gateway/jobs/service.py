@@ -15,7 +15,7 @@ spec.
 Files under the state directory:
 
     inbox/<machine>/[tmp/]      the FTP inbox's folders (empty when nothing is uploading)
-    jobs/queue.sqlite3          the queue
+    jobs/queue.sqlite3          the queue (unless the gateway file's `queue:` names a PostgreSQL database)
     jobs/spool/<id>.received    an upload between arrival and validation
     jobs/spool/<id>.program     a validated program waiting for delivery (kept for FAILED/CANCELLED: retry)
     jobs/spool/delivered/<machine>/<id>.program
@@ -44,10 +44,11 @@ from gateway.jobs.delivery.supervisor import DeliverySupervisor
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.inbox import Inbox, tls_context
 from gateway.jobs.intake import Intake
+from gateway.jobs.queue.backend import job_store
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.publish import JobPublisher
-from gateway.jobs.queue.store import JobQueue
 from gateway.jobs.queue_port import QueuePort
-from gateway.jobs.spool import Spool, queue_path
+from gateway.jobs.spool import Spool
 from gateway.jobs.threads import JobThreads
 from gateway.jobs.validation import compiled
 from gateway.jobs.validation.file_check import ready
@@ -79,7 +80,7 @@ class JobService:
         state = config.state_dir
         self.spool = Spool(state / "jobs" / "spool")  # what it keeps per machine: the machine's transport
         self.backups_dir = state / "backups"
-        self.queue = JobQueue(queue_path(state))
+        self.queue: JobStore = job_store(config.gateway.queue, state)  # gateway file's `queue:`, else SQLite
         self.threads = JobThreads()
         self.delivery = DeliverySupervisor(self.queue, self.threads, JobPublisher(tree, self.machines))
         self.intake = Intake(

@@ -14,8 +14,9 @@ from typing import Any, TypeVar
 
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.publish import JobPublisher
-from gateway.jobs.queue.store import JobQueue, JobState
+from gateway.jobs.queue.store import JobState
 from gateway.jobs.threads import JobThreads
 from gateway.transports.base import Deliveries, Delivery
 
@@ -27,7 +28,7 @@ ENDED_SWEEP = 200  # ended jobs past a machine's retained limit whose records ar
 class DeliverySupervisor:
     """Runs deliveries and publishes the queue, for the machines in `publisher`."""
 
-    def __init__(self, queue: JobQueue, threads: JobThreads, publisher: JobPublisher) -> None:
+    def __init__(self, queue: JobStore, threads: JobThreads, publisher: JobPublisher) -> None:
         self.queue = queue
         self.threads = threads
         self.publisher = publisher
