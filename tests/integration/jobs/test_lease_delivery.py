@@ -15,8 +15,6 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
-from gateway.jobs.delivery.transports import transport_for
-
 from gateway.config.loader import load_mapping
 from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.queue.postgres import PostgresJobQueue
@@ -25,6 +23,8 @@ from gateway.jobs.queue.records import Job, JobState
 from gateway.jobs.service import Spool
 from gateway.model.tree import VariableTree
 from gateway.shards.holder import LeaseHolder
+from gateway.transports.ftp.config import ControllerFtp
+from gateway.transports.ftp.transport import FtpTransport
 from tests.integration.jobs.conftest import Store, mapping_text, program
 from tests.waiting import wait_until
 
@@ -36,6 +36,8 @@ class Shard:
     def __init__(self, name: str, url: str, mapping_file: Path, spool: Spool) -> None:
         mapping = load_mapping(mapping_file, environ={})
         assert mapping.jobs is not None
+        controller = mapping.jobs.controller
+        assert isinstance(controller, ControllerFtp)
         self.name = name
         self.queue = PostgresJobQueue(url)
         self.holder = LeaseHolder(url, name, ["laser"], lease_time=LEASE)
@@ -47,7 +49,7 @@ class Shard:
             spool,
             JobPublisher(tree, {"laser": mapping.jobs}),
             self.call,
-            transport_for(mapping.jobs, machine="laser"),
+            FtpTransport(controller, verify=mapping.jobs.verify),
             lease=self.holder,
         )
         self.tasks: list[asyncio.Task[Any]] = []
