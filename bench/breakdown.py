@@ -36,6 +36,7 @@ _RULES: tuple[tuple[str, str], ...] = (
     ("json/", JSON),
     ("paho/", PAHO),
     ("gateway/sinks/mqtt/", SINK),
+    ("gateway/sinks/mqtt_link/", SINK),  # its paho adapter and backlog, below the MQTT sink since issue 24
     ("gateway/codecs/mqtt_publish.py", SINK),
     ("gateway/model/", TREE),
     ("gateway/sinks/opcua/", SERVER),

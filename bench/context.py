@@ -36,6 +36,8 @@ class Settings:
     profile: bool = False
     #: The dnc scenario's runs: (label, checkout whose gateway/ the gateway agent imports; None: this one).
     dnc_gateways: list[tuple[str, str | None]] = field(default_factory=lambda: [("", None)])
+    #: The dnc scenario's parts to run (load, after_dc3, single, fleet, restart); empty: all of them.
+    dnc_parts: list[str] = field(default_factory=list)
 
     @classmethod
     def full(cls) -> Settings:

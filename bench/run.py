@@ -35,6 +35,7 @@ from bench.scenarios import (
     naive,
     peer,
     plc,
+    queue,
     scale,
     sparkplug,
     umati,
@@ -58,6 +59,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "focas": focas.run,
     "plc": plc.run,
     "umati": umati.run,
+    "queue": queue.run,
 }
 
 
@@ -88,6 +90,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sources", nargs="+", choices=["opcua", "inproc"], help="mirror: sources")
     p.add_argument("--peer-rates", nargs="+", metavar="R", help="peer: changes/s per step ('max': flat out)")
     p.add_argument("--scale", type=int, nargs=2, metavar=("MACHINES", "PER_MACHINE"), help="scale: size")
+    p.add_argument(
+        "--dnc-part",
+        action="append",
+        default=[],
+        dest="dnc_parts",
+        choices=["load", "after_dc3", "single", "fleet", "restart"],
+        help="dnc: run only this part (repeatable), e.g. the 10 MB after-DC3 drip alone on a quiet machine",
+    )
     p.add_argument(
         "--dnc-gateway", action="append", type=_labelled, metavar="LABEL=PATH", dest="dnc_gateways",
         help="dnc: run the scenario against the gateway/ of the checkout at PATH, its figures labelled "
@@ -122,6 +132,7 @@ def _override(settings: Settings, args: argparse.Namespace) -> None:
         settings.mirror_sources = args.sources
     if args.scale:
         settings.scale_machines, settings.scale_per_machine = args.scale
+    settings.dnc_parts = list(args.dnc_parts)
     if args.dnc_gateways:
         labels = [label for label, _path in args.dnc_gateways]
         if len(set(labels)) != len(labels):

@@ -91,7 +91,7 @@ def build_sinks(gateway: Gateway) -> list[Sink]:
         logins=gateway.logins,
         host=gateway,
         audit=gateway.audit,
-        jobs=gateway.jobs,
+        jobs=gateway.jobs.port if gateway.jobs is not None else None,
         alarms=gateway.alarms,
     )
     built = (spec.create(context) for spec in SINKS)

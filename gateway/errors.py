@@ -183,11 +183,12 @@ class BrokerRefused(BrokerError):
     """The broker answered, and refused us: bad credentials, not authorised, client id rejected."""
 
 
-# --- durable stores (gateway/sqlite_file.py) ---------------------------------------------------
+# --- durable stores (gateway/sqlite_file.py, gateway/postgres.py) ------------------------------
 
 
 class StoreError(GatewayError):
-    """A state file (SQLite) cannot be opened, read or written; the message names the file."""
+    """A state file (SQLite) or database (PostgreSQL) cannot be opened, read or written; the message names
+    the file, or the database's URL without its password."""
 
 
 class AlarmStoreError(StoreError):
@@ -199,7 +200,15 @@ class AuditStoreError(StoreError):
 
 
 class TransferLogError(StoreError):
-    """The DNC transfer log cannot be opened or written (gateway/jobs/dnc/transfers.py)."""
+    """The DNC transfer log cannot be opened or written (gateway/transports/dnc/transfers.py)."""
+
+
+class LeaseError(StoreError):
+    """The lease table (gateway/shards/leases.py) cannot be reached, or a lease is lost: expired, or taken."""
+
+
+class StaleFence(LeaseError):
+    """A fencing token is no longer its machine's current lease: its holder must not act on the machine."""
 
 
 # --- jobs --------------------------------------------------------------------------------------
@@ -207,6 +216,11 @@ class TransferLogError(StoreError):
 
 class JobError(GatewayError):
     """A job operation was refused: unknown job, or a state that does not allow it."""
+
+
+class JobStoreError(StoreError, JobError):
+    """The job queue's database (PostgreSQL) cannot be reached or failed; a JobError too, so that the
+    callers that refuse a job operation refuse this one the same way."""
 
 
 class PathRefused(GatewayError):

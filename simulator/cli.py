@@ -16,6 +16,7 @@ from pathlib import Path
 from simulator.dnc import DncOptions
 from simulator.dnc.options import _port_or_off, add_dnc_arguments, dnc_banner, dnc_options
 from simulator.errors import SimulatorError
+from simulator.fleet import SimulatorFleet
 from simulator.focas import DEFAULT_PORT as FOCAS_PORT
 from simulator.focas import DEFAULT_SESSIONS as FOCAS_SESSIONS
 from simulator.haas_mdc import DEFAULT_PORT as HAAS_PORT
@@ -63,6 +64,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--ftp-password", default=None, help="FTP password (default $CNC_SIM_FTP_PASSWORD or 'simulator')"
     )
+    fleet = p.add_argument_group("fleet mode (a plant's load for gateway shards)")
+    fleet.add_argument(
+        "--machines", type=int, default=1, metavar="N",
+        help="serve N laser cutters (laser-001 …), each its own OPC UA and FTP server on the base ports + i"
+        " (0: free ports); only OPC UA and FTP (default 1: the one machine with every face)",
+    )  # fmt: skip
+    fleet.add_argument(
+        "--fleet-mappings", type=Path, default=None, metavar="DIR",
+        help="with --machines: write a gateway mapping file per machine into DIR at start",
+    )  # fmt: skip
     p.add_argument("--opcua-user", default=None, help="require this OPC UA user (default: anonymous access)")
     p.add_argument("--opcua-password", default=None, help="password of --opcua-user")
     noise = p.add_argument_group("noise mode (benchmark load)")
@@ -170,12 +181,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         build_parser().error("--noise-variables must be >= 0 and --noise-per-folder >= 1")
     if args.noise_mapping is not None and not args.noise_variables:
         build_parser().error("--noise-mapping needs --noise-variables")
+    if args.machines < 1:
+        build_parser().error("--machines must be >= 1")
+    if args.fleet_mappings is not None and args.machines < 2:
+        build_parser().error("--fleet-mappings needs --machines N (N >= 2)")
+    if args.machines > 1 and (args.noise_variables or args.opcua_user):
+        build_parser().error("--machines serves plain laser cutters: no --noise-variables or --opcua-user")
     try:
         dnc = dnc_options(args)
     except ValueError as exc:
         build_parser().error(str(exc))
     configure_logging(args.log_level)
     try:
+        if args.machines > 1:
+            return asyncio.run(serve_fleet(args))
         return asyncio.run(serve(args, dnc))
     except KeyboardInterrupt:  # a signal before the handlers were installed
         return 0
@@ -224,6 +243,55 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
         log.error("cannot start: %s", exc)
         return 1
     return 0
+
+
+async def serve_fleet(args: argparse.Namespace) -> int:
+    """`--machines N`: N laser cutters, each its own OPC UA and FTP server, until SIGINT/SIGTERM."""
+    stop = _stop_on_signals()
+    fleet = SimulatorFleet(
+        args.machines,
+        host=args.host,
+        opcua_port=args.opcua_port,
+        ftp_port=args.ftp_port,
+        speed=args.speed,
+        tick=args.tick,
+        loop_program=args.loop,
+        store_root=args.store,
+        ftp_user=args.ftp_user,
+        ftp_password=args.ftp_password,
+    )
+    try:
+        async with fleet:
+            if args.fleet_mappings is not None:
+                try:
+                    fleet.write_mappings(args.fleet_mappings)
+                except OSError as exc:
+                    log.error(
+                        "cannot write the mappings into %s: %s", args.fleet_mappings, exc.strerror or exc
+                    )
+                    return 1
+            lines = [f"cnc-simulator: a fleet of {fleet.count} laser cutters"]
+            for name, sim in fleet.names():
+                lines.append(f"  {name}  {sim.opcua_endpoint}  ftp://{sim.host}:{sim.ftp_port}/DATA/Programs")
+            if args.fleet_mappings is not None:
+                lines.append(f"  mappings written to {args.fleet_mappings}")
+            lines.append("  stop     Ctrl-C")
+            print("\n".join(["", *lines, ""]), flush=True)
+            await stop.wait()
+            log.info("shutting down")
+    except SimulatorError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
+    return 0
+
+
+def _stop_on_signals() -> asyncio.Event:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):  # Windows has no signal handlers
+            loop.add_signal_handler(sig, stop.set)
+    return stop
 
 
 def _noise(args: argparse.Namespace) -> NoiseSpec | None:

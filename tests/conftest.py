@@ -45,3 +45,12 @@ def unused_port() -> int:
     from tests.waiting import free_port
 
     return free_port()
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    """A fresh PostgreSQL database for this test (tests/postgres.py), dropped afterwards."""
+    from tests.postgres import database
+
+    with database() as url:
+        yield url

@@ -327,9 +327,9 @@ async def main(workdir: Path) -> None:
         return {"seconds": seconds}
 
     async def restart(request: dict[str, Any]) -> dict[str, Any]:
-        from gateway.config.jobs import ControllerSerial
-        from gateway.jobs.delivery.transport import Program, Progress
-        from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
+        from gateway.transports.base import Program, Progress
+        from gateway.transports.dnc.config import ControllerSerial
+        from gateway.transports.dnc.transport import SerialTransport, request_restart
 
         def ignore(_progress: Progress) -> None:
             pass

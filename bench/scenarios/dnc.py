@@ -133,15 +133,21 @@ async def _run_one(ctx: Context, label: str, source: str | None, runs: dict[str,
     run = Run(ctx, sim, gw, folder, details, label, gw.ready.get("commit") or "")
     run.log(f"gateway from {details['gateway']} ({details['commit'] or 'no git'})")
     try:
-        await _load(run, size=40_000 if quick else 1_000_000)
-        details["after_dc3"] = {}
-        for kind in KINDS:
-            await _after_dc3(run, kind, size=40_000 if quick else 5_000_000)
-        details["single"] = {}
-        for factor in FACTORS:
-            await _single(run, factor, seconds=8.0 if quick else 60.0)
-        await _fleet(run, seconds=10.0 if quick else 60.0)
-        await _restart(run, repeats=3 if quick else 5)
+        parts = set(ctx.settings.dnc_parts) or {"load", "after_dc3", "single", "fleet", "restart"}
+        if "load" in parts:
+            await _load(run, size=40_000 if quick else 1_000_000)
+        if "after_dc3" in parts:
+            details["after_dc3"] = {}
+            for kind in KINDS:
+                await _after_dc3(run, kind, size=40_000 if quick else 5_000_000)
+        if "single" in parts:
+            details["single"] = {}
+            for factor in FACTORS:
+                await _single(run, factor, seconds=8.0 if quick else 60.0)
+        if "fleet" in parts:
+            await _fleet(run, seconds=10.0 if quick else 60.0)
+        if "restart" in parts:
+            await _restart(run, repeats=3 if quick else 5)
     finally:
         await gw.stop()
         await sim.stop()

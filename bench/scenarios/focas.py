@@ -22,14 +22,14 @@ import psutil
 
 from bench.context import Context
 from bench.procs import Agent
-from gateway.config.focas import ControllerFocas
-from gateway.config.jobs import ControllerFtp
 from gateway.config.mapping import MachineMapping
-from gateway.jobs.delivery.transport import Program
-from gateway.jobs.delivery.transports.focas import FocasTransport
-from gateway.jobs.delivery.transports.ftp import FtpTransport
 from gateway.model.tree import VariableTree
 from gateway.sources.focas.source import FocasSource
+from gateway.transports.base import Program
+from gateway.transports.focas.config import ControllerFocas
+from gateway.transports.focas.transport import FocasTransport
+from gateway.transports.ftp.config import ControllerFtp
+from gateway.transports.ftp.transport import FtpTransport
 
 SECTION = "FOCAS: 20 Fanucs x 50 items at 100 ms, program download"
 MACHINES = 20

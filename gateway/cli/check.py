@@ -17,6 +17,7 @@ from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping, VariableSpec
 from gateway.errors import ConfigError
 from gateway.sinks.copydata.config import CopydataTarget
+from gateway.sources.base import PlansPolls
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -48,8 +49,11 @@ def print_config(config: Config, out: TextIO) -> None:
     default_role = gw.access.default_write_role if enabled else None
     for mapping in config.machines:
         print_tree(mapping, out, default_role)
-        if (describe_plan := getattr(mapping.driver, "describe_plan", None)) is not None:  # a polled driver
-            print("\n".join(describe_plan(mapping.variables, mapping.sampling_interval)), file=out)
+        if isinstance(mapping.driver, PlansPolls):  # a polled driver
+            print(
+                "\n".join(mapping.driver.describe_plan(mapping.variables, mapping.sampling_interval)),
+                file=out,
+            )
         print_commands(mapping, out)
         copydata_role = gw.access.copydata_role or "none: refused"  # never implied, users or not
         print_copydata(mapping, out, copydata_role if gw.access.checks_roles() else None)

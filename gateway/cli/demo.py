@@ -31,7 +31,7 @@ from gateway.cli.demo_dnc import DRIP_NAME, keep_dripping, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
 from gateway.cli.demo_driver import keep_program_running
 from gateway.config.gateway import GatewayConfig
-from gateway.config.jobs import ControllerSerial, FtpAccount, InboxConfig
+from gateway.config.jobs import FtpAccount, InboxConfig
 from gateway.config.loader import Config, load
 from gateway.config.mapping import MachineMapping
 from gateway.errors import ConfigError, SinkError
@@ -44,6 +44,7 @@ from gateway.sinks.sparkplug.config import SparkplugConfig
 from gateway.sinks.web.config import HttpConfig
 from gateway.sources.base import settings_of
 from gateway.sources.opcua.config import OpcUaDriver
+from gateway.transports.dnc.config import ControllerSerial
 
 log = logging.getLogger("gateway.demo")
 

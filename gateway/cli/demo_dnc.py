@@ -24,11 +24,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from gateway.config.jobs import ControllerSerial
 from gateway.config.mapping import MachineMapping
 from gateway.errors import RequestError
 from gateway.sources.base import settings_of
 from gateway.sources.opcua.config import OpcUaDriver
+from gateway.transports.dnc.config import ControllerSerial
 
 log = logging.getLogger("gateway.demo")
 
@@ -96,7 +96,7 @@ def simulator(args: Any, store: Path) -> Any:
 async def punch_once(sim: Any, state_dir: Path, machine: str) -> None:
     """Unless the machine's store of punched programs holds one already, the operator's PUNCH of demo.nc
     as soon as the gateway listens on the line (the simulator refuses while a transfer runs: try again)."""
-    from gateway.jobs.dnc.received import ReceivedStore
+    from gateway.transports.dnc.received import ReceivedStore
 
     if await asyncio.to_thread(ReceivedStore(state_dir).list, machine):
         return

@@ -6,10 +6,10 @@ import argparse
 import os
 from collections.abc import Callable
 
-from gateway.config.focas import ControllerFocas
 from gateway.config.mapping import MachineMapping
 from gateway.sinks.mqtt.config import MachineMqtt
 from gateway.sources.focas.config import FocasDriver
+from gateway.transports.focas.config import ControllerFocas
 
 DEFAULT_PORT = 8193
 MAPPING = "fanuc-sim.yaml"

@@ -1,5 +1,7 @@
-"""`cnc-gateway discover opc.tcp://…` (or `http://agent:5000`): a starting mapping file from a controller
-(browsed over OPC UA) or from an MTConnect agent's /probe."""
+"""`cnc-gateway discover opc.tcp://…` (or `http://agent:5000`, `focas://host:8193`): a starting mapping file
+from a controller (browsed over OPC UA, asked over FOCAS2) or from an MTConnect agent's /probe. The
+driver is the one whose spec `discovers` the endpoint's scheme (gateway/sources/base.py `DriverSpec`),
+else the default driver (OPC UA)."""
 
 from __future__ import annotations
 
@@ -42,57 +44,37 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def handle(args: argparse.Namespace) -> int:
     import os
 
-    from gateway.sources.opcua.discover import discover
+    from gateway.sources import registry
+    from gateway.sources.base import DiscoverRequest
 
     configure("warning")
-    if args.endpoint.startswith(("http://", "https://")):
-        return _mtconnect(args)
-    if args.endpoint.startswith("focas://"):
-        return _focas(args)
-    try:
-        check_endpoint(args.endpoint)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    spec = next(
+        (s for s in registry.ordered() if s.discovers and args.endpoint.startswith(s.discovers)), None
+    )
+    if spec is None:  # the default driver's (OPC UA): its endpoint is checked first
+        try:
+            check_endpoint(args.endpoint)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        spec = registry.find(registry.DEFAULT)
+    if spec is None or spec.discover is None:  # a driver that names endpoints without discovering them
+        print(f"error: nothing discovers {args.endpoint}", file=sys.stderr)
         return 2
-    password = args.password or os.environ.get("CNC_DISCOVER_PASSWORD")
+    request = DiscoverRequest(
+        endpoint=args.endpoint,
+        machine=args.machine,
+        timeout=args.timeout,
+        device=args.device,
+        user=args.user,
+        password=args.password or os.environ.get("CNC_DISCOVER_PASSWORD"),
+        security=args.security,
+        start=args.start,
+        max_depth=args.max_depth,
+        max_variables=args.max_variables,
+    )
     try:
-        text = asyncio.run(
-            discover(
-                args.endpoint,
-                machine=args.machine,
-                username=args.user,
-                password=password,
-                security=args.security,
-                start=args.start,
-                max_depth=args.max_depth,
-                max_variables=args.max_variables,
-                timeout=args.timeout,
-            )
-        )
-    except (SourceError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return _write(args, text)
-
-
-def _mtconnect(args: argparse.Namespace) -> int:
-    from gateway.sources.mtconnect.discover import discover_agent
-
-    try:
-        text = asyncio.run(
-            discover_agent(args.endpoint, machine=args.machine, device=args.device, wait=args.timeout)
-        )
-    except (SourceError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return _write(args, text)
-
-
-def _focas(args: argparse.Namespace) -> int:
-    from gateway.sources.focas.discover import discover_focas
-
-    try:
-        text = asyncio.run(discover_focas(args.endpoint, machine=args.machine, timeout=args.timeout))
+        text = asyncio.run(spec.discover(request))
     except (SourceError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

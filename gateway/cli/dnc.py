@@ -15,8 +15,8 @@ from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
 from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
 from gateway.errors import TransferLogError
-from gateway.jobs.dnc.transfers import DIRECTIONS, TransferLog, TransferRecord, transfers_path
 from gateway.sqlite_file import iso
+from gateway.transports.dnc.transfers import DIRECTIONS, TransferLog, TransferRecord, transfers_path
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -12,7 +12,7 @@ the lead in the controller's buffer and the run time left) until it ends.
 pause/resume/abort hold, continue or stop what a serial machine's line is
 sending (a job's drip-feed, or the answer to a remote request): they need the
 running gateway, which they reach through a request file in the state directory
-(gateway/jobs/dnc/control.py); it calls the machine's `Commands/DripPause` …
+(gateway/transports/dnc/control.py); it calls the machine's `Commands/DripPause` …
 like OPC UA or MQTT would, audited with origin `cli` and the file owner's name.
 """
 
@@ -30,6 +30,7 @@ from typing import Any, TextIO
 
 from gateway.cli.state_dir import add_state_dir_options, load_config, resolve_state_dir
 from gateway.errors import JobError
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.store import Job, JobQueue, JobState, parse_job_id
 
 PASSWORD_ENV = "CNC_INBOX_PASSWORD"
@@ -129,9 +130,17 @@ def _last_written(state: Path) -> float:
     return max(f.stat().st_mtime for f in files if f.exists())
 
 
-def open_queue(args: argparse.Namespace) -> JobQueue:
-    from gateway.jobs.service import queue_path
+def open_queue(args: argparse.Namespace) -> JobStore:
+    from gateway.jobs.queue.postgres import PostgresJobQueue
+    from gateway.jobs.spool import queue_path
 
+    config = load_config(args) if args.state_dir is None else None
+    if config is not None and config.gateway.queue is not None:  # the shards' shared queue (PostgreSQL)
+        try:
+            return PostgresJobQueue(config.gateway.queue).open()
+        except JobError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
     path = queue_path(state_dir(args))
     if not path.is_file():
         print(f"error: no job queue at {path} (give -c FILE or --state-dir)", file=sys.stderr)
@@ -172,7 +181,7 @@ def _answers(state: Path | None, machine: str | None) -> list[str]:
     """Remote requests' answers being drip-fed (their progress files), a line each: they are no jobs."""
     if state is None:
         return []
-    from gateway.jobs.delivery.transports.serial import ANSWER, progress_path, read_progress
+    from gateway.transports.dnc.transport import ANSWER, progress_path, read_progress
 
     found = []
     folder = progress_path(state, "x").parent
@@ -309,8 +318,8 @@ def handle_cancel(args: argparse.Namespace) -> int:
 
 
 def handle_restart(args: argparse.Namespace) -> int:
-    from gateway.jobs.delivery.transports.serial import request_restart
-    from gateway.jobs.service import Spool
+    from gateway.jobs.spool import Spool
+    from gateway.transports.dnc.transport import request_restart
 
     if args.line < 1:
         print("error: --line must be a program line (1 or more)", file=sys.stderr)
@@ -335,7 +344,7 @@ def handle_restart(args: argparse.Namespace) -> int:
 
 def handle_drip(args: argparse.Namespace) -> int:
     """pause/resume/abort: a request file the running gateway takes, acts on and answers."""
-    from gateway.jobs.dnc.control import ask, read_reply, reply_for
+    from gateway.transports.dnc.control import ask, read_reply, reply_for
 
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", args.machine):
         print(f"error: {args.machine!r} is not a machine name", file=sys.stderr)
@@ -372,7 +381,7 @@ def _sending(job: Job, state: Path | None) -> str:
     """A SENDING job's progress on a serial line (its progress file), '' when there is none."""
     if state is None or job.state is not JobState.SENDING:
         return ""
-    from gateway.jobs.delivery.transports.serial import read_progress
+    from gateway.transports.dnc.transport import read_progress
 
     point = read_progress(state, job.machine)
     if point is None or Path(point.program).stem != job.id:
@@ -474,7 +483,7 @@ def follow(args: argparse.Namespace, reply: str, out: TextIO, *, poll: float = 0
             bar.done()
             print(f"{job.id} {job.state.value}: {job.reason}")
             return 0 if job.state is JobState.DELIVERED else 1
-        from gateway.jobs.delivery.transports.serial import read_progress
+        from gateway.transports.dnc.transport import read_progress
 
         point = read_progress(state, job.machine) if job.state is JobState.SENDING else None
         if point is not None and Path(point.program).stem == job.id and bar.enabled:

@@ -25,19 +25,23 @@ COMMANDS = (
     "frames",
     "audit",
     "alarms",
-    "dnc",
+    "dnc",  # serial DNC's transfer log: here, not in gateway/transports/dnc/, as it reads the gateway file
     "sparkplug",
     "tokens",
+    "shards",
 )
 MODULE_OF = {name: name for name in COMMANDS if name != "passwords"} | {"hash-password": "passwords"}
 
 
 def _driver_commands() -> dict[str, str]:
-    """The verbs drivers add (gateway/sources/base.py `DriverSpec.commands`): verb -> module. Read only for
-    a verb that is not the gateway's own, so that those do not load the drivers' settings models."""
+    """The verbs drivers and delivery transports add (`DriverSpec.commands` in gateway/sources/base.py,
+    `TransportSpec.commands` in gateway/transports/base.py): verb -> module. Read only for a verb that is
+    not the gateway's own, so that those do not load the adapters' settings models."""
     from gateway.sources.registry import DRIVERS
+    from gateway.transports.registry import TRANSPORTS
 
-    return {verb: module for spec in DRIVERS for verb, module in spec.commands}
+    verbs = [*(spec.commands for spec in DRIVERS), *(spec.commands for spec in TRANSPORTS)]
+    return {verb: module for commands in verbs for verb, module in commands}
 
 
 def _modules(argv: Sequence[str]) -> tuple[str, ...]:

@@ -44,8 +44,8 @@ from gateway.errors import AuditStoreError, ConfigError, DeliveryError
 from gateway.model.audit import AuditEntry, as_text
 
 if TYPE_CHECKING:
-    from gateway.jobs.delivery.transport import OpenStore
-    from gateway.jobs.dnc.received import ReceivedProgram, ReceivedStore
+    from gateway.transports.base import OpenStore
+    from gateway.transports.dnc.received import ReceivedProgram, ReceivedStore
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -119,8 +119,8 @@ def handle_received(args: argparse.Namespace) -> int:
     import json
 
     from gateway.errors import PathRefused
-    from gateway.jobs.dnc.received import ReceivedStore
-    from gateway.jobs.dnc.transfers import transfers_path
+    from gateway.transports.dnc.received import ReceivedStore
+    from gateway.transports.dnc.transfers import transfers_path
 
     state = resolve_state_dir(args, "received programs", transfers_path)
     store = ReceivedStore(state)
@@ -210,9 +210,9 @@ def jobs_config(args: argparse.Namespace) -> JobsConfig:
 
 def open_store(args: argparse.Namespace, cfg: JobsConfig) -> OpenStore:
     """The machine's program store; exits 2 if its delivery transport has none."""
-    from gateway.jobs.delivery.transports import program_store_for
+    from gateway.transports.registry import program_store_for
 
-    store = program_store_for(cfg)
+    store = program_store_for(cfg.controller)
     if store is None:
         print(f"error: {args.machine}'s controller has no program store to list or change", file=sys.stderr)
         raise SystemExit(2)

@@ -39,7 +39,7 @@ from gateway.codecs.sparkplug import (
 from gateway.codecs.sparkplug.sparkplug_b_pb2 import Payload
 from gateway.errors import BrokerError
 from gateway.model.types import TypeSpec
-from gateway.sinks.mqtt.client import BrokerSettings, Incoming, MqttClient
+from gateway.sinks.mqtt_link.client import BrokerSettings, Incoming, MqttClient
 
 SHOWN = 12  # name=value pairs printed per data message unless --all
 RETRY_EVERY = 1.0  # s between connection attempts

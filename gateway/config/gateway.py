@@ -20,6 +20,8 @@ from gateway.settings.access import (
     unknown_role,
 )
 from gateway.settings.sections import Sectioned, with_sections
+from gateway.settings.urls import check_queue_url
+from gateway.shards.static import KOfN, parse_k_of_n
 from gateway.sinks import registry as sinks
 from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mtconnect.config import AgentConfig
@@ -36,6 +38,16 @@ class GatewayConfig(Sectioned):
         default="state", description="Where the gateway keeps its state; relative to this file"
     )
     machines: list[str] = Field(default_factory=list, description="Mapping files, relative to this file")
+    shard: str | list[str] | None = Field(
+        default=None,
+        description="Serve only some machines of the fleet: K/N (2/4: every fourth machine in name order,"
+        " from the second) or their names; absent: all of them",
+    )
+    queue: str | None = Field(
+        default=None,
+        description="The job queue: a PostgreSQL database that shards share (postgresql://user@host/db;"
+        " the password from PGPASSWORD or ~/.pgpass); absent: a SQLite file in the state directory",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
     inbox: InboxConfig = Field(
         default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
@@ -68,6 +80,28 @@ class GatewayConfig(Sectioned):
         default_factory=HttpConfig,
         description="The web console, REST API and /metrics (gateway/sinks/web/config.py); null: off",
     )
+
+    @field_validator("shard")
+    @classmethod
+    def _shard(cls, shard: str | list[str] | None) -> str | list[str] | None:
+        if isinstance(shard, str):
+            parse_k_of_n(shard)
+        elif isinstance(shard, list):
+            if not shard:
+                raise ValueError("lists no machines (leave shard out to serve them all)")
+            repeated = sorted({name for name in shard if shard.count(name) > 1})
+            if repeated:
+                raise ValueError(f"names {', '.join(repeated)} more than once")
+        return shard
+
+    def shard_of(self) -> KOfN | list[str] | None:
+        """The `shard:` this process serves, parsed (None: the whole fleet)."""
+        return parse_k_of_n(self.shard) if isinstance(self.shard, str) else self.shard
+
+    @field_validator("queue")
+    @classmethod
+    def _queue(cls, queue: str | None) -> str | None:
+        return None if queue is None else check_queue_url(queue)
 
     @field_validator("roles")
     @classmethod

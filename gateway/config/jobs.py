@@ -10,20 +10,22 @@ software drops programs into: where it listens, who may log in, and its limits.
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
-from pydantic import ByteSize, Discriminator, Field, SecretStr, Tag, field_validator, model_validator
+from pydantic import ByteSize, Discriminator, Field, Tag, field_validator, model_validator
 
 from gateway.auth.passwords import parse_hash
-from gateway.config.focas import ControllerFocas
-from gateway.config.punch import PunchSettings
 from gateway.config.validation import ValidationRules
 from gateway.settings.base import Backoff, Strict
+from gateway.settings.names import check_variable_path
+from gateway.transports import registry as transports
+from gateway.transports.base import ControllerSettings
+from gateway.transports.dnc.config import ControllerSerial
+from gateway.transports.dnc.punch import PunchSettings
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _USER = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.@\-]{0,63}$")
 _MACHINE = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,62}$")
-_VARIABLE_PATH = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*(/[A-Za-z0-9_][A-Za-z0-9_.\-]*)*$")
 
 ANONYMOUS_USERS = ("anonymous", "ftp")
 
@@ -36,194 +38,27 @@ Size = Annotated[ByteSize, Field(description="Bytes, or a size with a unit: 64Mi
 # --- the mapping file: jobs --------------------------------------------------------------------
 
 
-class ControllerFtp(Strict):
-    """The controller's FTP program store."""
-
-    type: Literal["ftp"] = Field(default="ftp", description="ftp (the default) or serial")
-    host: str = Field(min_length=1, description="Controller address")
-    port: Port = 21
-    user: str = Field(default="anonymous", min_length=1)
-    password: SecretStr | None = Field(
-        default=None, description="Use ${NAME} to take it from the environment"
-    )
-    folder: str = Field(default="/DATA/Programs", description="Where programs go on the controller")
-    passive: Literal["auto", "epsv", "pasv"] = Field(
-        default="auto",
-        description="Passive mode command: auto tries EPSV, then PASV (active mode is not supported)",
-    )
-    tls: Literal["none", "implicit", "explicit"] = Field(
-        default="none", description="FTPS: implicit (TLS from the first byte) or explicit (AUTH TLS)"
-    )
-    tls_verify: bool = Field(default=True, description="Check the controller's certificate")
-    timeout: float = Field(default=10.0, gt=0, description="Seconds per connect, command and data block")
-    upload: Literal["temp-rename", "direct"] = Field(
-        default="temp-rename",
-        description="temp-rename: upload under a temporary name, then rename (atomic); "
-        "direct: for stores without RNFR/RNTO",
-    )
-    temp_suffix: str = Field(
-        default=".tmp", min_length=1, description="Suffix of the temporary name on the controller"
-    )
-    rate_limit: Size | None = Field(
-        default=None, description="Upload speed limit in bytes per second (slow controllers)"
-    )
-
-    @field_validator("folder")
-    @classmethod
-    def _folder(cls, folder: str) -> str:
-        if not folder.startswith("/"):
-            raise ValueError(
-                f"folder {folder!r} must be an absolute path on the controller, e.g. /DATA/Programs"
-            )
-        if any(part == ".." for part in folder.split("/")) or "\\" in folder:
-            raise ValueError(f"folder {folder!r} must not contain '..' or backslashes")
-        return folder.rstrip("/") or "/"
-
-    @field_validator("temp_suffix")
-    @classmethod
-    def _suffix(cls, suffix: str) -> str:
-        if "/" in suffix or "\\" in suffix or not suffix.isprintable():
-            raise ValueError("temp_suffix must be a plain, printable file name suffix such as .tmp")
-        return suffix
-
-
-_URL = re.compile(r"^(socket|rfc2217)://([A-Za-z0-9_.\-]+|\[[0-9A-Fa-f:.]+\]):(\d{1,5})/?$")
-_DEVICE = re.compile(r"^(/dev/[A-Za-z0-9_.\-/]+|COM[0-9]{1,3}|\\\\\.\\COM[0-9]{1,3})$")
-
-
-class AlarmWhen(Strict):
-    """A mapped variable whose value says the controller is in alarm (a drip-feed then stops, FAILED)."""
-
-    path: str = Field(description="Mapped variable, e.g. Machine/State")
-    equals: bool | int | float | str = Field(description="The value that means alarm, e.g. 3")
-
-    @field_validator("path")
-    @classmethod
-    def _path(cls, path: str) -> str:
-        return check_variable_path(path)
-
-
-class ControllerSerial(Strict):
-    """A controller that takes programs over RS-232 (serial DNC), directly or through a device server."""
-
-    type: Literal["serial"] = Field(description="serial: RS-232 DNC (load or drip-feed)")
-    where: str = Field(
-        description="A device path (/dev/ttyUSB0, COM3), rfc2217://host:port (a device server with "
-        "RFC 2217) or socket://host:port (a raw TCP device server)"
-    )
-    baud: int = Field(default=9600, ge=50, le=4_000_000, description="Line speed, bits per second")
-    bytesize: Literal[7, 8] = Field(default=7, description="Data bits (Fanuc: 7)")
-    parity: Literal["none", "even", "odd"] = Field(default="even", description="Parity bit")
-    stopbits: Literal[1, 2] = Field(default=2, description="Stop bits")
-    handshake: Literal["xonxoff", "rtscts", "none"] = Field(
-        default="xonxoff", description="Flow control: the controller's DC1/DC3 (xonxoff), RTS/CTS, or none"
-    )
-    eob: Literal["lf", "crlf"] = Field(default="lf", description="End of block the controller expects")
-    leader: int = Field(default=20, ge=0, le=10_000, description="NULs sent before the first %")
-    percent: bool = Field(default=True, description="Frame the program with % markers")
-    chunk_size: int = Field(default=200, ge=1, le=65_536, description="Most bytes handed to the port at once")
-    software_parity: bool = Field(
-        default=False,
-        description="Send a 7-bit line's parity bit as bit 7 of 8-bit bytes: only for a transparent 8-bit "
-        "port (a device server whose serial port is set to 8N1/8N2, a pseudo-terminal). A device server "
-        "whose port is set to the controller's format (7E2: the usual set-up) does the parity itself: "
-        "leave it off. DC1/DC3 are obeyed whatever their bit 7 either way (docs/dnc-fanuc.md)",
-    )
-    mode: Literal["load", "drip"] = Field(
-        default="load",
-        description="load: the whole program into the controller's memory; drip: it runs as it arrives",
-    )
-    start: Literal["dc1", "now"] = Field(
-        default="dc1", description="Start sending on the controller's first DC1 (its READ), or at once"
-    )
-    dc1_timeout: float = Field(
-        default=60.0, gt=0, description="Seconds to wait for the controller's DC1 before the job fails"
-    )
-    stall_timeout: float = Field(
-        default=600.0,
-        gt=0,
-        description="Seconds the controller may hold the line with DC3 before the job fails "
-        "(a machine in feed hold)",
-    )
-    lead_time: float = Field(
-        default=30.0, gt=0, description="Drip: seconds of cutting the controller's buffer should hold ahead"
-    )
-    buffer: int = Field(
-        default=256, ge=8, le=16 * 1024 * 1024, description="The controller's receive buffer, bytes"
-    )
-    link: str | None = Field(
-        default=None,
-        pattern=r"^[A-Za-z0-9_.:-]{1,64}$",
-        description="Drip: the device server or uplink this line shares with other machines' lines (any "
-        "name; the same name in each machine's file); with link_capacity, the lines share it so that the "
-        "machine whose buffer runs dry first is served first",
-    )
-    link_capacity: float | None = Field(
-        default=None,
-        gt=0,
-        description="Characters per second the shared link carries for all its lines together",
-    )
-    rapid: float = Field(
-        default=10_000.0, gt=0, description="Rapid rate, mm/min, for the run-time estimate while dripping"
-    )
-    lathe: bool = Field(
-        default=False,
-        description="Drip: the programs are a lathe's (Fanuc T, G-code system A: X a diameter, G98/G99 feed "
-        "per minute/revolution, G50 S the spindle clamp), for the run-time estimate",
-    )
-    dwell_p: Literal["ms", "s"] = Field(
-        default="ms",
-        description="Drip: the unit of G4 P in the run-time estimate (Fanuc: ms; LinuxCNC: s). The "
-        "estimate errs short, so ms is the default",
-    )
-    connect_timeout: float = Field(default=10.0, gt=0, description="Seconds to open the port")
-    alarm_when: AlarmWhen | None = Field(
-        default=None,
-        description="A serial line cannot tell that the controller went into alarm; where the machine's "
-        "state is mapped (from another driver), this stops a transfer when it says alarm",
-    )
-    dsr: bool = Field(
-        default=False,
-        description="A device path only: fail the transfer when DSR drops (the cable has DSR wired)",
-    )
-
-    @field_validator("where")
-    @classmethod
-    def _where(cls, where: str) -> str:
-        if "://" in where:
-            match = _URL.match(where)
-            if match is None:
-                raise ValueError(f"{where!r} is not like socket://host:port or rfc2217://host:port")
-            if not 1 <= int(match.group(3)) <= 65535:
-                raise ValueError(f"port {match.group(3)} in {where!r} is outside 1..65535")
-            return where
-        if not _DEVICE.match(where) or ".." in where.split("/"):
-            raise ValueError(f"{where!r} is not a serial device path (/dev/ttyUSB0, COM3) or a URL")
-        return where
-
-    @model_validator(mode="after")
-    def _line(self) -> ControllerSerial:
-        if self.software_parity and (self.bytesize != 7 or self.parity == "none"):
-            raise ValueError("software_parity needs bytesize 7 and parity even or odd")
-        if self.link_capacity is not None and self.link is None:
-            raise ValueError("link_capacity needs link: the name of the device server or uplink it is of")
-        return self
+# The controller's settings (`jobs.controller`): each transport's own model, from its folder
+# (gateway/transports/registry.py); the union pydantic validates is built from the registry.
 
 
 def _controller_type(value: Any) -> str:
     """Which controller model a `controller:` section is; files from before serial DNC have no `type`."""
     if isinstance(value, dict):
-        return str(value.get("type", "ftp"))
-    return str(getattr(value, "type", "ftp"))
+        return str(value.get("type", transports.DEFAULT))
+    return str(getattr(value, "type", transports.DEFAULT))
 
 
-CONTROLLER_TAGS = ("ftp", "serial", "focas")
-Controller = Annotated[
-    Annotated[ControllerFtp, Tag("ftp")]
-    | Annotated[ControllerSerial, Tag("serial")]
-    | Annotated[ControllerFocas, Tag("focas")],
-    Discriminator(_controller_type),
-]
+def _controller_union() -> Any:
+    """`jobs.controller` as pydantic validates it: the registered transports' models, tagged by type."""
+    members = tuple(Annotated[spec.settings, Tag(spec.type)] for spec in transports.ordered())
+    return Annotated[Union[members], Discriminator(_controller_type)]  # noqa: UP007 - built from a tuple
+
+
+if TYPE_CHECKING:  # what the core may read of any controller's settings; each transport narrows to its own
+    Controller = ControllerSettings
+else:
+    Controller = _controller_union()
 
 
 class Retry(Backoff):
@@ -345,12 +180,6 @@ class JobsConfig(Strict):
         if serial and self.auto is not None and self.auto.select_value == "path":
             raise ValueError("auto.select_value: path needs a program folder; a serial line has none")
         return self
-
-
-def check_variable_path(path: str) -> str:
-    if not _VARIABLE_PATH.match(path):
-        raise ValueError(f"{path!r} is not a variable path such as Control/Start")
-    return path
 
 
 # --- the gateway file: inbox --------------------------------------------------------------------

@@ -23,13 +23,14 @@ from pydantic import BaseModel, ValidationError
 from gateway.alarms.config import SOURCE_TAGS
 from gateway.auth.known_passwords import is_known, known_passwords_of
 from gateway.config.gateway import GatewayConfig
-from gateway.config.jobs import CONTROLLER_TAGS
 from gateway.config.mapping import MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
 from gateway.settings.access import DEFAULT_ROLES, REFUSE, ROLE_RE, unknown_role
 from gateway.settings.masking import masked
+from gateway.shards.static import select
 from gateway.sources import registry
+from gateway.transports import registry as transports
 
 Loc = tuple[str | int, ...]
 M = TypeVar("M", bound=BaseModel)
@@ -207,7 +208,7 @@ def _untagged(loc: Loc) -> Loc:
     for at, tags in (
         (("driver",), registry.types()),
         (("alarms", "source"), SOURCE_TAGS),
-        (("jobs", "controller"), CONTROLLER_TAGS),
+        (("jobs", "controller"), transports.types()),
     ):
         n = len(at)
         if len(loc) > n and loc[:n] == at and loc[n] in tags:
@@ -380,6 +381,7 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     issues: list[ConfigIssue] = []
     gateway = GatewayConfig()
     gateway_file: Path | None = None
+    gateway_located: Located | None = None
     base_dir = Path.cwd()
     mapping_files: list[Path] = []
     for path in paths:
@@ -398,6 +400,7 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
                 raise ConfigError(exc.issues) from None
             base_dir = path.parent.resolve()
             gateway_file = path
+            gateway_located = located
             issues.extend(
                 _known_password_issues(located, gateway, os.environ if environ is None else environ)
             )
@@ -432,7 +435,45 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     issues.extend(_shared_links(machines, seen))
     if issues:
         raise ConfigError(issues)
+    if gateway.shard is not None and gateway_located is not None and gateway_file is not None:
+        machines = _shard_machines(gateway, machines, gateway_located, gateway_file)
+        mapping_files = [seen[m.machine] for m in machines]
     return Config(gateway, tuple(machines), base_dir, tuple(mapping_files))
+
+
+def _shard_machines(
+    gateway: GatewayConfig, machines: list[MachineMapping], located: Located, file: Path
+) -> list[MachineMapping]:
+    """The machines of the gateway file's `shard:` (the whole fleet was checked first)."""
+    shard = gateway.shard_of()
+    assert shard is not None
+    names = [m.machine for m in machines]
+    issues: list[ConfigIssue] = []
+    if isinstance(shard, list):
+        for index, name in enumerate(shard):
+            if name not in names:
+                known = ", ".join(sorted(names))
+                issues.append(
+                    ConfigIssue(
+                        str(file),
+                        located.line(("shard", index)) or located.line(("shard",)),
+                        f"shard[{index}]",
+                        f"names {name!r}, which no mapping file defines (the fleet: {known})",
+                    )
+                )
+    chosen = set(select(names, shard))
+    if not chosen and not issues:
+        issues.append(
+            ConfigIssue(
+                str(file),
+                located.line(("shard",)),
+                "shard",
+                f"shard {shard} gets no machine: the fleet has {len(names)}",
+            )
+        )
+    if issues:
+        raise ConfigError(issues)
+    return [m for m in machines if m.machine in chosen]
 
 
 def _known_password_issues(

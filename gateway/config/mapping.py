@@ -31,7 +31,7 @@ from gateway.sinks import registry as sinks
 from gateway.sinks.copydata.config import MachineCopydata, VariableCopydata, copydata_issues
 from gateway.sinks.mqtt.config import MachineMqtt, VariableMqtt
 from gateway.sources import registry
-from gateway.sources.base import DriverSettings, VariableSettings
+from gateway.sources.base import ChecksVariables, DriverSettings, VariableSettings
 
 
 def check_path(path: str) -> str:
@@ -308,9 +308,8 @@ class MachineMapping(Sectioned):
         if spec is not None and spec.read_only is not None:
             message = f"a {spec.type} driver is read-only ({spec.read_only}): use access: read"
             located_errors([((i, "access"), message) for i, var in enumerate(variables) if var.writable])
-        check = getattr(driver, "variable_issues", None)  # a driver's own checks across its variables
-        if check is not None:
-            located_errors(check(variables))
+        if isinstance(driver, ChecksVariables):  # a driver's own checks across its variables
+            located_errors(driver.variable_issues(variables))
         return variables
 
     @field_validator("jobs")

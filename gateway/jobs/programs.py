@@ -31,11 +31,11 @@ from gateway.errors import (
     RequestError,
 )
 from gateway.jobs.backups import BackupShelf
-from gateway.jobs.delivery.transport import OpenStore
 from gateway.jobs.inbox.inbox import UploadReply
 from gateway.jobs.inbox.paths import check_file_name
 from gateway.model.methods import Argument, Method
 from gateway.model.types import TypeSpec
+from gateway.transports.base import OpenStore
 
 if TYPE_CHECKING:
     from gateway.model.context import WriteContext

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -9,6 +10,7 @@ from pydantic import BaseModel, SecretStr
 
 SECRET_WORDS = ("password", "secret", "token", "passphrase")
 MASK = "********"
+URL_PASSWORD = re.compile(r"(\w+://[^/:@\s]*:)[^@/\s]+@")  # postgresql://user:PASSWORD@host/db
 
 
 def masked(model: BaseModel) -> dict[str, Any]:
@@ -24,6 +26,8 @@ def _mask(value: Any) -> Any:
         }
     if isinstance(value, list):
         return [_mask(v) for v in value]
+    if isinstance(value, str):  # a URL with its password in it (the gateway file's queue:)
+        return URL_PASSWORD.sub(rf"\g<1>{MASK}@", value)
     if isinstance(value, SecretStr):  # pragma: no cover - model_dump(mode="json") has already hidden it
         return MASK
     return value

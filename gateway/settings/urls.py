@@ -33,3 +33,31 @@ def check_url(url: str) -> str:
     if parts.query or parts.fragment:
         raise ValueError(f"url {url!r} must be the agent's base address, without ?query or #fragment")
     return url.rstrip("/")
+
+
+def check_queue_url(url: str) -> str:
+    """The gateway file's `queue:`: a PostgreSQL URL naming a database (libpq's form; the password from the
+    URL, or from PGPASSWORD / ~/.pgpass, which libpq reads itself)."""
+    parts = urlsplit(url)
+    shown = _without_password(url)
+    if parts.scheme not in ("postgresql", "postgres"):
+        raise ValueError(
+            f"{shown!r} must be a PostgreSQL URL, postgresql://user@host:5432/database"
+            " (leave queue out for the SQLite file in the state directory)"
+        )
+    try:
+        parts.port  # noqa: B018 - a bad port raises here
+    except ValueError:
+        raise ValueError(f"{shown!r} has an invalid port") from None
+    if not parts.path.strip("/"):
+        raise ValueError(f"{shown!r} names no database: postgresql://host/database")
+    if parts.fragment:
+        raise ValueError(f"{shown!r} must not have a #fragment")
+    return url
+
+
+def _without_password(url: str) -> str:
+    parts = urlsplit(url)
+    if not parts.password:
+        return url
+    return url.replace(f":{parts.password}@", ":***@", 1)

@@ -8,7 +8,7 @@ or the OPC UA server:
 
 | port | implemented by |
 |---|---|
-| `JobsPort` | `gateway.jobs.service.JobService` (the same inbox staging, validation and queue as FTP) |
+| `JobsPort` | `gateway.jobs.queue_port.QueuePort` (the same inbox staging, validation and queue as FTP) |
 | `AlarmsPort` | `gateway.alarms.service.AlarmService` (the managers' role checks and audit) |
 | `AuditPort` | `gateway.audit.trail.AuditTrail` (reads the audit table) |
 | `TrustPort` | `gateway.sinks.opcua.security.TrustList` (the OPC UA server's pki folders) |

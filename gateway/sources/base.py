@@ -16,9 +16,9 @@ machine's mapping through `DriverMapping`, which the assembled `MachineMapping` 
 from __future__ import annotations
 
 import builtins
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, Self, TypeVar
+from typing import Any, Protocol, Self, TypeVar, runtime_checkable
 
 from gateway.model.sample import ReadBack
 from gateway.model.tree import Machine, VariableNode
@@ -56,6 +56,21 @@ class DriverSettings(Protocol):
     def endpoint(self) -> str:
         """The controller's address as users know it (`Status/Endpoint`, log lines)."""
         ...
+
+
+@runtime_checkable
+class ChecksVariables(Protocol):
+    """Driver settings that check a mapping's variables together (addresses against types, overlaps,
+    sizes): MachineMapping raises what it answers as `file:line: variables[i].<key>` errors."""
+
+    def variable_issues(self, variables: Sequence[Any]) -> list[tuple[tuple[str | int, ...], str]]: ...
+
+
+@runtime_checkable
+class PlansPolls(Protocol):
+    """Driver settings of a polled device (Modbus, S7): `cnc-gateway check` prints the requests it plans."""
+
+    def describe_plan(self, variables: Sequence[Any], interval_of: Callable[[Any], float]) -> list[str]: ...
 
 
 class VariableSettings(Protocol):
@@ -97,6 +112,26 @@ class DriverMapping(Protocol):
     def queue_size(self, var: VariableSettings) -> int: ...
 
 
+@dataclass(frozen=True, slots=True)
+class DiscoverRequest:
+    """What `cnc-gateway discover ENDPOINT` was asked; each driver reads the options it has."""
+
+    endpoint: str
+    machine: str  # the name the mapping file it writes gives the machine
+    timeout: float
+    device: str | None = None  # MTConnect: the device's name or uuid, when the agent has several
+    user: str | None = None
+    password: str | None = None
+    security: str = "None"  # OPC UA: asyncua's security string
+    start: str | None = None  # OPC UA: the node id to browse from
+    max_depth: int = 12
+    max_variables: int = 5000
+
+
+#: A starting mapping file (YAML text) from a controller; raises SourceError or ValueError saying why not.
+Discover = Callable[[DiscoverRequest], Coroutine[Any, Any, str]]
+
+
 @dataclass(frozen=True)
 class DriverSpec:
     """One driver, as gateway/sources/registry.py lists it.
@@ -122,6 +157,10 @@ class DriverSpec:
     # `cnc-gateway` verbs this driver adds, as (verb, module): the module (in the driver's folder) has
     # `register(sub)` as those of gateway/cli/ do, and is imported only when its verb is given (or --help).
     commands: tuple[tuple[str, str], ...] = ()
+    # `cnc-gateway discover ENDPOINT` for endpoints that start with one of `discovers` (`focas://`): it
+    # writes a starting mapping file. The default driver's `discover` takes any other endpoint.
+    discovers: tuple[str, ...] = ()
+    discover: Discover | None = None
 
 
 M = TypeVar("M")

@@ -51,14 +51,14 @@ def test_the_opcua_server_does_not_import_its_alarms_and_they_do_not_import_it()
 
 
 @pytest.mark.parametrize(
-    "module", ["gateway.sources.opcua.client", "gateway.sinks.mqtt.sink", "gateway.sinks.copydata.tcp",
+    "module", ["gateway.sources.opcua.client", "gateway.sinks.mqtt_link.link", "gateway.sinks.copydata.tcp",
                "gateway.sinks.copydata.udp", "gateway.sinks.copydata.win32"],
 )  # fmt: skip
 def test_reconnect_loops_use_the_one_helper(module: str) -> None:
     assert "gateway.reconnect" in imported(module)
 
 
-@pytest.mark.parametrize("module", ["gateway.audit.store", "gateway.sinks.mqtt.buffer"])
+@pytest.mark.parametrize("module", ["gateway.audit.store", "gateway.sinks.mqtt_link.buffer"])
 def test_sqlite_files_are_opened_through_sqlite_file(module: str) -> None:
     source = (ROOT / (module.replace(".", "/") + ".py")).read_text()
     assert "gateway.sqlite_file" in imported(module) and "sqlite3.connect" not in source

@@ -13,6 +13,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from gateway.codecs.mtconnect.assets import Asset
+from gateway.codecs.mtconnect.attributes import description_attributes, present
 from gateway.codecs.mtconnect.buffer import Entry, Window, entry_xml
 from gateway.codecs.mtconnect.errors import RequestError
 from gateway.codecs.mtconnect.model import (
@@ -23,9 +24,7 @@ from gateway.codecs.mtconnect.model import (
     Description,
     Device,
     Node,
-    Representation,
 )
-from gateway.codecs.mtconnect.vocabulary import format_float
 from gateway.codecs.mtconnect.xmltext import xml_attr, xml_text
 
 SCHEMA_VERSION = "2.4"
@@ -135,14 +134,8 @@ def _node_xml(node: Node, out: list[str]) -> None:
 
 def _description_xml(d: Description) -> str:
     parts = ["<Description"]
-    for attr, value in (
-        ("manufacturer", d.manufacturer),
-        ("model", d.model),
-        ("serialNumber", d.serial_number),
-        ("station", d.station),
-    ):
-        if value is not None:
-            parts.append(f' {attr}="{xml_attr(value)}"')
+    for attr, value in description_attributes(d):
+        parts.append(f' {attr}="{xml_attr(value)}"')
     if d.text:
         parts.append(f">{xml_text(d.text)}</Description>")
     else:
@@ -151,28 +144,9 @@ def _description_xml(d: Description) -> str:
 
 
 def _data_item_xml(item: DataItem) -> str:
-    parts = [
-        f'<DataItem category="{item.category.value}" id="{xml_attr(item.id)}" type="{xml_attr(item.type)}"'
-    ]
-    for attr, text in (
-        ("name", item.name),
-        ("subType", item.sub_type),
-        ("units", item.units),
-        ("nativeUnits", item.native_units),
-        ("coordinateSystem", item.coordinate_system),
-        ("statistic", item.statistic),
-        ("compositionId", item.composition_id),
-    ):
-        if text is not None:
-            parts.append(f' {attr}="{xml_attr(text)}"')
-    if item.native_scale is not None:
-        parts.append(f' nativeScale="{format_float(item.native_scale)}"')
-    if item.significant_digits is not None:
-        parts.append(f' significantDigits="{item.significant_digits}"')
-    if item.representation is not Representation.VALUE:
-        parts.append(f' representation="{item.representation.value}"')
-    if item.discrete:
-        parts.append(' discrete="true"')
+    parts = ["<DataItem"]
+    for attribute, value in present(item):
+        parts.append(f' {attribute.name}="{attribute.xml(value)}"')
     if item.source is not None:
         parts.append(f"><Source>{xml_text(item.source)}</Source></DataItem>")
     else:

@@ -25,6 +25,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from gateway.codecs.mtconnect.assets import Asset
+from gateway.codecs.mtconnect.attributes import description_attributes, present
 from gateway.codecs.mtconnect.buffer import Entry, Window
 from gateway.codecs.mtconnect.documents import SCHEMA_VERSION, DocumentInfo
 from gateway.codecs.mtconnect.errors import RequestError
@@ -36,7 +37,6 @@ from gateway.codecs.mtconnect.model import (
     Description,
     Device,
     Node,
-    Representation,
 )
 from gateway.codecs.mtconnect.vocabulary import FLOAT_EVENTS, INTEGER_EVENTS, THREE_SPACE, UNAVAILABLE
 
@@ -110,38 +110,14 @@ def _node_json(node: Node) -> dict[str, Any]:
 
 
 def _description_json(d: Description) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in (
-        ("manufacturer", d.manufacturer),
-        ("model", d.model),
-        ("serialNumber", d.serial_number),
-        ("station", d.station),
-        ("value", d.text),
-    ):
-        if value is not None:
-            out[key] = value
+    out: dict[str, Any] = dict(description_attributes(d))
+    if d.text is not None:
+        out["value"] = d.text
     return out
 
 
 def _data_item_json(item: DataItem) -> dict[str, Any]:
-    out: dict[str, Any] = {"category": item.category.value, "id": item.id, "type": item.type}
-    for key, value in (
-        ("name", item.name),
-        ("subType", item.sub_type),
-        ("units", item.units),
-        ("nativeUnits", item.native_units),
-        ("coordinateSystem", item.coordinate_system),
-        ("statistic", item.statistic),
-        ("compositionId", item.composition_id),
-        ("nativeScale", item.native_scale),
-        ("significantDigits", item.significant_digits),
-    ):
-        if value is not None:
-            out[key] = value
-    if item.representation is not Representation.VALUE:
-        out["representation"] = item.representation.value
-    if item.discrete:
-        out["discrete"] = True
+    out: dict[str, Any] = {attribute.name: value for attribute, value in present(item)}
     if item.source is not None:
         out["Source"] = {"value": item.source}
     return out

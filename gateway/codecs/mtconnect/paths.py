@@ -21,6 +21,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+from gateway.codecs.mtconnect.attributes import PATH_ATTRIBUTES, present
 from gateway.codecs.mtconnect.errors import InvalidPath
 from gateway.codecs.mtconnect.model import Catalog, DataItem, Device, Node
 
@@ -44,20 +45,7 @@ class _Element:
 
 
 def _item_element(item: DataItem) -> _Element:
-    attrs = {"id": item.id, "type": item.type, "category": item.category.value}
-    for key, value in (
-        ("name", item.name),
-        ("subType", item.sub_type),
-        ("units", item.units),
-        ("nativeUnits", item.native_units),
-        ("coordinateSystem", item.coordinate_system),
-        ("statistic", item.statistic),
-        ("compositionId", item.composition_id),
-    ):
-        if value is not None:
-            attrs[key] = value
-    if item.representation.value != "VALUE":
-        attrs["representation"] = item.representation.value
+    attrs = {attribute.name: value for attribute, value in present(item, PATH_ATTRIBUTES)}
     return _Element("DataItem", attrs, item_id=item.id)
 
 

@@ -14,6 +14,10 @@ Otherwise what the interrupted delivery left is removed and the job is sent agai
 
 How a program travels is the transport's business (transport.py); this module
 knows jobs, attempts, backoff and auto-start, and nothing of FTP.
+
+Shards (docs/scaling.md): given a `lease` (gateway/shards/holder.py), the worker acts only while
+its process holds the machine's lease, and presents the lease's fencing token with the claim
+and with its outcome, so that the queue refuses a worker whose process lost the machine.
 """
 
 from __future__ import annotations
@@ -26,15 +30,18 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from gateway.config.jobs import JobsConfig
-from gateway.errors import DeliveryError, JobError
+from gateway.errors import DeliveryError, JobError, JobStoreError
 from gateway.jobs.delivery.autostart import AutoStarter
-from gateway.jobs.delivery.transport import DeliveryTransport, Program, Progress
+from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.publish import JobPublisher
-from gateway.jobs.queue.store import Job, JobQueue, JobState
+from gateway.jobs.queue.records import Job, JobState
+from gateway.shards.fence import Fence
+from gateway.transports.base import DeliveryTransport, Program, Progress
 
 log = logging.getLogger("gateway.jobs.delivery")
 
 IDLE_POLL = 5.0  # s: a worker with nothing to do looks again at least this often
+LEASE_POLL = 1.0  # s: a worker whose process does not hold its machine's lease looks again this often
 
 
 def progress_record(progress: Progress) -> dict[str, Any]:
@@ -56,7 +63,13 @@ class Spool(Protocol):
     def delivered(self, job: Job) -> None: ...
 
 
-# Runs a JobQueue method off the event loop (and tells the publisher something may have changed).
+class LeaseView(Protocol):
+    """The machines' leases as a worker sees them (gateway/shards/holder.py `LeaseHolder`)."""
+
+    def fence(self, machine: str) -> Fence | None: ...
+
+
+# Runs a JobStore method off the event loop (and tells the publisher something may have changed).
 QueueCall = Callable[..., Awaitable[Any]]
 
 
@@ -67,13 +80,14 @@ class DeliveryWorker:
         self,
         machine: str,
         config: JobsConfig,
-        queue: JobQueue,
+        queue: JobStore,
         spool: Spool,
         publisher: JobPublisher,
         run: QueueCall,
         transport: DeliveryTransport,
         *,
         autostart: AutoStarter | None = None,
+        lease: LeaseView | None = None,
     ) -> None:
         self.machine = machine
         self.config = config
@@ -83,6 +97,7 @@ class DeliveryWorker:
         self._q = run
         self.transport = transport
         self.autostart = autostart
+        self.lease = lease  # None: this process owns the machine (no shards)
         self._wake = asyncio.Event()
 
     def wake(self) -> None:
@@ -99,25 +114,56 @@ class DeliveryWorker:
     async def run(self) -> None:
         """Until cancelled: take the head of the queue, deliver it (or re-check it after a crash)."""
         while True:
-            job: Job | None = await self._q(self.queue.head, self.machine)
+            fence = self.lease.fence(self.machine) if self.lease is not None else None
+            if self.lease is not None and fence is None:  # another shard's machine, for now
+                await self._sleep(LEASE_POLL)
+                continue
+            try:
+                job: Job | None = await self._q(self.queue.head, self.machine)
+            except JobStoreError as exc:  # the queue's database is away (PostgreSQL): wait for it
+                log.warning(
+                    "%s: the job queue cannot be read (%s); again in %g s", self.machine, exc, LEASE_POLL
+                )
+                await self._sleep(LEASE_POLL)
+                continue
             if job is None:
                 await self._sleep(IDLE_POLL)
                 continue
             if job.state is JobState.SENDING:
-                await self.recover(job)
+                await self._fenced(self.recover(job, fence), job)
                 continue
             wait = (job.next_attempt_at or 0.0) - time.time()
             if wait > 0:
                 await self._sleep(wait)
                 continue
-            await self.deliver(job)
+            await self._fenced(self.deliver(job, fence), job)
+
+    async def _fenced(self, step: Awaitable[None], job: Job) -> None:
+        """A step that a lease holder may lose midway (a refusal of its fencing token ends it, logged), or
+        that meets a PostgreSQL queue that is away (the job stays where it is; the worker waits)."""
+        try:
+            await step
+        except JobStoreError as exc:
+            log.warning("%s: %s waits for the job queue: %s", self.machine, job.id, exc)
+            await self._sleep(LEASE_POLL)
+        except JobError as exc:
+            if self.lease is None:
+                raise
+            log.warning("%s: %s left to the machine's next holder: %s", self.machine, job.id, exc)
 
     # --- one job ------------------------------------------------------------------------------------
 
-    async def deliver(self, job: Job) -> None:
+    def _still_held(self, fence: Fence | None) -> bool:
+        """With shards: does this process still hold the lease it claimed with (by its own clock)?"""
+        return self.lease is None or self.lease.fence(self.machine) == fence
+
+    async def deliver(self, job: Job, fence: Fence | None = None) -> None:
         try:
-            job = await self._q(self.queue.start_sending, job.seq)
-        except JobError:  # cancelled or changed from the CLI a moment ago
+            job = await self._q(self.queue.start_sending, job.seq, fence=fence)
+        except JobError:  # cancelled or changed from the CLI a moment ago, or the lease is lost
+            return
+        if not self._still_held(fence):  # the lease may have run out meanwhile: the next holder recovers it
+            log.warning("%s: %s claimed, but the lease is no longer sure; leaving it", self.machine, job.id)
             return
         program = self.program(job)
         name, total = program.name, program.size
@@ -134,12 +180,17 @@ class DeliveryWorker:
                 raise DeliveryError(missing, permanent=True)
             where = await self.transport.deliver(program, report)
         except DeliveryError as exc:
-            await self._failed(job, exc)
+            await self._failed(job, exc, fence)
             return
         finally:
             self.publisher.forget(job)
         seconds = time.monotonic() - started
-        job = await self._q(self.queue.delivered, job.seq, name, f"delivered to {where} in {seconds:.1f} s")
+        reason = f"delivered to {where} in {seconds:.1f} s"
+        try:
+            job = await self._q(self.queue.delivered, job.seq, name, reason, fence=fence)
+        except JobError as exc:  # the lease was lost while sending: the next holder checks the controller
+            log.warning("%s: %s sent, but not recorded: %s", self.machine, job.id, exc)
+            return
         log.info("%s: %s delivered as %s", self.machine, job.id, name)
         self.spool.delivered(job)
         if self.autostart is not None:
@@ -152,12 +203,14 @@ class DeliveryWorker:
         size, digest = job.program_size or 0, job.program_sha256 or ""
         return Program(job.filename, self.spool.program(job), size, digest, job.program_name, job.user)
 
-    async def _failed(self, job: Job, exc: DeliveryError) -> None:
+    async def _failed(self, job: Job, exc: DeliveryError, fence: Fence | None = None) -> None:
         attempts, limit = job.attempts, self.config.max_attempts
         reason = exc.reason
         if exc.permanent or attempts >= limit:
             why = "" if exc.permanent else f" after {attempts} attempt{'s' if attempts != 1 else ''}"
-            await self._q(self.queue.send_failed, job.seq, f"failed{why}: {reason}", retry_at=None)
+            await self._q(
+                self.queue.send_failed, job.seq, f"failed{why}: {reason}", retry_at=None, fence=fence
+            )
             log.warning("%s: %s FAILED%s: %s", self.machine, job.id, why, reason)
             return
         delay = self.config.retry.delay(attempts)
@@ -166,6 +219,7 @@ class DeliveryWorker:
             job.seq,
             f"attempt {attempts} of {limit} failed: {reason}; next in {delay:g} s",
             retry_at=time.time() + delay,
+            fence=fence,
         )
         log.info(
             "%s: %s attempt %d failed (%s); retrying in %g s", self.machine, job.id, attempts, reason, delay
@@ -173,7 +227,7 @@ class DeliveryWorker:
 
     # --- after a crash ----------------------------------------------------------------------------
 
-    async def recover(self, job: Job) -> None:
+    async def recover(self, job: Job, fence: Fence | None = None) -> None:
         """A job left SENDING by an earlier run: delivered after all, or to be sent again?"""
         program = self.program(job)
         attempt = 0
@@ -182,7 +236,7 @@ class DeliveryWorker:
             try:
                 if await self.transport.holds(program):
                     found = "found complete on the controller after a restart"
-                    job = await self._q(self.queue.delivered, job.seq, program.name, found)
+                    job = await self._q(self.queue.delivered, job.seq, program.name, found, fence=fence)
                     log.info(
                         "%s: %s was delivered before the restart; not sending it again", self.machine, job.id
                     )
@@ -191,7 +245,9 @@ class DeliveryWorker:
                 break
             except DeliveryError as exc:
                 if exc.permanent:  # the transport says it must not be sent again on its own
-                    await self._q(self.queue.send_failed, job.seq, f"failed: {exc.reason}", retry_at=None)
+                    await self._q(
+                        self.queue.send_failed, job.seq, f"failed: {exc.reason}", retry_at=None, fence=fence
+                    )
                     log.warning("%s: %s FAILED after a restart: %s", self.machine, job.id, exc.reason)
                     return
                 delay = self.config.retry.delay(attempt)
@@ -204,5 +260,9 @@ class DeliveryWorker:
                 )
                 await asyncio.sleep(delay)
         await self._q(
-            self.queue.send_failed, job.seq, "interrupted by a restart; sending again", retry_at=time.time()
+            self.queue.send_failed,
+            job.seq,
+            "interrupted by a restart; sending again",
+            retry_at=time.time(),
+            fence=fence,
         )

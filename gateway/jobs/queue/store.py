@@ -12,9 +12,10 @@ commits through `PRAGMA data_version` and picks them up by revision.
          \\-> REJECTED    \\-> REJECTED  \\-> CANCELLED  \\-> QUEUED (retry later) | FAILED
     FAILED / CANCELLED -> QUEUED (retry from the CLI)
 
-Job ids (`J000042`) come from an AUTOINCREMENT key, so they are stable across
-restarts and never reused. Methods are synchronous and thread-safe; the async
-side calls them in a worker thread.
+This is the embedded store; postgres.py keeps the same queue in PostgreSQL for shards
+that share it (base.py: the JobStore both fit). Job ids (`J000042`) come from an
+AUTOINCREMENT key, so they are stable across restarts and never reused. Methods are
+synchronous and thread-safe; the async side calls them in a worker thread.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from gateway.jobs.queue.records import (
     parse_job_id,
     parse_ts,
 )
+from gateway.shards.fence import Fence
 from gateway.sqlite_file import SqliteFile
 
 __all__ = ["ALLOWED", "TERMINAL", "Job", "JobQueue", "JobState", "Transition", "job_id", "parse_job_id"]
@@ -258,13 +260,15 @@ class JobQueue(SqliteFile):
             ).fetchone()
             return _job(row) if row else None
 
-    def start_sending(self, seq: int, reason: str = "") -> Job:
+    def start_sending(self, seq: int, reason: str = "", *, fence: Fence | None = None) -> Job:
         """QUEUED -> SENDING, counting the attempt. JobError if someone (the CLI) changed it meanwhile."""
+        _no_fence(fence)
         with self._write() as db:
             job = self._get(db, seq)
             return self._move(db, seq, S.SENDING, reason, expect=(S.QUEUED,), attempts=job.attempts + 1)
 
-    def delivered(self, seq: int, name: str, reason: str = "") -> Job:
+    def delivered(self, seq: int, name: str, reason: str = "", *, fence: Fence | None = None) -> Job:
+        _no_fence(fence)
         with self._write() as db:
             return self._move(
                 db,
@@ -277,8 +281,11 @@ class JobQueue(SqliteFile):
                 next_attempt_at=None,
             )
 
-    def send_failed(self, seq: int, reason: str, *, retry_at: float | None) -> Job:
+    def send_failed(
+        self, seq: int, reason: str, *, retry_at: float | None, fence: Fence | None = None
+    ) -> Job:
         """A failed attempt: back to QUEUED until `retry_at`, or FAILED (dead letter) when None."""
+        _no_fence(fence)
         with self._write() as db:
             if retry_at is None:
                 return self._move(db, seq, S.FAILED, reason, expect=(S.SENDING,), next_attempt_at=None)
@@ -410,6 +417,11 @@ class JobQueue(SqliteFile):
             clauses.append(f"state IN ({', '.join('?' for _ in states)})")
             args.extend(s.value for s in states)
         return (" WHERE " + " AND ".join(clauses) if clauses else ""), tuple(args)
+
+
+def _no_fence(fence: Fence | None) -> None:
+    if fence is not None:
+        raise JobError(f"a SQLite job queue holds no leases, so it cannot check the fencing token {fence}")
 
 
 def _transition(row: sqlite3.Row) -> Transition:

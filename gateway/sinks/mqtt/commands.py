@@ -31,28 +31,33 @@ from typing import Any
 
 from gateway.errors import (
     AccessDenied,
-    ArgumentsMissing,
     CallError,
     MalformedRequest,
     RequestError,
-    TooManyArguments,
 )
 from gateway.model.context import WriteContext
 from gateway.model.methods import Method
 from gateway.model.tree import Machine, VariableTree
-from gateway.sinks.mqtt.client import Incoming
 from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import plain
 from gateway.sinks.mqtt.topics import ResponseTopics, clean_segment
-from gateway.sinks.mqtt.writes import LogQuota, ResponseTopicRefused, TooManyWrites
+from gateway.sinks.mqtt.writes import ResponseTopicRefused
+from gateway.sinks.mqtt_link.client import Incoming
+from gateway.sinks.mqtt_link.requests import (
+    CORRELATION,
+    LogQuota,
+    TooManyWrites,
+    arguments,
+    carry_out,
+    correlation_of,
+    read_body,
+)
 
 log = logging.getLogger(__name__)
 
 COMMANDS = "commands"
 RESULT = "result"
 OBJECT = "Commands"  # the machine methods that are commands (gateway/commands/runner.py)
-CORRELATION = "correlation_id"
-MAX_RUNNING = 4  # commands of one machine carried out at once
 
 Answer = Callable[[str, bytes, "bytes | None"], None]
 _dumps = json.JSONEncoder(ensure_ascii=False, separators=(",", ":"), allow_nan=False).encode
@@ -82,49 +87,6 @@ def command_target(topic: str, prefix: str) -> tuple[str, str] | None:
     if len(levels) != 3 or levels[1] != COMMANDS or not levels[0] or not levels[2]:
         return None
     return levels[0], levels[2]
-
-
-def read_body(payload: bytes) -> dict[str, Any]:
-    """The request's JSON object (an empty body is `{}`). Raises MalformedRequest with the reason."""
-    try:
-        text = bytes(payload).decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise MalformedRequest(f"the body is not UTF-8 text (byte {exc.start})") from None
-    if not text.strip():
-        return {}
-    try:
-        body = json.loads(text)
-    except RecursionError:
-        raise MalformedRequest("malformed JSON: nested too deeply") from None
-    except json.JSONDecodeError as exc:
-        raise MalformedRequest(f"malformed JSON: {exc.msg} at character {exc.pos}") from None
-    except ValueError as exc:  # json's other refusals (an integer too long to convert, say)
-        raise MalformedRequest(f"malformed JSON: {exc}") from None
-    if not isinstance(body, dict):
-        raise MalformedRequest('expected a JSON object with the arguments by name, e.g. {"name": "part.nc"}')
-    return body
-
-
-def correlation_of(body: Mapping[str, Any]) -> str | int | None:
-    value = body.get(CORRELATION)
-    if value is None or (isinstance(value, (str, int)) and not isinstance(value, bool)):
-        return value
-    raise MalformedRequest(f"{CORRELATION} must be text or a number")
-
-
-def arguments(method: Method, body: Mapping[str, Any]) -> list[Any]:
-    """The body's arguments in the method's order (types are checked by the call itself)."""
-    names = [a.name for a in method.inputs]
-    unknown = sorted(k for k in body if k != CORRELATION and k not in names)
-    if unknown:
-        takes = ", ".join(names) if names else "no arguments"
-        raise TooManyArguments(
-            f"{method.name} does not take {', '.join(map(repr, unknown))} (it takes {takes})"
-        )
-    missing = [n for n in names if n not in body]
-    if missing:
-        raise ArgumentsMissing(f"{method.name} needs {', '.join(missing)}")
-    return [body[n] for n in names]
 
 
 def encode_reply(
@@ -286,15 +248,11 @@ class CommandRequests:
 
     async def worker(self, machine_name: str) -> None:
         """Carry out one machine's queued commands, up to MAX_RUNNING at once, until cancelled."""
-        queue = self.queues[machine_name]
-        slots = asyncio.Semaphore(MAX_RUNNING)
-        async with asyncio.TaskGroup() as tg:
-            while True:
-                req = await queue.get()
-                await slots.acquire()
-                tg.create_task(self._run(req, slots), name=f"mqtt:command:{machine_name}:{req.method.name}")
+        await carry_out(
+            self.queues[machine_name], self._run, lambda req: f"mqtt:command:{machine_name}:{req.method.name}"
+        )
 
-    async def _run(self, req: _Request, slots: asyncio.Semaphore) -> None:
+    async def _run(self, req: _Request) -> None:
         name = req.method.name
         try:
             outputs: Sequence[Any] = await req.machine.call_method(
@@ -309,8 +267,6 @@ class CommandRequests:
                 name, req.reply, req.data, req.correlation, CallError(f"internal error: {exc}"), req.received
             )
             return
-        finally:
-            slots.release()
         result = str(outputs[0]) if outputs else ""
         log.info("MQTT command %s/%s: %s", req.machine.name, name, result)
         payload = encode_reply(

@@ -1,35 +1,27 @@
 """MQTT settings: the broker connection (gateway file), and how machines and variables appear there.
 
-The gateway file's `mqtt:` section says which broker to reach and how; without
-it the gateway does not use MQTT at all. Mapping files may refine, per machine
-and per variable, the QoS, the retain flag, the payload form, the topic and
-whether writes over MQTT are allowed (they are off unless a mapping says so).
+The gateway file's `mqtt:` section says which broker to reach and how (the keys it shares with
+`sparkplug.broker`: gateway/sinks/mqtt_link/broker.py); without it the gateway does not use MQTT
+at all. Mapping files may refine, per machine and per variable, the QoS, the retain flag, the payload
+form, the topic and whether writes over MQTT are allowed (they are off unless a mapping says so).
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from typing import Annotated, Any, Literal, Protocol
+from typing import Annotated, Literal, Protocol
 
-from pydantic import (
-    AfterValidator,
-    BeforeValidator,
-    Field,
-    SecretStr,
-    field_validator,
-    model_validator,
-)
+from pydantic import AfterValidator, Field, field_validator, model_validator
 
 from gateway.settings.access import check_role_name
-from gateway.settings.base import Backoff, Strict
+from gateway.settings.base import Strict
+from gateway.sinks.mqtt_link.broker import MAX_PACKET_SIZE, MIB, BrokerConnection, MqttReconnect
 
 QoS = Literal[0, 1, 2]
 PayloadMode = Literal["json", "raw"]
 
 _TOPIC_FORBIDDEN = re.compile(r"[+#\x00]")
-MIB = 1024 * 1024
-MAX_PACKET_SIZE = 268_435_455  # the largest packet MQTT can encode (a 4-byte remaining length)
 
 
 def check_topic_part(text: str, what: str) -> str:
@@ -67,42 +59,6 @@ def check_topic_filter(text: str, what: str) -> str:
 TopicFilter = Annotated[str, AfterValidator(lambda text: check_topic_filter(text, "topic filter"))]
 
 
-def _protocol(value: Any) -> Any:
-    """YAML reads `protocol: 5` as a number; accept it, and 3.1.1 written as text."""
-    if isinstance(value, int) and not isinstance(value, bool):
-        return str(value)
-    return value
-
-
-class MqttTls(Strict):
-    """TLS towards the broker. The broker's certificate and host name are verified unless `verify: false`."""
-
-    ca: str | None = Field(
-        default=None, description="CA certificate file (PEM); default: the system's trusted CAs"
-    )
-    cert: str | None = Field(
-        default=None, description="Client certificate file (PEM), for brokers that require one"
-    )
-    key: str | None = Field(default=None, description="Client private key file (PEM); default: inside `cert`")
-    key_password: SecretStr | None = None
-    verify: bool = Field(
-        default=True, description="Verify the broker's certificate and host name (keep this on)"
-    )
-
-    @model_validator(mode="after")
-    def _key_needs_cert(self) -> MqttTls:
-        if self.key is not None and self.cert is None:
-            raise ValueError("tls.key needs tls.cert")
-        return self
-
-
-class MqttReconnect(Backoff):
-    """Exponential backoff between connection attempts to the broker, in seconds."""
-
-    initial: float = Field(default=1.0, gt=0)
-    max: float = Field(default=30.0, gt=0)
-
-
 class MqttBuffer(Strict):
     """Store-and-forward while the broker is unreachable (or slower than the machines)."""
 
@@ -120,26 +76,9 @@ class MqttBuffer(Strict):
     )
 
 
-class MqttConfig(Strict):
+class MqttConfig(BrokerConnection):
     """The MQTT broker the gateway publishes to (gateway file). Absent: MQTT is off."""
 
-    host: str = Field(default="127.0.0.1", min_length=1)
-    port: int = Field(default=1883, ge=1, le=65535, description="1883, or usually 8883 with TLS")
-    client_id: str = Field(
-        default="",
-        max_length=128,
-        description="Default: cnc-gateway-<host name>; keep it stable for broker ACLs",
-    )
-    username: str | None = None
-    password: SecretStr | None = Field(
-        default=None, description="Use ${NAME} to take it from the environment"
-    )
-    protocol: Annotated[Literal["3.1.1", "5"], BeforeValidator(_protocol)] = Field(
-        default="3.1.1", description="MQTT protocol version: 3.1.1 or 5"
-    )
-    keepalive: int = Field(default=30, ge=5, le=65535, description="Seconds")
-    connect_timeout: float = Field(default=5.0, gt=0, le=120, description="Seconds for TCP, TLS and CONNACK")
-    tls: MqttTls | None = None
     prefix: str = Field(default="cnc", description="First topic level(s): <prefix>/<machine>/<path>")
     qos: QoS = Field(default=1, description="Default QoS of value topics")
     retain: bool = Field(
@@ -178,13 +117,6 @@ class MqttConfig(Strict):
     @classmethod
     def _prefix(cls, prefix: str) -> str:
         return check_topic_part(prefix, "prefix")
-
-    @field_validator("client_id")
-    @classmethod
-    def _client_id(cls, value: str) -> str:
-        if _TOPIC_FORBIDDEN.search(value) or any(ch.isspace() for ch in value):
-            raise ValueError(f"client_id {value!r} must not contain spaces, '+', '#' or NUL")
-        return value
 
     @model_validator(mode="after")
     def _room_for_requests(self) -> MqttConfig:

@@ -32,23 +32,12 @@ from typing import Self
 
 from gateway import __version__
 from gateway.codecs.mqtt_publish import remaining_length
-from gateway.errors import BrokerError, BrokerRefused, SinkError
+from gateway.errors import BrokerError, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
-from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.base import SinkHealth
-from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
-from gateway.sinks.mqtt.client import (
-    BrokerSettings,
-    Connected,
-    Incoming,
-    MqttClient,
-    Will,
-    default_client_id,
-    tls_context,
-)
 from gateway.sinks.mqtt.commands import CommandRequests
 from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import encode_event, encode_json, encode_raw
@@ -56,24 +45,38 @@ from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.status import gateway_offline, gateway_online, machine_payload, status_nodes
 from gateway.sinks.mqtt.topics import TopicClash, event_topic, set_filters
 from gateway.sinks.mqtt.writes import WriteBack, report_writers
+from gateway.sinks.mqtt_link.buffer import Message
+from gateway.sinks.mqtt_link.client import Connected, Incoming, MqttClient, Will, default_client_id
+from gateway.sinks.mqtt_link.link import (
+    REMIND_EVERY,
+    STATE_CONNECTED,
+    STATE_CONNECTING,
+    STATE_DISCONNECTED,
+    BrokerLink,
+    Wording,
+    broker_settings,
+)
 
 log = logging.getLogger(__name__)
 
 BACKLOG_FILE = "mqtt-backlog.sqlite3"
 YIELD_EVERY = 2000  # changes encoded between turns for the rest of the loop
-STABLE_AFTER = 10.0  # s a connection must last before the reconnect backoff starts again from `initial`
 SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to acknowledge what is in flight
 # QoS 0 variables taken, encoded and written at a time; the rest keep coalescing meanwhile. Large: a take
 # happens once per turn of the loop at most (after the source's batch that changed them), so a small chunk
 # would cap the rate at chunk x turns/s when the source's decoding makes the turns long.
 LATEST_CHUNK = 5000
 PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before QoS 0 changes are shed
-REMIND_EVERY = 60.0  # s between "still buffering" log lines during an outage
+WORDING = Wording(
+    label="MQTT",
+    check="check mqtt.username/password and the broker's ACL",
+    waiting="messages waiting",
+    kept="messages",
+    lost="messages",
+)
 
-STATE_CONNECTING, STATE_CONNECTED, STATE_DISCONNECTED = "connecting", "connected", "disconnected"
 
-
-class MqttSink:
+class MqttSink(BrokerLink):
     """Mirrors the variable tree into MQTT topics (implements gateway.sinks.base.Sink)."""
 
     name = "mqtt"
@@ -111,32 +114,19 @@ class MqttSink:
         self._status_owner = {n: name for name, nodes in self._status_nodes.items() for n in nodes}
         self._last_status: dict[str, bytes] = {}
         self._dirty: set[str] = set()
-        tls = tls_context(config.tls, base_dir or Path.cwd()) if config.tls is not None else None
-        self.settings = BrokerSettings(
-            host=config.host,
-            port=config.port,
+        settings = broker_settings(
+            config,
+            base_dir,
             client_id=config.client_id or default_client_id(),
-            username=config.username,
-            password=config.password.get_secret_value() if config.password is not None else None,
-            protocol=config.protocol,
-            keepalive=config.keepalive,
-            connect_timeout=config.connect_timeout,
-            tls=tls,
-            tls_verify=config.tls.verify if config.tls is not None else True,
             max_packet_size=config.max_packet_size,
             will=Will(
                 self.routes.status_topic, gateway_offline(__version__, "connection to the gateway lost")
             ),
         )
+        super().__init__(settings, config.reconnect, WORDING, log)
         self.writes = WriteBack(tree, self.routes, config, self._answer)
         # <prefix>/<machine>/commands/<name>
         self.commands = CommandRequests(tree, config, mappings, self._answer)
-        self.backlog: Backlog | None = None
-        self.state = STATE_CONNECTING
-        self.last_error = ""
-        self.connects = 0  # successful connections
-        self.attempts = 0  # failed ones
-        self.last_delay = 0.0  # the backoff before the latest retry
         self.discarded = 0  # QoS 0 changes not sent because the broker was away (QoS 0 promises no more)
         self._client: MqttClient | None = None
         self._sub: Subscription[VariableNode] | None = None
@@ -149,7 +139,6 @@ class MqttSink:
         self._dropped_reported = 0
         self._coalesced_reported = 0
         self._room = asyncio.Event()  # paho handed everything to the socket: the next QoS 0 chunk may go
-        self._outage = OutageLog(log, remind_every=REMIND_EVERY)  # the broker's absence, said once a while
 
     def _add_status_variables(self, machine: Machine) -> None:
         self._link_nodes[machine.name] = machine.add_internal(
@@ -165,10 +154,6 @@ class MqttSink:
             "value before they could be sent (the broker or the network took less than the machine changed)",
             0,
         )  # fmt: skip
-
-    @property
-    def endpoint(self) -> str:
-        return self.settings.address
 
     @property
     def online(self) -> bool:
@@ -197,8 +182,8 @@ class MqttSink:
     # --- lifecycle -----------------------------------------------------------------------------
 
     async def __aenter__(self) -> Self:
-        journal = Journal(self.state_dir / BACKLOG_FILE) if self.config.buffer.persist else None
-        self.backlog = Backlog(self.config.buffer.limit, journal)
+        buffer = self.config.buffer
+        self._open_backlog(buffer.limit, self.state_dir / BACKLOG_FILE if buffer.persist else None)
         self._client = MqttClient(
             self.settings,
             on_message=self._incoming,
@@ -238,17 +223,7 @@ class MqttSink:
             if backlog is not None:
                 backlog.put_front(list(self._inflight.values()))
                 self._inflight.clear()
-                if backlog.journal is not None:
-                    waiting = backlog.counted
-                    backlog.journal.close()
-                    if waiting:
-                        log.info(
-                            "MQTT: %d messages kept in %s for the next start", waiting, backlog.journal.path
-                        )
-                elif backlog.counted:
-                    log.warning(
-                        "MQTT: %d messages were not delivered (buffer.persist is off)", backlog.counted
-                    )
+                self._close_backlog()
             if self._sub is not None:
                 self._sub.close()
                 self._sub = None
@@ -273,19 +248,13 @@ class MqttSink:
 
     def health(self) -> SinkHealth:
         """Ready while the broker connection is up; the queues as the diagnostics show them."""
-        backlog = self.backlog
-        return SinkHealth(
+        return self._health(
             ready=self.state == STATE_CONNECTED,
-            state=self.state,
-            backlog=len(backlog) if backlog is not None else None,
-            dropped=backlog.dropped_total if backlog is not None else None,
             in_flight=self.in_flight,
+            online=self.online,
             discarded=self.discarded,
             coalesced=self.coalesced,
             socket_queue=self.socket_queue,
-            connects=self.connects,
-            online=self.online,
-            last_error=self.last_error,
         )
 
     async def run(self) -> None:
@@ -307,43 +276,16 @@ class MqttSink:
     # --- the broker connection ------------------------------------------------------------------
 
     async def _connection(self) -> None:
-        assert self._client is not None
         client = self._client
-        backoff = Backoff.of(self.config.reconnect, stable_after=STABLE_AFTER)
-        while True:
-            self._set_state(STATE_CONNECTING, self.last_error)
-            try:
-                info = await client.connect()
-            except BrokerError as exc:
-                delay = backoff.next()
-                self.attempts += 1
-                self.last_delay = delay
-                self._connect_failed(exc, delay)
-                await asyncio.sleep(delay)
-                continue
-            backoff.connected()
-            self._on_connected(info)
-            await self._lost.wait()
-            self._lost.clear()
-            if not backoff.ended():  # a broker that drops us at once (ACL, a twin with our client id)
-                await asyncio.sleep(backoff.next())  # is not hammered
+        assert client is not None
+        await self._keep_connected(client.connect, self._session)
 
-    def _connect_failed(self, exc: BrokerError, delay: float) -> None:
-        reason = exc.reason
-        self._set_state(STATE_DISCONNECTED, reason)
-        waiting = len(self.backlog) if self.backlog is not None else 0
-        if isinstance(exc, BrokerRefused):
-            self._outage.failed(
-                reason,
-                "MQTT: %s; check mqtt.username/password and the broker's ACL. Retrying in %.1f s "
-                "(%d messages waiting)",
-                reason, delay, waiting,
-                level=logging.ERROR,
-            )  # fmt: skip
-        else:
-            self._outage.failed(
-                reason, "MQTT: %s; retrying in %.1f s (%d messages waiting)", reason, delay, waiting
-            )
+    async def _session(self, info: Connected) -> bool:
+        """Connected: publish until the connection is lost (then the link connects again)."""
+        self._on_connected(info)
+        await self._lost.wait()
+        self._lost.clear()
+        return False
 
     def _on_connected(self, info: Connected) -> None:
         assert self._client is not None and self.backlog is not None
@@ -395,7 +337,8 @@ class MqttSink:
         self._room.set()
 
     def _set_state(self, state: str, reason: str) -> None:
-        self.state, self.last_error = state, reason
+        """The link's state, also in every machine's Status/MqttState."""
+        super()._set_state(state, reason)
         text = state if not reason or state == STATE_CONNECTED else f"{state}: {reason}"
         for name, node in self._link_nodes.items():
             self.tree.machines[name].set_internal(node, text)
@@ -591,11 +534,6 @@ class MqttSink:
                 inflight[mid] = msg
             else:
                 backlog.done(msg)
-
-    def _commit(self) -> None:
-        backlog = self.backlog
-        if backlog is not None and backlog.journal is not None:
-            backlog.journal.commit()
 
     def _incoming(self, msg: Incoming) -> None:
         """A message from the broker: a command request, or else a write request."""

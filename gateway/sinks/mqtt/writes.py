@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 from collections.abc import Callable, Mapping
 
 from gateway.errors import (
@@ -31,13 +30,13 @@ from gateway.errors import (
     WriteError,
 )
 from gateway.model.context import WriteContext
-from gateway.model.reach import reach
-from gateway.model.tree import VariableTree
-from gateway.sinks.mqtt.client import Incoming
+from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.mqtt.config import MqttConfig, MqttMachineEntry
 from gateway.sinks.mqtt.payloads import decode_set, encode_result
 from gateway.sinks.mqtt.routes import Route, Routes
 from gateway.sinks.mqtt.topics import RESULT, SET, ResponseTopics, result_topic, target_of_set
+from gateway.sinks.mqtt_link.client import Incoming
+from gateway.sinks.mqtt_link.requests import LogQuota, TooManyWrites, report_roles
 
 log = logging.getLogger(__name__)
 
@@ -45,67 +44,31 @@ log = logging.getLogger(__name__)
 def report_writers(tree: VariableTree, routes: Routes, mappings: Mapping[str, MqttMachineEntry]) -> None:
     """Say at start-up, per machine, which `/set` writes and commands the mapping opens to MQTT and the
     role they act with; or that they are refused for want of a role."""
-    access = tree.access
-    for machine in tree.machines.values():
+
+    def opened(machine: Machine) -> tuple[Machine, list[VariableNode], bool]:
         nodes = [r.node for r in routes.by_node.values() if r.writable and r.node.machine is machine]
         mapping = mappings.get(machine.name)
         settings = mapping.mqtt if mapping is not None else None
-        objects = {"Commands"} if settings is not None and settings.commands else set()
-        if not nodes and not objects:
-            continue
-        role = access.mqtt_role(machine.name)
-        if access.enabled and role is None:
-            log.info(
-                "MQTT: %s: writes and commands enabled in the mapping are refused: they have no role "
-                "(mapping: mqtt.writer_role, or the gateway file's access.mqtt_writer_role)",
-                machine.name,
-            )
-            continue
-        opened = reach(machine, role, variables=nodes, objects=objects, alarms=False)
-        log.info(
-            "MQTT: requests to %s act as %s and may %s",
-            machine.name,
-            role or "no role (access.enabled is false)",
-            opened.what(),
-        )
+        return machine, nodes, settings is not None and settings.commands
+
+    report_roles(
+        tree,
+        map(opened, tree.machines.values()),
+        log,
+        refused="MQTT: %s: writes and commands enabled in the mapping are refused: they have no role "
+        "(mapping: mqtt.writer_role, or the gateway file's access.mqtt_writer_role)",
+        acts="MQTT: requests to %s act as %s and may %s",
+    )
 
 
 # (topic to answer on, payload, MQTT v5 correlation data)
 Answer = Callable[[str, bytes, "bytes | None"], None]
 
 
-class TooManyWrites(RequestError):
-    status = "BadTooManyOperations"
-
-
 class ResponseTopicRefused(RequestError):
     """An MQTT 5 response topic the gateway will not publish to (topics.ResponseTopics)."""
 
     status = "BadRequestNotAllowed"
-
-
-class LogQuota:
-    """At most `per_minute` lines a minute; the rest are counted and summarised."""
-
-    def __init__(self, per_minute: int = 10) -> None:
-        self.per_minute = per_minute
-        self._window = 0.0
-        self._used = 0
-        self._suppressed = 0
-
-    def allow(self) -> bool:
-        now = time.monotonic()
-        if now - self._window >= 60.0:
-            if self._suppressed:
-                log.warning(
-                    "%d more refused MQTT writes in the last minute (not logged one by one)", self._suppressed
-                )
-            self._window, self._used, self._suppressed = now, 0, 0
-        if self._used < self.per_minute:
-            self._used += 1
-            return True
-        self._suppressed += 1
-        return False
 
 
 class _Request:

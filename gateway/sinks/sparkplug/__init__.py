@@ -4,7 +4,8 @@
 gated by the primary host's STATE); `devices.py` turns the tree into metrics; `node.py` holds the
 edge node's own metrics; `commands.py` carries NCMD and DCMD out through the tree's one write path;
 `bdseq.py` keeps the birth/death number across restarts. Payloads and topics come from the pure
-codec, gateway/codecs/sparkplug/; the MQTT connection is gateway/sinks/mqtt/client.py's.
+codec, gateway/codecs/sparkplug/; the MQTT link (the connection, store-and-forward, the bounds of
+requests) from gateway/sinks/mqtt_link/, as the MQTT sink's.
 """
 
 from __future__ import annotations

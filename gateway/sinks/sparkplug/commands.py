@@ -51,9 +51,8 @@ from gateway.errors import (
 )
 from gateway.model.context import WriteContext
 from gateway.model.tree import VariableTree
-from gateway.sinks.mqtt.client import Incoming
-from gateway.sinks.mqtt.commands import MAX_RUNNING
-from gateway.sinks.mqtt.writes import LogQuota, TooManyWrites
+from gateway.sinks.mqtt_link.client import Incoming
+from gateway.sinks.mqtt_link.requests import LogQuota, TooManyWrites, carry_out
 from gateway.sinks.sparkplug.devices import CommandMetric, Device, VariableMetric, now_ms
 
 log = logging.getLogger(__name__)
@@ -305,17 +304,13 @@ class Requests:
 
     async def call_worker(self, name: str) -> None:
         """Carry out one machine's queued commands, up to MAX_RUNNING at once, until cancelled."""
-        queue = self.calls[name]
-        slots = asyncio.Semaphore(MAX_RUNNING)
-        async with asyncio.TaskGroup() as tg:
-            while True:
-                job = await queue.get()
-                await slots.acquire()
-                tg.create_task(
-                    self._run(name, job, slots), name=f"sparkplug:command:{name}:{job.command.method.name}"
-                )
+        await carry_out(
+            self.calls[name],
+            lambda job: self._run(name, job),
+            lambda job: f"sparkplug:command:{name}:{job.command.method.name}",
+        )
 
-    async def _run(self, name: str, job: _Call, slots: asyncio.Semaphore) -> None:
+    async def _run(self, name: str, job: _Call) -> None:
         device = self.devices[name]
         method = job.command.method
         try:
@@ -327,8 +322,6 @@ class Requests:
             log.exception("Sparkplug command %s/%s failed unexpectedly", name, method.name)
             self._end_command(device, job.command, CallError(f"internal error: {exc}"))
             return
-        finally:
-            slots.release()
         self.accepted += 1
         result = str(outputs[0]) if outputs else ""
         log.info("Sparkplug command %s/%s: %s", name, method.name, result)

@@ -14,55 +14,29 @@ without `mqtt:` needs it.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
-
-from pydantic import BeforeValidator, Field, SecretStr, field_validator
+from pydantic import Field, field_validator
 
 from gateway.codecs.sparkplug.errors import SparkplugError
 from gateway.codecs.sparkplug.topics import check_id
 from gateway.codecs.sparkplug.wire import MAX_PAYLOAD
 from gateway.settings.base import Strict
-from gateway.sinks.mqtt.config import MAX_PACKET_SIZE, MIB, MqttConfig, MqttReconnect, MqttTls
+from gateway.sinks.mqtt_link.broker import MAX_PACKET_SIZE, MIB, BrokerConnection, MqttReconnect, SharedBroker
 
 SUFFIX = "-sparkplug"  # appended to the mqtt: section's client id
 
 
-def _protocol(value: Any) -> Any:
-    """YAML reads `protocol: 5` as a number; take it as the text it names."""
-    return str(value) if isinstance(value, int) and not isinstance(value, bool) else value
-
-
-class SparkplugBroker(Strict):
+class SparkplugBroker(BrokerConnection):
     """The MQTT broker the edge node connects to, when it is not the `mqtt:` section's."""
 
-    host: str = Field(default="127.0.0.1", min_length=1)
-    port: int = Field(default=1883, ge=1, le=65535, description="1883, or usually 8883 with TLS")
     client_id: str = Field(
         default="",
         max_length=128 + len(SUFFIX),  # the mqtt: section's, with the suffix
         description="Default: cnc-gateway-<host name>-sparkplug; keep it stable for broker ACLs",
     )
-    username: str | None = None
-    password: SecretStr | None = Field(
-        default=None, description="Use ${NAME} to take it from the environment"
-    )
-    protocol: Annotated[Literal["3.1.1", "5"], BeforeValidator(_protocol)] = Field(
-        default="3.1.1", description="MQTT protocol version: 3.1.1 or 5"
-    )
-    keepalive: int = Field(default=30, ge=5, le=65535, description="Seconds")
-    connect_timeout: float = Field(default=5.0, gt=0, le=120, description="Seconds for TCP, TLS and CONNACK")
-    tls: MqttTls | None = None
     reconnect: MqttReconnect = MqttReconnect()
 
-    @field_validator("client_id")
     @classmethod
-    def _client_id(cls, value: str) -> str:
-        if any(ch in value for ch in "+#\x00") or any(ch.isspace() for ch in value):
-            raise ValueError(f"client_id {value!r} must not contain spaces, '+', '#' or NUL")
-        return value
-
-    @classmethod
-    def of_mqtt(cls, mqtt: MqttConfig) -> SparkplugBroker:
+    def of_mqtt(cls, mqtt: SharedBroker) -> SparkplugBroker:
         """The `mqtt:` section's broker, for a connection of the edge node's own."""
         return cls(
             host=mqtt.host,
@@ -150,7 +124,7 @@ class SparkplugConfig(Strict):
     def _host(cls, value: str | None) -> str | None:
         return None if value is None else _sparkplug_id("primary_host_id", value)
 
-    def connection(self, mqtt: MqttConfig | None) -> SparkplugBroker:
+    def connection(self, mqtt: SharedBroker | None) -> SparkplugBroker:
         """The broker to connect to: `broker`, else the `mqtt:` section's (ValueError without either)."""
         if self.broker is not None:
             return self.broker

@@ -19,10 +19,10 @@ Choices where the specification is silent, after what Ignition's MQTT Engine doe
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
-from typing import Any
+from typing import Any, Protocol
 
 from gateway.codecs.sparkplug import (
     PROP_QUALITY,
@@ -43,8 +43,7 @@ from gateway.model.methods import Method
 from gateway.model.sample import Sample
 from gateway.model.tree import Machine, VariableNode
 from gateway.model.types import DataType, TypeSpec
-from gateway.sinks.mqtt.commands import arguments, read_body
-from gateway.sinks.mqtt.config import MqttMachineEntry
+from gateway.sinks.mqtt_link.requests import arguments, read_body
 
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 MS = timedelta(milliseconds=1)
@@ -84,7 +83,39 @@ def value_of(sample: Sample) -> Any:
     return None if sample.status == WAITING else sample.value
 
 
-def dcmd_writable(node: VariableNode, mapping: MqttMachineEntry | None) -> bool:
+class VariableOpening(Protocol):
+    @property
+    def writable(self) -> bool | None: ...
+
+
+class MachineOpening(Protocol):
+    @property
+    def writable(self) -> bool: ...
+
+    @property
+    def commands(self) -> bool: ...
+
+
+class MappedVariable(Protocol):
+    @property
+    def path(self) -> str: ...
+
+    @property
+    def mqtt(self) -> VariableOpening | None: ...
+
+
+class DeviceMapping(Protocol):
+    """What DCMD reads of a machine's mapping file: its `mqtt:` openings, per machine and per variable
+    (gateway/config/mapping.py `MachineMapping` fits it): both doors are MQTT, through one broker."""
+
+    @property
+    def mqtt(self) -> MachineOpening | None: ...
+
+    @property
+    def variables(self) -> Sequence[MappedVariable]: ...
+
+
+def dcmd_writable(node: VariableNode, mapping: DeviceMapping | None) -> bool:
     """Whether the mapping opens `node` to writes over MQTT (mqtt.writable of the machine or variable),
     which DCMD writes follow: Sparkplug reaches the machine through the same broker."""
     spec = node.definition
@@ -210,7 +241,7 @@ class Device:
         group_id: str,
         edge_node_id: str,
         aliases: Aliases,
-        mapping: MqttMachineEntry | None,
+        mapping: DeviceMapping | None,
     ) -> None:
         self.machine = machine
         self.name = machine.name

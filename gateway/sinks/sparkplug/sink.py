@@ -16,7 +16,7 @@ A session (Sparkplug 3.0, chapter 5):
    a clean stop: NDEATH, then DISCONNECT; a crash: the broker publishes the will.
 
 Store-and-forward: while there is no session (no broker, or the primary host offline), changes
-are kept in the MQTT sink's `Backlog` (with its optional SQLite journal), one stored DDATA per
+are kept in the MQTT link's `Backlog` (with its optional SQLite journal), one stored DDATA per
 machine and cycle, by name and marked historical (the codec's `encode_stored`). After the next
 births they go out oldest first, with this session's aliases and seq (`release_stored`), beside
 the live data, which is never held back for them: every message is either live or historical.
@@ -65,23 +65,21 @@ from gateway.codecs.sparkplug import (
     state_topic,
 )
 from gateway.codecs.sparkplug.aliases import Aliases
-from gateway.errors import BrokerError, BrokerRefused
+from gateway.errors import BrokerError
 from gateway.model.hub import Change, Subscription
-from gateway.model.reach import reach
 from gateway.model.tree import VariableNode, VariableTree
-from gateway.reconnect import Backoff, OutageLog
 from gateway.sinks.base import SinkHealth
-from gateway.sinks.mqtt.buffer import Backlog, Journal, Message
-from gateway.sinks.mqtt.client import (
-    BrokerSettings,
-    Connected,
-    Incoming,
-    MqttClient,
-    Will,
-    default_client_id,
-    tls_context,
+from gateway.sinks.mqtt_link.buffer import Message
+from gateway.sinks.mqtt_link.client import Connected, Incoming, MqttClient, Will, default_client_id
+from gateway.sinks.mqtt_link.link import (
+    REMIND_EVERY,
+    STATE_CONNECTED,
+    STATE_DISCONNECTED,
+    BrokerLink,
+    Wording,
+    broker_settings,
 )
-from gateway.sinks.mqtt.config import MqttMachineEntry
+from gateway.sinks.mqtt_link.requests import report_roles
 from gateway.sinks.sparkplug.bdseq import FILE as BDSEQ_FILE
 from gateway.sinks.sparkplug.bdseq import BdSeqStore
 from gateway.sinks.sparkplug.commands import Outcomes, Requests
@@ -90,6 +88,7 @@ from gateway.sinks.sparkplug.devices import (
     QUALITY_PROPERTY,
     CommandMetric,
     Device,
+    DeviceMapping,
     VariableMetric,
     millis,
     now_ms,
@@ -105,16 +104,14 @@ MAX_METRICS = 2000  # metrics per DDATA; a larger cycle of one machine goes out 
 REPLAY_WINDOW = 64  # stored messages out and not yet fenced
 HUB_LIMIT = 100_000  # changes the hub keeps in order for this sink before it keeps the latest per variable
 PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before live data is stored instead
-STABLE_AFTER = 10.0  # s a connection must last before the reconnect backoff starts again from `initial`
 SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to take what is in flight
-REMIND_EVERY = 60.0  # s between "still storing" log lines while there is no session
-
-STATE_CONNECTING, STATE_CONNECTED, STATE_WAITING, STATE_ONLINE, STATE_DISCONNECTED = (
-    "connecting",
-    "connected",
-    "connected, waiting for the primary host",
-    "online",
-    "disconnected",
+STATE_WAITING, STATE_ONLINE = "connected, waiting for the primary host", "online"
+WORDING = Wording(
+    label="Sparkplug",
+    check="check the credentials and the broker's ACL",
+    waiting="DDATA messages stored",
+    kept="DDATA messages",
+    lost="stored DDATA messages",
 )
 
 
@@ -129,7 +126,7 @@ class _Sent:
         self.message = message
 
 
-class SparkplugSink:
+class SparkplugSink(BrokerLink):
     """Mirrors the variable tree to a Sparkplug B host (implements gateway.sinks.base.Sink)."""
 
     name = "sparkplug"
@@ -140,7 +137,7 @@ class SparkplugSink:
         config: SparkplugConfig,
         broker: SparkplugBroker,
         state_dir: Path,
-        mappings: Mapping[str, MqttMachineEntry],
+        mappings: Mapping[str, DeviceMapping],
         *,
         base_dir: Path | None = None,
     ) -> None:
@@ -156,33 +153,20 @@ class SparkplugSink:
         host_id = config.primary_host_id
         self.state_topic = state_topic(host_id) if host_id is not None else None
         self.host = PrimaryHost() if host_id is not None else None
-        tls = tls_context(broker.tls, base_dir or Path.cwd()) if broker.tls is not None else None
-        self.settings = BrokerSettings(
-            host=broker.host,
-            port=broker.port,
+        settings = broker_settings(
+            broker,
+            base_dir,
             client_id=broker.client_id or (default_client_id()[: 64 - len(SUFFIX)] + SUFFIX),
-            username=broker.username,
-            password=broker.password.get_secret_value() if broker.password is not None else None,
-            protocol=broker.protocol,
-            keepalive=broker.keepalive,
-            connect_timeout=broker.connect_timeout,
-            tls=tls,
-            tls_verify=broker.tls.verify if broker.tls is not None else True,
             max_packet_size=config.max_packet_size,
             no_delay=True,  # a DDATA, then its fence: neither should wait for the broker's delayed ACK
         )
-        self.reconnect = broker.reconnect
+        super().__init__(settings, broker.reconnect, WORDING, log)
         self.aliases = Aliases()
         self.seq = Seq()
         self.devices: dict[str, Device] = {}
         self.node: NodeMetrics | None = None
         self.requests: Requests | None = None
-        self.backlog: Backlog | None = None
         self.bdseq: int | None = None  # this session's
-        self.state = STATE_CONNECTING
-        self.last_error = ""
-        self.connects = 0
-        self.attempts = 0
         self.connected = False  # an MQTT session is up
         self.born = False  # and its NBIRTH is out
         self.births = 0  # NBIRTHs published (each followed by every DBIRTH)
@@ -209,13 +193,8 @@ class SparkplugSink:
         self._ndeath_acked = asyncio.Event()
         self._fenced = asyncio.Event()  # set while nothing sent waits for its fence
         self._unencodable: set[str] = set()
-        self._outage = OutageLog(log, remind_every=REMIND_EVERY)
 
     # --- what others read ----------------------------------------------------------------------
-
-    @property
-    def endpoint(self) -> str:
-        return self.settings.address
 
     @property
     def online(self) -> bool:
@@ -254,8 +233,7 @@ class SparkplugSink:
 
     async def __aenter__(self) -> Self:
         buffer = self.config.buffer
-        journal = Journal(self.state_dir / BACKLOG_FILE) if buffer.persist else None
-        self.backlog = Backlog(buffer.limit, journal)
+        self._open_backlog(buffer.limit, self.state_dir / BACKLOG_FILE if buffer.persist else None)
         self._store = BdSeqStore(self.state_dir / BDSEQ_FILE)
         # Subscribe before the devices read their controllers' state, so no change falls between the two.
         self._sub = self.tree.hub.subscribe(self.name, every_change=True, limit=HUB_LIMIT)
@@ -290,30 +268,24 @@ class SparkplugSink:
         return self
 
     def _report_writers(self) -> None:
-        access = self.tree.access
-        for device in self.devices.values():
-            nodes = [m.node for m in device.variables.values() if m.writable]
-            objects = {"Commands"} if any(c.enabled for c in device.commands) else set()
-            if not nodes and not objects:
-                continue
-            role = access.mqtt_role(device.name)
-            if access.enabled and role is None:
-                log.info(
-                    "Sparkplug: %s: DCMD writes and commands the mapping opens are refused: they have "
-                    "no role (mapping: mqtt.writer_role, or access.mqtt_writer_role)",
-                    device.name,
+        report_roles(
+            self.tree,
+            (
+                (
+                    device.machine,
+                    [m.node for m in device.variables.values() if m.writable],
+                    any(c.enabled for c in device.commands),
                 )
-                continue
-            opened = reach(device.machine, role, variables=nodes, objects=objects, alarms=False)
-            log.info(
-                "Sparkplug: DCMD to %s acts as %s and may %s",
-                device.name,
-                role or "no role (access.enabled is false)",
-                opened.what(),
-            )
+                for device in self.devices.values()
+            ),
+            log,
+            refused="Sparkplug: %s: DCMD writes and commands the mapping opens are refused: they have "
+            "no role (mapping: mqtt.writer_role, or access.mqtt_writer_role)",
+            acts="Sparkplug: DCMD to %s acts as %s and may %s",
+        )
 
     async def __aexit__(self, *exc_info: object) -> None:
-        client, backlog = self._client, self.backlog
+        client = self._client
         try:
             if client is not None and self.connected:
                 await self._say_goodbye(client)
@@ -321,21 +293,7 @@ class SparkplugSink:
                 client.close()
         finally:
             self._session_over("gateway stopped")
-            if backlog is not None:
-                if backlog.journal is not None:
-                    waiting = backlog.counted
-                    backlog.journal.close()
-                    if waiting:
-                        log.info(
-                            "Sparkplug: %d DDATA messages kept in %s for the next start",
-                            waiting,
-                            backlog.journal.path,
-                        )
-                elif backlog.counted:
-                    log.warning(
-                        "Sparkplug: %d stored DDATA messages were not delivered (buffer.persist is off)",
-                        backlog.counted,
-                    )
+            self._close_backlog()
             if self._sub is not None:
                 self._sub.close()
                 self._sub = None
@@ -367,17 +325,7 @@ class SparkplugSink:
     def health(self) -> SinkHealth:
         """Ready once the edge node is online: connected, and its NBIRTH and DBIRTHs published (connected
         alone, or waiting for the primary host, is not yet serving Sparkplug consumers)."""
-        backlog = self.backlog
-        return SinkHealth(
-            ready=self.state == STATE_ONLINE,
-            state=self.state,
-            backlog=len(backlog) if backlog is not None else None,
-            dropped=backlog.dropped_total if backlog is not None else None,
-            in_flight=self.in_flight,
-            connects=self.connects,
-            online=self.online,
-            last_error=self.last_error,
-        )
+        return self._health(ready=self.state == STATE_ONLINE, in_flight=self.in_flight, online=self.online)
 
     async def run(self) -> None:
         """Keep the session, publish the changes, carry out commands; until cancelled."""
@@ -411,50 +359,32 @@ class SparkplugSink:
         return client
 
     async def _connection(self) -> None:
-        assert self._store is not None
-        backoff = Backoff.of(self.reconnect, stable_after=STABLE_AFTER)
-        while True:
-            self._set_state(STATE_CONNECTING, self.last_error)
-            bdseq = self._store.candidate()
-            client = self._new_client(bdseq)
-            try:
-                info = await client.connect()
-            except BrokerError as exc:
-                client.close()
-                delay = backoff.next()
-                self.attempts += 1
-                self._connect_failed(exc, delay)
-                await asyncio.sleep(delay)
-                continue
-            backoff.connected()
-            self._session_started(client, bdseq, info)
-            await self._session_end.wait()
-            self._session_end.clear()
-            leaving, self._leaving = self._leaving, None
-            if leaving is not None:  # the primary host went offline: NDEATH, DISCONNECT, and again
-                await self._leave(client, leaving)
-                continue
-            if not backoff.ended():  # a broker that drops us at once (ACL, a twin with our client id)
-                await asyncio.sleep(backoff.next())  # is not hammered
+        await self._keep_connected(self._connect, self._session)
 
-    def _connect_failed(self, exc: BrokerError, delay: float) -> None:
-        reason = exc.reason
-        self._set_state(STATE_DISCONNECTED, reason)
-        waiting = len(self.backlog) if self.backlog is not None else 0
-        if isinstance(exc, BrokerRefused):
-            self._outage.failed(
-                reason,
-                "Sparkplug: %s; check the credentials and the broker's ACL. Retrying in %.1f s "
-                "(%d DDATA messages stored)",
-                reason,
-                delay,
-                waiting,
-                level=logging.ERROR,
-            )
-        else:
-            self._outage.failed(
-                reason, "Sparkplug: %s; retrying in %.1f s (%d DDATA messages stored)", reason, delay, waiting
-            )
+    async def _connect(self) -> tuple[MqttClient, int, Connected]:
+        """A new client (its will carries the next bdSeq), connected."""
+        assert self._store is not None
+        bdseq = self._store.candidate()
+        client = self._new_client(bdseq)
+        try:
+            info = await client.connect()
+        except BrokerError:
+            client.close()
+            raise
+        return client, bdseq, info
+
+    async def _session(self, opened: tuple[MqttClient, int, Connected]) -> bool:
+        """Until the connection is lost (False), or the primary host went offline: NDEATH, DISCONNECT,
+        and a new session at once (True)."""
+        client, bdseq, info = opened
+        self._session_started(client, bdseq, info)
+        await self._session_end.wait()
+        self._session_end.clear()
+        leaving, self._leaving = self._leaving, None
+        if leaving is None:
+            return False
+        await self._leave(client, leaving)
+        return True
 
     def _session_started(self, client: MqttClient, bdseq: int, info: Connected) -> None:
         assert self._store is not None
@@ -533,9 +463,6 @@ class SparkplugSink:
             self._commit()
         if self.state != STATE_DISCONNECTED:
             self._set_state(STATE_DISCONNECTED, reason)
-
-    def _set_state(self, state: str, reason: str) -> None:
-        self.state, self.last_error = state, reason
 
     # --- births ---------------------------------------------------------------------------------
 
@@ -841,11 +768,6 @@ class SparkplugSink:
             self._send(device.ddata, released.payload)
             self._unconfirmed.append(_Sent(device, None, msg))
             self._replays += 1
-
-    def _commit(self) -> None:
-        backlog = self.backlog
-        if backlog is not None and backlog.journal is not None:
-            backlog.journal.commit()
 
     # --- from the broker -----------------------------------------------------------------------
 

@@ -6,7 +6,7 @@ from an agent's /probe."""
 from __future__ import annotations
 
 from gateway.model.tree import Machine
-from gateway.sources.base import DriverMapping, DriverSpec, Source
+from gateway.sources.base import DiscoverRequest, DriverMapping, DriverSpec, Source
 from gateway.sources.mtconnect.config import MTConnectDriver, ShdrDriver
 
 READ_ONLY = "MTConnect has no writes"
@@ -24,12 +24,22 @@ def _adapter(machine: Machine, mapping: DriverMapping) -> Source:
     return ShdrSource(machine, mapping)
 
 
+async def _discover(request: DiscoverRequest) -> str:
+    from gateway.sources.mtconnect.discover import discover_agent
+
+    return await discover_agent(
+        request.endpoint, machine=request.machine, device=request.device, wait=request.timeout
+    )
+
+
 AGENT = DriverSpec(
     type="mtconnect",
     settings=MTConnectDriver,
     create=_agent,
     summary="another MTConnect agent: /probe, then a /sample stream (read-only)",
     read_only=READ_ONLY,
+    discovers=("http://", "https://"),
+    discover=_discover,
 )
 SHDR = DriverSpec(
     type="shdr",

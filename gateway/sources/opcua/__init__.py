@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from gateway.codecs.opcua_nodeid import parse_address
 from gateway.model.tree import Machine
-from gateway.sources.base import DriverMapping, DriverSpec, Source
+from gateway.sources.base import DiscoverRequest, DriverMapping, DriverSpec, Source
 from gateway.sources.opcua.config import OpcUaDriver
 
 
@@ -19,10 +19,27 @@ def _create(machine: Machine, mapping: DriverMapping) -> Source:
     return OpcUaSource(machine, mapping)
 
 
+async def _discover(request: DiscoverRequest) -> str:
+    from gateway.sources.opcua.discover import discover
+
+    return await discover(
+        request.endpoint,
+        machine=request.machine,
+        username=request.user,
+        password=request.password,
+        security=request.security,
+        start=request.start,
+        max_depth=request.max_depth,
+        max_variables=request.max_variables,
+        timeout=request.timeout,
+    )
+
+
 SPEC = DriverSpec(
     type="opcua",
     settings=OpcUaDriver,
     create=_create,
     summary="a controller's OPC UA server: subscriptions, writes with read-back (asyncua)",
     check_address=parse_address,  # ns=2;s=… node ids and browse paths, checked at load time
+    discover=_discover,  # the default driver's: any endpoint no other driver's `discovers` names
 )

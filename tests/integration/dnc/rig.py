@@ -23,9 +23,9 @@ import yaml
 
 from bench.gcode_gen import paced_program
 from gateway.codecs.dnc import LineSettings
-from gateway.config.jobs import ControllerSerial
-from gateway.jobs.delivery.transport import Program, Progress
-from gateway.jobs.delivery.transports.serial import SerialTransport
+from gateway.transports.base import Program, Progress
+from gateway.transports.dnc.config import ControllerSerial
+from gateway.transports.dnc.transport import SerialTransport
 from simulator.dnc import DeviceServer, DncFace, DncOptions, DncSpec, Mode
 from simulator.runner import Simulator
 from tests.waiting import free_port

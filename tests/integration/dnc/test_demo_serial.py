@@ -15,10 +15,10 @@ from gateway.cli.demo import find_mapping
 from gateway.cli.demo_dnc import PUNCHED, point_at, punch_once
 from gateway.cli.demo_dnc import simulator as dnc_simulator
 from gateway.config.gateway import GatewayConfig
-from gateway.config.jobs import ControllerSerial
 from gateway.config.loader import Config, load
-from gateway.jobs.dnc.received import ReceivedStore
 from gateway.sinks.opcua.config import OpcUaServerConfig
+from gateway.transports.dnc.config import ControllerSerial
+from gateway.transports.dnc.received import ReceivedStore
 from tests.waiting import free_port, wait_until
 
 BIN = Path(sys.executable).parent

@@ -24,8 +24,8 @@ from typing import Any
 
 import pytest
 
-from gateway.jobs.dnc.received import ReceivedStore
 from gateway.jobs.queue.store import JobState
+from gateway.transports.dnc.received import ReceivedStore
 from simulator.alarms import DNC_BUFFER_OVERFLOW
 from simulator.dnc import DeviceServer
 from simulator.machine import MachineState

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from gateway.errors import DeliveryError
-from gateway.jobs.delivery.transports.serial import SerialTransport, request_restart
-from gateway.jobs.dnc.transfer import TransferFailed
+from gateway.transports.dnc.transfer import TransferFailed
+from gateway.transports.dnc.transport import SerialTransport, request_restart
 from simulator.alarms import DNC_LINE_DROPPED
 from simulator.runner import Simulator
 from tests.integration.dnc.rig import (

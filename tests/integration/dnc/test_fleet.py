@@ -2,7 +2,7 @@
 
 Three of the simulator's DNC faces (raw TCP device servers, each with its own
 machine cutting what it receives) are drip-fed at once by three serial transports
-in one fleet (gateway/jobs/dnc/fleet.py). Their link to the device server is
+in one fleet (gateway/transports/dnc/fleet.py). Their link to the device server is
 configured narrower than what the machines would take together, so the scheduler
 must share it: the device servers together never receive faster than the link
 carries, the machines get their shares alike, and every program runs byte for byte.
@@ -17,8 +17,8 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 from gateway.codecs.dnc import LineSettings
-from gateway.jobs.delivery.transports.serial import SerialTransport
-from gateway.jobs.dnc.fleet import DripFleet
+from gateway.transports.dnc.fleet import DripFleet
+from gateway.transports.dnc.transport import SerialTransport
 from simulator.dnc.controller import DncSpec
 from simulator.dnc.face import DncFace
 from simulator.dnc.links import Link

@@ -14,9 +14,9 @@ from typing import Any
 
 import pytest
 
-from gateway.jobs.dnc.transfers import TransferLog
 from gateway.jobs.queue.store import JobState
 from gateway.model.context import WriteContext
+from gateway.transports.dnc.transfers import TransferLog
 from simulator.alarms import DNC_LINE_DROPPED
 from simulator.runner import Simulator
 from tests.integration.dnc.rig import (

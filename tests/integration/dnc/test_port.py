@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import socket
 
-from gateway.jobs.dnc.port import SerialPort
+from gateway.transports.dnc.port import SerialPort
 from tests.integration.dnc.rig import settings
 
 

@@ -11,14 +11,14 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from gateway.config.punch import PunchSettings, RemoteRequests
-from gateway.jobs.delivery.transports.serial import SerialTransport
-from gateway.jobs.dnc.desk import PunchDesk
-from gateway.jobs.dnc.received import ReceivedStore
-from gateway.jobs.dnc.transfers import TransferLog
 from gateway.model.audit import AuditEntry
 from gateway.model.definitions import MachineDefinition
 from gateway.model.tree import VariableTree
+from gateway.transports.dnc.desk import PunchDesk
+from gateway.transports.dnc.punch import PunchSettings, RemoteRequests
+from gateway.transports.dnc.received import ReceivedStore
+from gateway.transports.dnc.transfers import TransferLog
+from gateway.transports.dnc.transport import SerialTransport
 from simulator.runner import Simulator
 from tests.integration.dnc.rig import SIM_BAUD, face, load_program, simulator, transport
 from tests.waiting import wait_until

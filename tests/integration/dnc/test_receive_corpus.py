@@ -1,7 +1,7 @@
 """Every case of tests/corpus/dnc/punch.yaml over a real line: a scripted controller on a raw TCP port
 sends the case's bytes to the gateway's serial transport (real pyserial, socket://), whose idle listener is
 the punch desk; the controller reads back the answer, if any. The same expectations as the unit runner
-(tests/unit/jobs/dnc/test_desk_corpus.py), here with the line's own reads, timers and drops."""
+(tests/unit/transports/dnc/test_desk_corpus.py), here with the line's own reads, timers and drops."""
 
 from __future__ import annotations
 
@@ -14,13 +14,13 @@ from typing import Any
 import pytest
 import yaml
 
-from gateway.config.punch import PunchSettings, RemoteRequests
-from gateway.jobs.dnc.desk import PunchDesk
-from gateway.jobs.dnc.received import ReceivedStore
-from gateway.jobs.dnc.transfers import TransferLog
 from gateway.model.audit import AuditEntry
 from gateway.model.definitions import MachineDefinition
 from gateway.model.tree import VariableTree
+from gateway.transports.dnc.desk import PunchDesk
+from gateway.transports.dnc.punch import PunchSettings, RemoteRequests
+from gateway.transports.dnc.received import ReceivedStore
+from gateway.transports.dnc.transfers import TransferLog
 from tests.integration.dnc.rig import SIM_BAUD, transport
 from tests.waiting import wait_until
 

@@ -9,9 +9,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from gateway.jobs.dnc.transfers import TransferLog
 from gateway.jobs.queue.store import JobState
 from gateway.model.audit import AuditEntry
+from gateway.transports.dnc.transfers import TransferLog
 from tests.integration.dnc.rig import (
     GATEWAY_BUFFER,
     SIM_BAUD,
@@ -99,7 +99,7 @@ async def test_an_answer_on_a_drip_line_is_drip_fed_and_can_be_paused(harness: B
         async with harness([text], accounts=[]) as h:
             await wait_until(lambda: face(sim).stats()["link"], message="the line open between jobs")
             face(sim).request("O0042")
-            line = h.service.lines["lathe"]
+            line = h.service.delivery.transports["serial"].lines["lathe"]  # type: ignore[attr-defined]
             await wait_until(lambda: line.current is not None, timeout=30, message="the answer under way")
             assert line.pause() == "O0042 (DRIP) paused"
             assert line.resume() == "O0042 (DRIP) resumed"

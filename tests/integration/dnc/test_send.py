@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gateway.jobs.dnc.transfer import AHEAD
+from gateway.transports.dnc.transfer import AHEAD
 from tests.integration.dnc.rig import (
     SIM_BAUD,
     Mode,

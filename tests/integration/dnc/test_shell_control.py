@@ -12,9 +12,9 @@ from typing import Any
 import pytest
 
 from gateway.cli.main import main
-from gateway.jobs.dnc.control import control_dir, owner
 from gateway.jobs.queue.store import JobState
 from gateway.model.audit import AuditEntry
+from gateway.transports.dnc.control import control_dir, owner
 from tests.integration.dnc.rig import Mode, drip_program, face, simulator
 from tests.integration.dnc.test_jobs import gateway, submit
 from tests.waiting import wait_until

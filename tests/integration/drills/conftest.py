@@ -36,6 +36,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "held_addresses": (2, 20),  # addresses that hold inbox sessions open without logging in
     "guessing_addresses": (2, 30),  # addresses that guess passwords on the web console and the FTP inbox
     "slow_connections": (1000, 1000),  # per HTTP face, held open against the web console and MTConnect
+    "paused_holders": (3, 30),  # lease holders stopped (SIGSTOP) past their lease, then continued
 }
 
 

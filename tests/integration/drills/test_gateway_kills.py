@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 from gateway.jobs.queue.store import JobQueue, JobState
-from gateway.jobs.service import queue_path
+from gateway.jobs.spool import queue_path
 from tests.integration.drills import processes
 from tests.integration.drills.conftest import Report, count
 from tests.integration.jobs.conftest import (

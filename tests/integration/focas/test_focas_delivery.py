@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from gateway.config.focas import ControllerFocas
 from gateway.errors import DeliveryError, ProgramNotFound
-from gateway.jobs.delivery.transport import Program, Progress
-from gateway.jobs.delivery.transports.focas import FocasTransport
+from gateway.transports.base import Program, Progress
+from gateway.transports.focas.config import ControllerFocas
+from gateway.transports.focas.transport import FocasTransport
 from tests.integration.focas.conftest import simulator
 
 

@@ -172,7 +172,12 @@ async def harness(tmp_path: Path) -> AsyncIterator[Build]:
 
     @asynccontextmanager
     async def build(
-        mappings: list[str], *, environ: dict[str, str] | None = None, accounts: Any = None, **inbox: Any
+        mappings: list[str],
+        *,
+        environ: dict[str, str] | None = None,
+        accounts: Any = None,
+        queue: str | None = None,
+        **inbox: Any,
     ) -> AsyncIterator[Harness]:
         files = []
         for index, text in enumerate(mappings):
@@ -185,7 +190,8 @@ async def harness(tmp_path: Path) -> AsyncIterator[Build]:
         inbox_config = InboxConfig.model_validate(
             {"host": "127.0.0.1", "port": 0, "accounts": accounts, **inbox}
         )
-        config = Config(GatewayConfig(state_dir=str(state), inbox=inbox_config), tuple(files), tmp_path)
+        gateway = GatewayConfig(state_dir=str(state), inbox=inbox_config, queue=queue)
+        config = Config(gateway, tuple(files), tmp_path)
         tree = MappedTree(config.machines)
         service = JobService(config, tree, environ=environ or {})
         async with service:

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from gateway.jobs.queue.store import JobQueue, JobState
-from gateway.jobs.service import queue_path
+from gateway.jobs.spool import queue_path
 from tests.integration.jobs.conftest import PASSWORD, PASSWORD_HASH, USER, Store, in_thread, mapping_text
 from tests.waiting import free_port, wait_until
 

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from gateway.jobs.queue.store import JobQueue, JobState
-from gateway.jobs.service import queue_path
+from gateway.jobs.spool import queue_path
 from simulator.ftp_store import FtpStore
 from tests.integration.jobs.conftest import (
     GOOD,

@@ -222,3 +222,10 @@ def _hash() -> str:
     from gateway.auth.passwords import hash_password
 
     return hash_password("x", n=2**10)
+
+
+def test_the_masked_view_hides_a_password_in_a_url_and_keeps_the_rest() -> None:
+    config = GatewayConfig.model_validate({"queue": "postgresql://gw:hunter2@db.plant:5432/jobs"})
+    view = masked(config)
+    assert view["queue"] == f"postgresql://gw:{MASK}@db.plant:5432/jobs"
+    assert "hunter2" not in json.dumps(view)

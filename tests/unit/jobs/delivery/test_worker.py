@@ -19,11 +19,11 @@ import pytest
 from gateway.config.jobs import JobsConfig
 from gateway.config.mapping import MachineMapping
 from gateway.errors import DeliveryError
-from gateway.jobs.delivery.transport import DeliveryTransport, Program, Progress, ReportProgress
 from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.queue.publish import JobPublisher
 from gateway.jobs.queue.store import Job, JobQueue, JobState
 from gateway.model.tree import VariableTree
+from gateway.transports.base import DeliveryTransport, Program, Progress, ReportProgress
 
 CONTENT = b"G1 X10 F100\nM30\n"
 DIGEST = hashlib.sha256(CONTENT).hexdigest()

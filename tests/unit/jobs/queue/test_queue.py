@@ -1,32 +1,48 @@
-"""The durable queue: its state machine, duplicates, order, retries, and two processes on one file."""
+"""The durable queue: its state machine, duplicates, order, retries, and two processes on one queue.
+
+Every test of the queue's behaviour runs against both stores: the SQLite file and PostgreSQL (a fresh
+database per test, tests/postgres.py). The file's own matters (WAL, busy timeout, user_version) stay SQLite's.
+"""
 
 from __future__ import annotations
 
 import json
 import sqlite3
 import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
 from gateway.errors import JobError
+from gateway.jobs.queue.base import JobStore
+from gateway.jobs.queue.postgres import PostgresJobQueue
 from gateway.jobs.queue.store import ALLOWED, TERMINAL, JobQueue, JobState, job_id, parse_job_id
 
 S = JobState
 
 
+@pytest.fixture(params=["sqlite", "postgresql"])
+def open_store(request: pytest.FixtureRequest, tmp_path: Path) -> Callable[[], JobStore]:
+    """A new connection to this test's queue, in each store: every call another process's view."""
+    if request.param == "sqlite":
+        return lambda: JobQueue(tmp_path / "queue.sqlite3")
+    url = request.getfixturevalue("postgres_url")
+    return lambda: PostgresJobQueue(url)
+
+
 @pytest.fixture
-def queue(tmp_path: Path) -> JobQueue:
-    with JobQueue(tmp_path / "queue.sqlite3") as q:
+def queue(open_store: Callable[[], JobStore]) -> Iterator[JobStore]:
+    with open_store() as q:
         yield q
 
 
-def new(q: JobQueue, machine: str = "laser", name: str = "a.nc", sha: str = "aa", priority: int = 0) -> int:
+def new(q: JobStore, machine: str = "laser", name: str = "a.nc", sha: str = "aa", priority: int = 0) -> int:
     return q.receive(machine, name, 10, sha, user="nest", origin="ftp", priority=priority).seq
 
 
 def queued(
-    q: JobQueue,
+    q: JobStore,
     machine: str = "laser",
     name: str = "a.nc",
     sha: str = "aa",
@@ -38,13 +54,12 @@ def queued(
     return job.seq
 
 
-def test_a_new_job_is_received_with_a_stable_readable_id(tmp_path: Path) -> None:
-    path = tmp_path / "q.sqlite3"
-    with JobQueue(path) as q:
+def test_a_new_job_is_received_with_a_stable_readable_id(open_store: Callable[[], JobStore]) -> None:
+    with open_store() as q:
         job = q.receive("laser", "part.nc", 123, "ab" * 32, user="nest", origin="ftp 1.2.3.4")
         assert job.id == "J000001" and job.state is S.RECEIVED
         assert [t.state for t in q.history(job.seq)] == [S.RECEIVED]
-    with JobQueue(path) as q:  # another run of the gateway
+    with open_store() as q:  # another run of the gateway
         assert q.get(1).filename == "part.nc"
         assert q.receive("laser", "b.nc", 1, "cd").id == "J000002"
 
@@ -57,7 +72,7 @@ def test_job_ids_parse_in_the_forms_people_type() -> None:
             parse_job_id(bad)
 
 
-def test_the_happy_path_records_every_transition_with_reason_and_time(queue: JobQueue) -> None:
+def test_the_happy_path_records_every_transition_with_reason_and_time(queue: JobStore) -> None:
     seq = new(queue)
     job, replaced = queue.accept(
         seq,
@@ -103,7 +118,7 @@ def test_the_happy_path_records_every_transition_with_reason_and_time(queue: Job
     ],
 )
 def test_transitions_the_state_machine_does_not_allow_are_refused(
-    queue: JobQueue, setup: str, action
+    queue: JobStore, setup: str, action
 ) -> None:
     seq = new(queue) if setup == "received" else queued(queue)
     if setup in ("sending", "delivered"):
@@ -123,13 +138,13 @@ def test_terminal_states_lead_nowhere_but_a_retry() -> None:
     assert ALLOWED[S.DELIVERED] == frozenset() and ALLOWED[S.REJECTED] == frozenset()
 
 
-def test_rejection_keeps_the_reason(queue: JobQueue) -> None:
+def test_rejection_keeps_the_reason(queue: JobStore) -> None:
     seq = new(queue)
     job = queue.reject(seq, "line 3: no M30")
     assert job.state is S.REJECTED and job.reason == "line 3: no M30"
 
 
-def test_same_content_while_the_first_still_waits_is_skipped(queue: JobQueue) -> None:
+def test_same_content_while_the_first_still_waits_is_skipped(queue: JobStore) -> None:
     first = queued(queue, sha="same")
     second = new(queue, name="copy.nc", sha="same")
     job, replaced = queue.accept(second, duplicates="skip", program_size=10, program_sha256="same")
@@ -137,7 +152,7 @@ def test_same_content_while_the_first_still_waits_is_skipped(queue: JobQueue) ->
     assert queue.get(first).state is S.QUEUED
 
 
-def test_replace_cancels_the_waiting_copy_and_queues_the_new_one(queue: JobQueue) -> None:
+def test_replace_cancels_the_waiting_copy_and_queues_the_new_one(queue: JobStore) -> None:
     first = queued(queue, sha="same")
     second = new(queue, sha="same")
     job, replaced = queue.accept(second, duplicates="replace", program_size=10, program_sha256="same")
@@ -146,7 +161,7 @@ def test_replace_cancels_the_waiting_copy_and_queues_the_new_one(queue: JobQueue
     assert queue.get(first).state is S.CANCELLED and "replaced by J000002" in queue.get(first).reason
 
 
-def test_a_copy_being_sent_cannot_be_replaced_so_the_new_one_is_a_duplicate(queue: JobQueue) -> None:
+def test_a_copy_being_sent_cannot_be_replaced_so_the_new_one_is_a_duplicate(queue: JobStore) -> None:
     first = queued(queue, sha="same")
     queue.start_sending(first)
     second = new(queue, sha="same")
@@ -155,7 +170,7 @@ def test_a_copy_being_sent_cannot_be_replaced_so_the_new_one_is_a_duplicate(queu
     assert queue.get(first).state is S.SENDING
 
 
-def test_same_content_is_no_duplicate_once_delivered_or_for_another_machine(queue: JobQueue) -> None:
+def test_same_content_is_no_duplicate_once_delivered_or_for_another_machine(queue: JobStore) -> None:
     first = queued(queue, sha="same")
     queue.start_sending(first)
     queue.delivered(first, "a.nc")
@@ -163,7 +178,7 @@ def test_same_content_is_no_duplicate_once_delivered_or_for_another_machine(queu
     assert queue.get(queued(queue, machine="plasma", sha="same")).state is S.QUEUED
 
 
-def test_fifo_per_machine_with_priority_first_and_an_interrupted_send_before_all(queue: JobQueue) -> None:
+def test_fifo_per_machine_with_priority_first_and_an_interrupted_send_before_all(queue: JobStore) -> None:
     a = queued(queue, name="a.nc", sha="1")
     b = queued(queue, name="b.nc", sha="2")
     other = queued(queue, machine="plasma", sha="3")
@@ -183,7 +198,7 @@ def test_fifo_per_machine_with_priority_first_and_an_interrupted_send_before_all
     assert queue.head("nothing") is None
 
 
-def test_priority_of_a_waiting_job_can_change(queue: JobQueue) -> None:
+def test_priority_of_a_waiting_job_can_change(queue: JobStore) -> None:
     a = queued(queue, sha="1")
     b = queued(queue, sha="2")
     queue.set_priority(b, 3)
@@ -194,7 +209,7 @@ def test_priority_of_a_waiting_job_can_change(queue: JobQueue) -> None:
     assert queue.get(a).priority == 0
 
 
-def test_failed_attempts_retry_later_then_fail_and_an_operator_can_retry(queue: JobQueue) -> None:
+def test_failed_attempts_retry_later_then_fail_and_an_operator_can_retry(queue: JobStore) -> None:
     seq = queued(queue)
     queue.start_sending(seq)
     job = queue.send_failed(seq, "connection refused", retry_at=1234.5)
@@ -207,7 +222,7 @@ def test_failed_attempts_retry_later_then_fail_and_an_operator_can_retry(queue: 
     assert "anna" in job.reason
 
 
-def test_cancel_waiting_jobs_and_retry_cancelled_ones(queue: JobQueue) -> None:
+def test_cancel_waiting_jobs_and_retry_cancelled_ones(queue: JobStore) -> None:
     seq = queued(queue)
     job = queue.cancel(seq, by="ops")
     assert job.state is S.CANCELLED and "ops" in job.reason
@@ -217,7 +232,7 @@ def test_cancel_waiting_jobs_and_retry_cancelled_ones(queue: JobQueue) -> None:
     assert queue.cancel(received).state is S.CANCELLED
 
 
-def test_note_changes_the_reason_only(queue: JobQueue) -> None:
+def test_note_changes_the_reason_only(queue: JobStore) -> None:
     seq = queued(queue)
     queue.start_sending(seq)
     queue.delivered(seq, "a.nc", "delivered")
@@ -225,7 +240,7 @@ def test_note_changes_the_reason_only(queue: JobQueue) -> None:
     assert job.state is S.DELIVERED and job.reason == "delivered; started a.nc"
 
 
-def test_listing_counting_and_latest(queue: JobQueue) -> None:
+def test_listing_counting_and_latest(queue: JobStore) -> None:
     a = queued(queue, sha="1")
     b = queued(queue, sha="2")
     queue.reject(new(queue, sha="3"), "bad")
@@ -236,7 +251,7 @@ def test_listing_counting_and_latest(queue: JobQueue) -> None:
     assert [j.seq for j in queue.list(states=(S.QUEUED,), newest_first=False)] == [a, b]
 
 
-def test_changes_are_followed_by_revision_and_transition(queue: JobQueue) -> None:
+def test_changes_are_followed_by_revision_and_transition(queue: JobStore) -> None:
     rev, tid = queue.marks()
     seq = queued(queue)
     changed = queue.changes_since(rev)
@@ -246,10 +261,9 @@ def test_changes_are_followed_by_revision_and_transition(queue: JobQueue) -> Non
     assert queue.changes_since(rev) == [] and queue.transitions_since(tid) == []
 
 
-def test_a_second_process_sees_and_changes_the_same_queue(tmp_path: Path) -> None:
-    """The CLI and the running gateway share the file: WAL, data_version, compare-and-set."""
-    path = tmp_path / "q.sqlite3"
-    with JobQueue(path) as gateway, JobQueue(path) as cli:
+def test_a_second_process_sees_and_changes_the_same_queue(open_store: Callable[[], JobStore]) -> None:
+    """The CLI and the running gateway share the queue: data_version, changes by revision, compare-and-set."""
+    with open_store() as gateway, open_store() as cli:
         seq = queued(gateway)
         version = gateway.data_version()
         rev, _ = gateway.marks()
@@ -258,7 +272,8 @@ def test_a_second_process_sees_and_changes_the_same_queue(tmp_path: Path) -> Non
         assert [j.state for j in gateway.changes_since(rev)] == [S.CANCELLED]
         with pytest.raises(JobError):  # the gateway's worker loses the race cleanly
             gateway.start_sending(seq)
-        assert sqlite3.connect(path).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    if isinstance(gateway, JobQueue):
+        assert sqlite3.connect(gateway.path).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
 
 
 def test_a_writer_waits_for_another_writer_and_a_hopeless_wait_is_a_clear_error(tmp_path: Path) -> None:

@@ -13,16 +13,10 @@ from gateway.commands.runner import install_commands
 from gateway.config.mapping import MachineMapping
 from gateway.errors import ArgumentsMissing, ConfirmTimeout, MalformedRequest, TooManyArguments
 from gateway.model.tree import VariableNode, VariableTree
-from gateway.sinks.mqtt.client import Incoming
-from gateway.sinks.mqtt.commands import (
-    CommandRequests,
-    arguments,
-    command_target,
-    correlation_of,
-    encode_reply,
-    read_body,
-)
+from gateway.sinks.mqtt.commands import CommandRequests, command_target, encode_reply
 from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
+from gateway.sinks.mqtt_link.client import Incoming
+from gateway.sinks.mqtt_link.requests import arguments, correlation_of, read_body
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 

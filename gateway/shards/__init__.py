@@ -1,0 +1,1 @@
+"""Shards: gateway processes that share a plant's machines, by leases with fencing tokens in PostgreSQL."""
