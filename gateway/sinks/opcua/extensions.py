@@ -10,42 +10,17 @@ group `cnc_gateway.opcua_extensions`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from gateway.model.tree import VariableTree
 from gateway.plugins import installed
 from gateway.settings.sections import Section
-from gateway.sinks.opcua.umati.config import UmatiView
-from gateway.sinks.opcua.umati.config import check as umati_check
-from gateway.sinks.opcua.umati.config import report as umati_report
+from gateway.sinks.opcua.extension_spec import ExtensionContext, ExtensionSpec
+from gateway.sinks.opcua.umati import SPEC as UMATI
 
-if TYPE_CHECKING:  # port.py imports asyncua, the alarm service SQLite: loading a configuration does not
-    from gateway.alarms.service import AlarmService
+if TYPE_CHECKING:
     from gateway.sinks.opcua.port import ServerExtension
 
-
-@dataclass(frozen=True)
-class ExtensionContext:
-    """What an extension's factory gets."""
-
-    tree: VariableTree  # machines, nodes, and tree.events (alarms/active, jobs/<id> records)
-    machines: Mapping[str, Any]  # machine -> the value of its `machine_section` (only machines with one)
-    server: Any  # the value of its `server_section` under the gateway file's `opcua:` (None: absent)
-    state_dir: Path
-    alarms: AlarmService | None  # the alarm managers, when some machine has alarms:
-
-
-@dataclass(frozen=True)
-class ExtensionSpec:
-    name: str
-    summary: str  # one line, for the adapters table of docs/architecture.md
-    # The part to install, or None when the configuration does not ask for it.
-    create: Callable[[ExtensionContext], ServerExtension | None]
-    machine_section: Section | None = None  # a key per machine in mapping files (umati:)
-    server_section: Section | None = None  # a key under the gateway file's `opcua:`
+__all__ = ["ALARMS", "EXTENSIONS", "UMATI", "ExtensionContext", "ExtensionSpec"]
 
 
 def _alarms(context: ExtensionContext) -> ServerExtension | None:
@@ -62,28 +37,6 @@ ALARMS = ExtensionSpec(
     create=_alarms,
 )
 
-
-def _umati(context: ExtensionContext) -> ServerExtension | None:
-    if not context.machines:
-        return None
-    from gateway.sinks.opcua.umati.install import UmatiExtension
-
-    return UmatiExtension(context.machines, context.tree, context.alarms)
-
-
-UMATI = ExtensionSpec(
-    name="umati",
-    summary="the umati view: each machine with a `umati:` section as an OPC 40501-1 MachineTool under "
-    "the Machinery Machines folder (identification, monitoring, production, notifications)",
-    create=_umati,
-    machine_section=Section(
-        "umati",
-        UmatiView,
-        "The machine as an OPC 40501-1 MachineTool (umati) under the Machinery Machines folder",
-        check=umati_check,
-        report=umati_report,
-    ),
-)
 
 BUILT_IN: tuple[ExtensionSpec, ...] = (ALARMS, UMATI)
 
