@@ -34,6 +34,7 @@ from simulator.machine import Machine
 from simulator.store import MemoryStore
 
 TICK = 0.01  # s between machine steps, as the simulator's runner
+LAG_PROBE = 0.002  # s: the sleep whose overshoot measures the event loop's lateness
 
 
 @dataclass
@@ -123,7 +124,9 @@ class Fleet:
     starved: list[float] = field(default_factory=list)
     stack: contextlib.AsyncExitStack | None = None
     ticker: asyncio.Task[None] | None = None
+    prober: asyncio.Task[None] | None = None
     speed: float = 1.0
+    lags: list[float] = field(default_factory=list)  # s: how late the loop woke a 2 ms sleep, per sleep
 
 
 async def main() -> None:
@@ -148,6 +151,13 @@ async def main() -> None:
                 if machine.waiting_for_data:
                     fleet.starved[i] += dt
                 machine.step(dt * fleet.speed)
+
+    async def probe() -> None:
+        """The event loop's lateness, which is the faces' (a late loop raises a DC3 late)."""
+        while True:
+            before = time.monotonic()
+            await asyncio.sleep(LAG_PROBE)
+            fleet.lags.append(time.monotonic() - before - LAG_PROBE)
 
     async def setup(request: dict[str, Any]) -> dict[str, Any]:
         await teardown({})
@@ -182,6 +192,8 @@ async def main() -> None:
             fleet.faces.append(face)
             fleet.starved.append(0.0)
         fleet.ticker = asyncio.create_task(tick(), name="dnc-sim:tick")
+        fleet.lags = []
+        fleet.prober = asyncio.create_task(probe(), name="dnc-sim:lag")
         return {"urls": [f.socket_url for f in fleet.faces]}
 
     def mark(_request: dict[str, Any]) -> dict[str, Any]:
@@ -194,6 +206,7 @@ async def main() -> None:
             face.in_flight.clear()
             face.sent_after.clear()
             face.holds.clear()
+        fleet.lags = []
         return {}
 
     def stats(_request: dict[str, Any]) -> dict[str, Any]:
@@ -207,6 +220,7 @@ async def main() -> None:
                     "after_dc3": percentiles([float(e) for e in episodes]),
                     "episodes": len(episodes),
                     "in_flight_at_dc3": percentiles([float(n) for n in face.in_flight]),
+                    "in_flight_each": list(face.in_flight),
                     "sent_after_dc3": percentiles([float(n) for n in face.sent_after]),
                     "holds": [[t if t != math.inf else None for t in hold] for hold in face.holds],
                     "first": face.timed.first,
@@ -220,14 +234,17 @@ async def main() -> None:
                     "highest": face.highest,
                 }
             )
-        return {"faces": out}
+        lags = [lag * 1000.0 for lag in fleet.lags]
+        late = {f"over_{ms}_ms": sum(1 for lag in lags if lag > ms) for ms in (10, 20, 40)}
+        return {"faces": out, "loop_lag_ms": {**percentiles(lags), **late}}
 
     async def teardown(_request: dict[str, Any]) -> dict[str, Any]:
-        if fleet.ticker is not None:
-            fleet.ticker.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await fleet.ticker
-            fleet.ticker = None
+        for task in (fleet.ticker, fleet.prober):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        fleet.ticker = fleet.prober = None
         if fleet.stack is not None:
             await fleet.stack.aclose()
             fleet.stack = None

@@ -236,7 +236,8 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         timeout=timeout + 60,
     )
     await _settled(sim, lambda f: f["machine"] != "RUNNING", timeout=60)
-    [face] = (await sim.ask("stats"))["faces"]
+    stats = await sim.ask("stats")
+    [face] = stats["faces"]
     arrived, got, flight = face["sent_after_dc3"], face["after_dc3"], face["in_flight_at_dc3"]
     # Certainly after the DC3 and before the DC1: from just after the DC3's send to just before the DC1's;
     # at most: from just before the one to just after the other (a descheduled simulator widens the gap).
@@ -245,6 +246,16 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
     timed = await gw.ask("sent_after", holds=certain, timeout=120)
     sent = percentiles([float(n) for n in timed["counts"]])
     upper = percentiles([float(n) for n in (await gw.ask("sent_after", holds=widest, timeout=120))["counts"]])
+    # Where the largest in-flight figures came from: what the gateway wrote in the 50 and 200 ms before
+    # those DC3s, against what the line carries in that time (a writer ahead of the line, or a late DC3).
+    each, all_holds = face.get("in_flight_each") or [], face["holds"]
+    top = sorted(range(min(len(each), len(all_holds))), key=lambda i: -each[i])[:5]
+    windows = [[all_holds[i][1] - w, all_holds[i][1]] for i in top for w in (0.05, 0.2)]
+    written = (await gw.ask("sent_after", holds=windows, timeout=120))["counts"] if windows else []
+    largest = [
+        {"in_flight": each[i], "written_50ms": written[2 * k], "written_200ms": written[2 * k + 1]}
+        for k, i in enumerate(top)
+    ]
     [job] = answer["jobs"].values()
     out = {
         "kind": kind,
@@ -256,6 +267,9 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         "writes": timed["writes"],
         "received_after_dc3": got,
         "in_flight_at_dc3": flight,
+        "largest_in_flight": largest,
+        "line_chars_50ms": round(line_rate(BAUD) * 0.05),
+        "loop_lag_ms": stats.get("loop_lag_ms"),
         "dc3_sent": face["dc3_sent"],
         "dc3_reported": job["dc3"],
         "overruns": face["overruns"],
@@ -274,6 +288,14 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         f"{upper['max']}); reached the device server after DC3 p99 {arrived['p99']} max {arrived['max']}; "
         f"received after DC3 p99 {got['p99']} max {got['max']}; overruns {face['overruns']:,} (highest "
         f"level {face['highest']:,}); failures {answer['failures']}"
+    )
+    lag = stats.get("loop_lag_ms") or {}
+    run.log(
+        "  largest in flight at a DC3 (written by the gateway in the 50 / 200 ms before it; the line "
+        f"carries {out['line_chars_50ms']} in 50 ms): "
+        + ", ".join(f"{x['in_flight']} ({x['written_50ms']} / {x['written_200ms']})" for x in largest)
+        + f"; the simulator's loop late p99 {lag.get('p99', 0):.1f} ms, max {lag.get('max', 0):.1f} ms, "
+        f"over 20 ms {lag.get('over_20_ms')} times, over 40 ms {lag.get('over_40_ms')}"
     )
     note = f"{out['size'] / 1e6:.2f} MB drip at 115,200 baud, {sent['n']:,} DC3s, a {kind} device server"
     key = f"dc3.{kind}."
