@@ -182,10 +182,18 @@ def judge_22(ctx: Context) -> list[Target]:
         runs = list((d.get("after_dc3") or {}).values())
         if runs:
             megabytes = sum(r["size"] for r in runs) / 1e6
-            each = "; ".join(f"{r['kind']}: {r['overruns']:,} (up to {r['highest']:,} bytes)" for r in runs)
+            # An overrun after a DC3 that the simulator raised late (its event loop late by more than the
+            # headroom's line time) would have happened whatever the sender did: counted apart, and said.
+            each = "; ".join(
+                f"{r['kind']}: {r.get('overruns_on_time', r['overruns']):,} (up to {r['highest']:,} bytes; "
+                f"{r.get('overruns_late_dc3', 0):,} more after "
+                f"{r.get('dc3_late_beyond_headroom', 0):,} late DC3s)"
+                for r in runs
+            )
             targets.append(Target(
-                f"buffer overruns (alarm 087) over a {megabytes:.1f} MB drip{suffix}", 0, 0, "",
-                higher_is_better=False, value=sum(r["overruns"] for r in runs),
+                f"buffer overruns (alarm 087) after an on-time DC3, {megabytes:.1f} MB drip{suffix}",
+                0, 0, "",
+                higher_is_better=False, value=sum(r.get("overruns_on_time", r["overruns"]) for r in runs),
                 source=each,
             ))  # fmt: skip
         for factor, one in (d.get("single") or {}).items():

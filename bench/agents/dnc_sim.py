@@ -56,6 +56,12 @@ class TimedFace(DncFace):
     timed: Timed
     overrun_at: int | None = None
     overruns: int = 0  # times the buffer's level went beyond overrun_at (alarm 087 on a real controller)
+    # Of those, the overruns of episodes whose DC3 left late: later after the level was reached (the line's
+    # own clock) than the headroom between the DC3 level and overrun_at takes the line to fill. Such a DC3
+    # overruns the buffer whatever the sender does; a controller's UART and firmware raise it on time, a
+    # simulator whose event loop is late does not (bench/README.md, scenario dnc).
+    overruns_late_dc3: int = 0
+    dc3_late: list[float]  # s after the level was reached, per DC3
     highest: int = 0  # the buffer's highest level
     in_flight: list[int]
     sent_after: list[int]
@@ -67,6 +73,7 @@ class TimedFace(DncFace):
 
     def watch_dc3(self) -> None:
         self.in_flight, self.sent_after, self.holds, self._after = [], [], [], None
+        self.dc3_late = []
         controller = self.controller
         send_flow = controller._send_flow
 
@@ -75,6 +82,7 @@ class TimedFace(DncFace):
             send_flow(char)
             sent = time.monotonic()
             if char == DC3:
+                self.dc3_late.append(max(0.0, now - controller._rx_free_at))  # the level's char arrived then
                 if not self.holds or self.holds[-1][3] != math.inf:
                     self.holds.append([now, sent, math.inf, math.inf])
                 self.in_flight.append(len(controller.wire))
@@ -93,7 +101,9 @@ class TimedFace(DncFace):
     def watch_level(self, overrun_at: int | None) -> None:
         """Count the overruns of a buffer of `overrun_at` bytes (the controller's own `_buffer` appends)."""
         self.overrun_at, self.overruns, self.highest = overrun_at, 0, 0
+        self.overruns_late_dc3 = 0
         controller = self.controller
+        headroom = (overrun_at - controller.spec.high) / controller.rate if overrun_at is not None else 0.0
         buffer = controller._buffer
 
         def watched(chars: bytes) -> None:
@@ -103,6 +113,8 @@ class TimedFace(DncFace):
             self.highest = max(self.highest, level)
             if self.overrun_at is not None and before <= self.overrun_at < level:
                 self.overruns += 1
+                if self.dc3_late and self.dc3_late[-1] > headroom:
+                    self.overruns_late_dc3 += 1
 
         controller._buffer = watched  # type: ignore[method-assign]
 
@@ -199,7 +211,8 @@ async def main() -> None:
     def mark(_request: dict[str, Any]) -> dict[str, Any]:
         for i, face in enumerate(fleet.faces):
             face.timed = Timed(rx_seen=face.controller.stats.rx_chars)
-            face.overruns = face.highest = 0
+            face.overruns = face.highest = face.overruns_late_dc3 = 0
+            face.dc3_late.clear()
             fleet.starved[i] = 0.0
             face.machine.starvations = 0
             face.controller.episodes.clear()
@@ -231,6 +244,14 @@ async def main() -> None:
                     "starved_seconds": fleet.starved[i],
                     "machine": face.machine.state.name,
                     "overruns": face.overruns,
+                    "overruns_late_dc3": face.overruns_late_dc3,
+                    "dc3_late_ms": percentiles([late * 1000.0 for late in face.dc3_late]),
+                    "dc3_late_beyond_headroom": sum(
+                        1
+                        for late in face.dc3_late
+                        if face.overrun_at is not None
+                        and late > (face.overrun_at - face.controller.spec.high) / face.controller.rate
+                    ),
                     "highest": face.highest,
                 }
             )

@@ -273,6 +273,10 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         "dc3_sent": face["dc3_sent"],
         "dc3_reported": job["dc3"],
         "overruns": face["overruns"],
+        "overruns_late_dc3": face.get("overruns_late_dc3", 0),
+        "overruns_on_time": face["overruns"] - face.get("overruns_late_dc3", 0),
+        "dc3_late_ms": face.get("dc3_late_ms"),
+        "dc3_late_beyond_headroom": face.get("dc3_late_beyond_headroom", 0),
         "highest": face["highest"],
         "failures": answer["failures"],
         "unfinished": answer["unfinished"],
@@ -295,7 +299,9 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         f"carries {out['line_chars_50ms']} in 50 ms): "
         + ", ".join(f"{x['in_flight']} ({x['written_50ms']} / {x['written_200ms']})" for x in largest)
         + f"; the simulator's loop late p99 {lag.get('p99', 0):.1f} ms, max {lag.get('max', 0):.1f} ms, "
-        f"over 20 ms {lag.get('over_20_ms')} times, over 40 ms {lag.get('over_40_ms')}"
+        f"over 20 ms {lag.get('over_20_ms')} times, over 40 ms {lag.get('over_40_ms')}; DC3s later than the "
+        f"headroom's line time after their level: {out['dc3_late_beyond_headroom']}, overruns after such a "
+        f"late DC3: {out['overruns_late_dc3']} of {face['overruns']}"
     )
     note = f"{out['size'] / 1e6:.2f} MB drip at 115,200 baud, {sent['n']:,} DC3s, a {kind} device server"
     key = f"dc3.{kind}."
