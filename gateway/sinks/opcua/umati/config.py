@@ -225,7 +225,11 @@ def check(view: UmatiView, earlier: Mapping[str, Any]) -> Iterable[tuple[Loc, st
             yield ("identification",), f"{key} is mandatory (MachineToolIdentificationType)"
     for loc, source, enum in bindings(view):
         if isinstance(source, Binding):
-            if source.variable not in variables:
+            # A job variable names the machine's job queue: bound when the mapping has `jobs:`, else the
+            # node stays empty (the laser's default map binds JobIdentifier, and a copy of it without a
+            # queue is still a valid mapping).
+            job_queue_absent = source.variable in JOB_VARIABLES and earlier.get("jobs") is None
+            if source.variable not in variables and not job_queue_absent:
                 yield (*loc, "variable"), f"{source.variable!r} is not a variable of this mapping"
             for code, name in (source.values or {}).items():
                 if enum is not None and name not in enum:

@@ -111,8 +111,13 @@ class UmatiExtension:
             data_type = planned.data_types[item.path]
             if isinstance(item.source, Binding):
                 node = machine.nodes.get(item.source.variable)
-                if node is None:  # a Jobs/ variable of a machine whose jobs: were taken away after the check
-                    log.warning("umati: %s has no %s: %s stays empty", name, item.source.variable, item.path)
+                if node is None:  # a Jobs/ variable of a machine without jobs: (the check lets it pass)
+                    log.info(
+                        "umati: %s has no %s (no jobs:): %s stays empty",
+                        name,
+                        item.source.variable,
+                        item.path,
+                    )
                     continue
                 server.show(nodeid, node, Converted.of(data_type, item, program_states))
                 await _analog(server, planned.ids, item.path, node.definition.range)
