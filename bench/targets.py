@@ -186,12 +186,12 @@ def judge_22(ctx: Context) -> list[Target]:
             # headroom's line time) would have happened whatever the sender did: counted apart, and said.
             each = "; ".join(
                 f"{r['kind']}: {r.get('overruns_on_time', r['overruns']):,} (up to {r['highest']:,} bytes; "
-                f"{r.get('overruns_late_dc3', 0):,} more after "
-                f"{r.get('dc3_late_beyond_headroom', 0):,} late DC3s)"
+                f"{r.get('overruns_late_dc3', 0):,} more after {r.get('dc3_late_beyond_headroom', 0):,} late "
+                f"DC3s, {r.get('overruns_bunched', 0):,} after {r.get('bunched_reads', 0):,} late reads)"
                 for r in runs
             )
             targets.append(Target(
-                f"buffer overruns (alarm 087) after an on-time DC3, {megabytes:.1f} MB drip{suffix}",
+                f"buffer overruns (alarm 087), the simulator on time, {megabytes:.1f} MB drip{suffix}",
                 0, 0, "",
                 higher_is_better=False, value=sum(r.get("overruns_on_time", r["overruns"]) for r in runs),
                 source=each,

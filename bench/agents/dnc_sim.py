@@ -61,6 +61,13 @@ class TimedFace(DncFace):
     # overruns the buffer whatever the sender does; a controller's UART and firmware raise it on time, a
     # simulator whose event loop is late does not (bench/README.md, scenario dnc).
     overruns_late_dc3: int = 0
+    # And those of episodes in which the device server took more than that headroom from TCP in one read:
+    # the gateway writes a few characters at a time, so such a read is the simulator's loop reading late
+    # (the kernel held what came meanwhile) and its line then carries a burst it would have carried over
+    # the time the loop slept, the machine cutting meanwhile.
+    overruns_bunched: int = 0
+    bunched_reads: int = 0
+    _largest_read: int = 0  # since the last DC1
     dc3_late: list[float]  # s after the level was reached, per DC3
     highest: int = 0  # the buffer's highest level
     in_flight: list[int]
@@ -90,6 +97,7 @@ class TimedFace(DncFace):
                     self.sent_after.append(self._after)
                 self._after = 0
             else:
+                self._largest_read = 0
                 if self.holds and self.holds[-1][3] == math.inf:
                     self.holds[-1][2:] = [now, sent]
                 if self._after is not None:
@@ -101,7 +109,7 @@ class TimedFace(DncFace):
     def watch_level(self, overrun_at: int | None) -> None:
         """Count the overruns of a buffer of `overrun_at` bytes (the controller's own `_buffer` appends)."""
         self.overrun_at, self.overruns, self.highest = overrun_at, 0, 0
-        self.overruns_late_dc3 = 0
+        self.overruns_late_dc3 = self.overruns_bunched = self.bunched_reads = self._largest_read = 0
         controller = self.controller
         headroom = (overrun_at - controller.spec.high) / controller.rate if overrun_at is not None else 0.0
         buffer = controller._buffer
@@ -115,6 +123,8 @@ class TimedFace(DncFace):
                 self.overruns += 1
                 if self.dc3_late and self.dc3_late[-1] > headroom:
                     self.overruns_late_dc3 += 1
+                elif self._largest_read > self.overrun_at - controller.spec.high:
+                    self.overruns_bunched += 1
 
         controller._buffer = watched  # type: ignore[method-assign]
 
@@ -125,6 +135,9 @@ class TimedFace(DncFace):
             t.first = now
         t.last = now
         t.chars += len(data)
+        self._largest_read = max(self._largest_read, len(data))
+        if self.overrun_at is not None and len(data) > self.overrun_at - self.controller.spec.high:
+            self.bunched_reads += 1
         if self._after is not None:
             self._after += len(data)
         super().link_data(link, data)
@@ -211,7 +224,8 @@ async def main() -> None:
     def mark(_request: dict[str, Any]) -> dict[str, Any]:
         for i, face in enumerate(fleet.faces):
             face.timed = Timed(rx_seen=face.controller.stats.rx_chars)
-            face.overruns = face.highest = face.overruns_late_dc3 = 0
+            face.overruns = face.highest = face.overruns_late_dc3 = face.overruns_bunched = 0
+            face.bunched_reads = 0
             face.dc3_late.clear()
             fleet.starved[i] = 0.0
             face.machine.starvations = 0
@@ -245,6 +259,8 @@ async def main() -> None:
                     "machine": face.machine.state.name,
                     "overruns": face.overruns,
                     "overruns_late_dc3": face.overruns_late_dc3,
+                    "overruns_bunched": face.overruns_bunched,
+                    "bunched_reads": face.bunched_reads,
                     "dc3_late_ms": percentiles([late * 1000.0 for late in face.dc3_late]),
                     "dc3_late_beyond_headroom": sum(
                         1

@@ -274,7 +274,11 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         "dc3_reported": job["dc3"],
         "overruns": face["overruns"],
         "overruns_late_dc3": face.get("overruns_late_dc3", 0),
-        "overruns_on_time": face["overruns"] - face.get("overruns_late_dc3", 0),
+        "overruns_bunched": face.get("overruns_bunched", 0),
+        "bunched_reads": face.get("bunched_reads", 0),
+        "overruns_on_time": face["overruns"]
+        - face.get("overruns_late_dc3", 0)
+        - face.get("overruns_bunched", 0),
         "dc3_late_ms": face.get("dc3_late_ms"),
         "dc3_late_beyond_headroom": face.get("dc3_late_beyond_headroom", 0),
         "highest": face["highest"],
@@ -301,7 +305,9 @@ async def _after_dc3(run: Run, kind: str, *, size: int) -> None:
         + f"; the simulator's loop late p99 {lag.get('p99', 0):.1f} ms, max {lag.get('max', 0):.1f} ms, "
         f"over 20 ms {lag.get('over_20_ms')} times, over 40 ms {lag.get('over_40_ms')}; DC3s later than the "
         f"headroom's line time after their level: {out['dc3_late_beyond_headroom']}, overruns after such a "
-        f"late DC3: {out['overruns_late_dc3']} of {face['overruns']}"
+        f"late DC3: {out['overruns_late_dc3']} of {face['overruns']}; reads from TCP larger than the "
+        f"headroom (the loop reading late): {out['bunched_reads']}, overruns after one: "
+        f"{out['overruns_bunched']}"
     )
     note = f"{out['size'] / 1e6:.2f} MB drip at 115,200 baud, {sent['n']:,} DC3s, a {kind} device server"
     key = f"dc3.{kind}."
