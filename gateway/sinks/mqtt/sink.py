@@ -74,6 +74,7 @@ SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to acknowledge w
 # happens once per turn of the loop at most (after the source's batch that changed them), so a small chunk
 # would cap the rate at chunk x turns/s when the source's decoding makes the turns long.
 LATEST_CHUNK = 5000
+LOW_WINDOW = 1000  # a Receive Maximum below this is said at connect: it caps QoS 1 at a few thousand/s
 PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before QoS 0 changes are shed
 WORDING = Wording(
     label="MQTT",
@@ -275,6 +276,7 @@ class MqttSink(BrokerLink):
             discarded=self.discarded,
             coalesced=self.coalesced,
             socket_queue=self.socket_queue,
+            resent=self.resent,
         )
 
     async def run(self) -> None:
@@ -312,6 +314,12 @@ class MqttSink(BrokerLink):
         client = self._client
         self.connects += 1
         self._window = min(self.config.max_inflight, info.receive_maximum or self.config.max_inflight)
+        if self._window < self.config.max_inflight and self._window < LOW_WINDOW and self._ordered:
+            log.info(
+                "MQTT: the broker takes at most %d unacknowledged messages (its Receive Maximum), which "
+                "bounds QoS 1 throughput; Mosquitto: raise max_inflight_messages (default 20)",
+                self._window,
+            )
         self._online = True
         self._set_state(STATE_CONNECTED, "")
         try:

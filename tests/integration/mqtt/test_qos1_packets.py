@@ -148,6 +148,7 @@ async def test_unacknowledged_changes_are_sent_again_with_dup_after_a_drop(tmp_p
         assert values(again) == sent
         assert [s.dup for s in again] == [True] * unacked + [False] * (len(sent) - unacked)
         assert sink.resent >= unacked  # and the status message that was in flight too
+        assert sink.health().figures()["resent"] == sink.resent  # what /metrics shows
 
 
 async def test_a_refusal_is_counted_and_not_sent_again(tmp_path: Path) -> None:
