@@ -207,3 +207,22 @@ def reply(case: dict[str, Any], packet_id: int) -> bytes:
     return bytes.fromhex(
         template.replace("{id}", f"{packet_id:04x}").replace("{other}", f"{packet_id ^ 0x5555:04x}")
     )
+
+
+async def test_unacknowledged_changes_survive_a_gateway_restart_in_the_journal(tmp_path: Path) -> None:
+    """buffer.persist: what the broker had not acknowledged when the gateway stopped is sent by the next
+    start, in order, before anything newer."""
+    persist = {"buffer": {"persist": True}}
+    async with spec_broker(hold=True) as broker:
+        async with running(broker, tmp_path, max_inflight=20, **persist) as (sink, tree):
+            topic = topic_of(sink, tree, "Axes/X/Position")
+            sent = feed(tree, "Axes/X/Position", range(30))
+            await wait_until(lambda: broker.outstanding() == 20, timeout=10, message="a full window")
+            await wait_until(lambda: len(sink.backlog or ()) >= 10, timeout=10, message="the rest kept back")
+        assert broker.published(topic) and all(s.connection == 1 for s in broker.published(topic))
+        broker.hold = False
+        broker.drop()
+        async with running(broker, tmp_path, max_inflight=20, **persist) as (sink, tree):
+            await wait_until(lambda: sink.settled, timeout=10, message="the kept changes acknowledged")
+        second = [s for s in broker.published(topic) if s.connection > 1]
+        assert values(second) == sent
