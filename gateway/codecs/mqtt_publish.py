@@ -1,4 +1,4 @@
-"""MQTT PUBLISH packets at QoS 0, encoded ahead of the client library: bytes in, bytes out.
+"""MQTT PUBLISH packets at QoS 0 and 1, and the PUBACKs that answer them: bytes in, bytes out.
 
 The MQTT sink sends thousands of QoS 0 changes a second. Handing each to paho
 costs a message-info object, a lock, a packet dict, a socket write and, once
@@ -10,6 +10,14 @@ and queues the batch as one write (`MqttClient.publish_packets`).
 Wire format (MQTT 3.1.1 §3.3, MQTT 5 §3.3): `0x30 | retain`, the remaining length
 as a variable byte integer, the topic as a UTF-8 string with a 2-byte length,
 (MQTT 5: the properties' length, 0), then the payload.
+
+QoS 1 (issue 28) is the same packet with the QoS bits set (`0x32 | retain`,
+`| 0x08` when it is sent again), and a 2-byte packet identifier between the
+topic and the properties. The broker answers each with a PUBACK: `0x40`, a
+remaining length of 2 (MQTT 5: 2, 3 or more, for a reason code and properties),
+the packet identifier. `read_puback` takes those from a receive buffer one by
+one, so that a burst of acknowledgements costs no per-packet object and no
+per-packet read from the socket.
 """
 
 from __future__ import annotations
@@ -18,12 +26,21 @@ MAX_REMAINING = 268_435_455  # the largest length a variable byte integer holds 
 MAX_TOPIC = 65_535
 
 
-def topic_field(topic: str, *, v5: bool = False) -> bytes:
-    """The variable header of a QoS 0 PUBLISH: the topic with its length (and no properties, MQTT 5)."""
+PUBACK = 0x40
+FAILURE = 0x80  # reason codes from here on say the broker did not accept the message (MQTT 5 §3.4.2.1)
+
+
+def topic_head(topic: str) -> bytes:
+    """The topic as an MQTT UTF-8 string: its length in 2 bytes, then the bytes."""
     raw = topic.encode("utf-8")
     if len(raw) > MAX_TOPIC:
         raise ValueError(f"topic of {len(raw)} bytes (MQTT allows {MAX_TOPIC})")
-    return len(raw).to_bytes(2, "big") + raw + (b"\x00" if v5 else b"")
+    return len(raw).to_bytes(2, "big") + raw
+
+
+def topic_field(topic: str, *, v5: bool = False) -> bytes:
+    """The variable header of a QoS 0 PUBLISH: the topic with its length (and no properties, MQTT 5)."""
+    return topic_head(topic) + (b"\x00" if v5 else b"")
 
 
 def first_byte(retain: bool) -> bytes:
@@ -50,3 +67,63 @@ def remaining_length(n: int) -> bytes:
 def publish_packet(first: bytes, field: bytes, payload: bytes) -> bytes:
     """One QoS 0 PUBLISH: `first` and `field` from `first_byte()` and `topic_field()`."""
     return first + remaining_length(len(field) + len(payload)) + field + payload
+
+
+def qos1_first_byte(retain: bool, dup: bool = False) -> bytes:
+    """The fixed header's first byte of a QoS 1 PUBLISH; `dup` when it is a re-delivery attempt."""
+    return bytes((0x32 | (0x08 if dup else 0) | (0x01 if retain else 0),))
+
+
+def qos1_packet(first: bytes, head: bytes, packet_id: int, payload: bytes, *, v5: bool = False) -> bytes:
+    """One QoS 1 PUBLISH: `first` from `qos1_first_byte()`, `head` from `topic_head()`."""
+    ident = packet_id.to_bytes(2, "big")
+    if v5:
+        return first + remaining_length(len(head) + 3 + len(payload)) + head + ident + b"\x00" + payload
+    return first + remaining_length(len(head) + 2 + len(payload)) + head + ident + payload
+
+
+def read_puback(buf: bytes | bytearray, pos: int = 0) -> tuple[int, int, int] | None:
+    """The PUBACK at `buf[pos:]` as (packet id, reason code, where the next packet starts); None when
+    what starts there is another kind of packet or not all of it has arrived yet.
+
+    The reason code is 0 (success) when the packet carries none (MQTT 3.1.1, and MQTT 5's short form).
+    A PUBACK whose length cannot hold a packet id is malformed: ValueError.
+    """
+    end = len(buf)
+    if end - pos < 2 or buf[pos] != PUBACK:
+        return None
+    length = 0
+    shift = 0
+    at = pos + 1
+    while True:  # the remaining length, a variable byte integer of at most 4 bytes
+        if at >= end:
+            return None
+        byte = buf[at]
+        length |= (byte & 0x7F) << shift
+        at += 1
+        if not byte & 0x80:
+            break
+        shift += 7
+        if shift > 21:
+            raise ValueError("a PUBACK whose remaining length takes more than 4 bytes")
+    if length < 2:
+        raise ValueError(f"a PUBACK of remaining length {length} (a packet id takes 2)")
+    if end - at < length:
+        return None
+    reason = buf[at + 2] if length > 2 else 0
+    if length > 3:  # MQTT 5: properties follow, their length first; they must fill the packet exactly
+        size, shift, prop = 0, 0, at + 3
+        while True:
+            if prop >= at + length:
+                raise ValueError("a PUBACK whose properties' length is cut short")
+            byte = buf[prop]
+            size |= (byte & 0x7F) << shift
+            prop += 1
+            if not byte & 0x80:
+                break
+            shift += 7
+            if shift > 21:
+                raise ValueError("a PUBACK whose properties' length takes more than 4 bytes")
+        if prop + size != at + length:
+            raise ValueError(f"a PUBACK whose properties ({size} bytes) do not fill its remaining length")
+    return (buf[at] << 8) | buf[at + 1], reason, at + length

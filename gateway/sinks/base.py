@@ -40,6 +40,7 @@ class SinkHealth:
     discarded: int | None = None  # QoS 0 changes not sent while the link was down
     coalesced: int | None = None  # changes replaced by a newer value before they were sent
     socket_queue: int | None = None  # writes the library holds that the socket has not taken
+    resent: int | None = None  # messages sent again (DUP) after the link dropped before their acknowledgement
     connects: int | None = None  # successful connections
     online: bool | None = None  # connected and publishing live
     last_error: str = ""  # the latest reason the link went down or was refused ("" none)
@@ -53,6 +54,7 @@ class SinkHealth:
             ("discarded", self.discarded),
             ("coalesced", self.coalesced),
             ("socket_queue", self.socket_queue),
+            ("resent", self.resent),
             ("connects", self.connects),
             ("online", self.online),
             ("state", self.state),

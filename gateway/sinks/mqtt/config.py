@@ -88,8 +88,11 @@ class MqttConfig(BrokerConnection):
         default="json", description="json: value, ts, quality, unit; raw: the value as text"
     )
     max_inflight: int = Field(
-        default=200, ge=1, le=65000, description="QoS 1/2 messages awaiting the broker's ack"
-    )
+        default=4000,
+        ge=1,
+        le=65000,
+        description="QoS 1/2 messages awaiting the broker's ack (MQTT 5: at most its Receive Maximum)",
+    )  # large: the window refills once per turn of the loop, and a busy OPC UA face makes turns long
     max_set_payload: int = Field(default=65536, ge=16, description="Largest accepted /set payload, in bytes")
     max_packet_size: int = Field(
         default=MIB,

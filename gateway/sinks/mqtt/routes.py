@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterable, Mapping
 
-from gateway.codecs.mqtt_publish import first_byte, topic_field
+from gateway.codecs.mqtt_publish import first_byte, qos1_first_byte, topic_field, topic_head
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.mqtt.config import (
     MachineMqtt,
@@ -39,6 +39,7 @@ class Route:
     __slots__ = (
         "field",
         "first",
+        "head",
         "latest_only",
         "machine",
         "node",
@@ -73,11 +74,15 @@ class Route:
         self.latest_only = qos == 0 and retain
         # QoS 0 changes go out as pre-encoded PUBLISH packets (gateway/codecs/mqtt_publish.py): the constant
         # parts, once per variable.
-        self.first = first_byte(retain)
+        self.first = first_byte(retain) if qos == 0 else qos1_first_byte(retain)
         self.field = b""  # empty: through paho's publish(), which says what is wrong with the topic
+        self.head = b""  # QoS 1: the topic with its length, the packet id goes after it
         if qos == 0:
             with contextlib.suppress(ValueError):
                 self.field = topic_field(topic, v5=v5)
+        elif qos == 1:
+            with contextlib.suppress(ValueError):
+                self.head = topic_head(topic)
 
     def __repr__(self) -> str:
         return f"<Route {self.topic} q{self.qos}{' r' if self.retain else ''}{' w' if self.writable else ''}>"

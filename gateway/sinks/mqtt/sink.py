@@ -2,9 +2,13 @@
 
 Flow of one change. QoS 1/2 topics promise every change: the hub keeps their
 changes in order (its `ordered` nodes), and each becomes a topic (cached per
-variable in `Route`) and a payload, given to paho straight away when the broker
-is connected, nothing is waiting and the window of unacknowledged messages has
-room, and otherwise put in the `Backlog`. QoS 0 topics promise the latest value:
+variable in `Route`) and a payload, sent straight away when the broker is
+connected, nothing is waiting and the window of unacknowledged messages has
+room, and otherwise put in the `Backlog`. QoS 1 is encoded here, like QoS 0,
+with packet ids from the client (issue 28): the packets of one turn of the loop
+go out as one write, and the PUBACKs of one read come back as one call
+(`_acked`), which frees the window and pulls the next messages from the backlog.
+QoS 2, rare, goes through paho's publish(). QoS 0 topics promise the latest value:
 the hub keeps one sample per variable (a newer one replaces the waiting one, and
 is counted as coalesced), and the `mqtt:latest` task takes the next chunk of
 them only when paho has handed the previous one to the socket. Those go out as
@@ -13,8 +17,11 @@ queues between the source and the socket, and what a subscriber receives stays
 fresh (issue 13: the queue used to be paho's, up to 50,000 packets deep).
 Broker acknowledgements free the window and pull the next messages from the
 backlog, oldest first. When the connection drops, the unacknowledged
-messages go back to the front of the backlog; on reconnect they are sent again,
-then the rest. The hot path never awaits per message.
+messages go back to the front of the backlog; on reconnect they are sent again
+(with the DUP flag, and counted: `resent`), then the rest. The session stays
+clean: a broker that kept ours would also keep the `/set` writes sent to it
+while the gateway was away, and hand them to the machine late. The hot path
+never awaits per message.
 
 Liveness: `<prefix>/status` (online, with a last will saying offline) and one
 retained status document per machine. `Status/MqttState`, `Status/MqttDropped`
@@ -25,13 +32,14 @@ changes replaced by a newer value before they were sent to OPC UA as well.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Self
 
 from gateway import __version__
-from gateway.codecs.mqtt_publish import remaining_length
+from gateway.codecs.mqtt_publish import FAILURE, qos1_first_byte, remaining_length, topic_head
 from gateway.errors import BrokerError, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
@@ -66,6 +74,7 @@ SHUTDOWN_FLUSH = 1.0  # s allowed on the way out for the broker to acknowledge w
 # happens once per turn of the loop at most (after the source's batch that changed them), so a small chunk
 # would cap the rate at chunk x turns/s when the source's decoding makes the turns long.
 LATEST_CHUNK = 5000
+LOW_WINDOW = 1000  # a Receive Maximum below this is said at connect: it caps QoS 1 at a few thousand/s
 PAHO_QUEUE_LIMIT = 50_000  # packets paho may hold for a stuck socket before QoS 0 changes are shed
 WORDING = Wording(
     label="MQTT",
@@ -131,7 +140,14 @@ class MqttSink(BrokerLink):
         self._client: MqttClient | None = None
         self._sub: Subscription[VariableNode] | None = None
         self._events: EventSubscription | None = None
-        self._inflight: dict[int, Message] = {}
+        self._inflight: dict[int, Message] = {}  # through paho (QoS 2, retained QoS 0), by its message id
+        self._acks: dict[int, Message] = {}  # QoS 1 on the packet path, by packet id, until its PUBACK
+        self._out: list[bytes] = []  # QoS 1 packets of this turn of the loop, written as one
+        self._flush_scheduled = False
+        self._heads: dict[str, bytes] = {}  # topic → its encoded head, for messages without a Route
+        self._v5 = config.protocol == "5"
+        self.resent = 0  # QoS 1 messages sent again (DUP) after the connection dropped before their PUBACK
+        self.refused = 0  # QoS 1 messages the broker answered with a failure reason code (MQTT 5)
         self._window = config.max_inflight
         self._online = False
         self._lost = asyncio.Event()
@@ -161,7 +177,7 @@ class MqttSink(BrokerLink):
 
     @property
     def in_flight(self) -> int:
-        return len(self._inflight)
+        return len(self._inflight) + len(self._acks)
 
     @property
     def coalesced(self) -> int:
@@ -177,7 +193,9 @@ class MqttSink(BrokerLink):
     def settled(self) -> bool:
         """Nothing left to do: every change taken from the hub, sent and acknowledged."""
         sub = self._sub
-        return sub is not None and not sub.backlog and not self._inflight and not self.backlog
+        return (
+            sub is not None and not sub.backlog and not self._inflight and not self._acks and not self.backlog
+        )
 
     # --- lifecycle -----------------------------------------------------------------------------
 
@@ -190,6 +208,7 @@ class MqttSink(BrokerLink):
             on_published=self._published,
             on_lost=self._on_lost,
             on_drained=self._room.set,
+            on_acked=self._acked,
         )
         # Subscribe before reading the current samples, so no change falls between the two.
         self._sub = self.tree.hub.subscribe(
@@ -221,8 +240,10 @@ class MqttSink(BrokerLink):
         finally:
             self._online = False
             if backlog is not None:
-                backlog.put_front(list(self._inflight.values()))
+                backlog.put_front([*self._inflight.values(), *self._acks.values()])
                 self._inflight.clear()
+                self._acks.clear()
+                self._out.clear()
                 self._close_backlog()
             if self._sub is not None:
                 self._sub.close()
@@ -237,12 +258,12 @@ class MqttSink(BrokerLink):
         deadline = loop.time() + SHUTDOWN_FLUSH
         # Polls for at most SHUTDOWN_FLUSH while stopping: paho's acknowledgements come by callback, with no
         # event to wait for.
-        while (self._inflight or self.backlog) and self._online and loop.time() < deadline:  # noqa: ASYNC110
+        while (self.in_flight or self.backlog) and self._online and loop.time() < deadline:  # noqa: ASYNC110
             await asyncio.sleep(0.02)
         payload = gateway_offline(__version__, "gateway stopped", utcnow())
         self._publish_now(self.routes.status_topic, payload, 1, True, None, True)
         deadline = loop.time() + SHUTDOWN_FLUSH / 2
-        while self._inflight and self._online and loop.time() < deadline:  # noqa: ASYNC110 - as above
+        while self.in_flight and self._online and loop.time() < deadline:  # noqa: ASYNC110 - as above
             await asyncio.sleep(0.01)
         await client.disconnect()
 
@@ -255,6 +276,7 @@ class MqttSink(BrokerLink):
             discarded=self.discarded,
             coalesced=self.coalesced,
             socket_queue=self.socket_queue,
+            resent=self.resent,
         )
 
     async def run(self) -> None:
@@ -292,6 +314,12 @@ class MqttSink(BrokerLink):
         client = self._client
         self.connects += 1
         self._window = min(self.config.max_inflight, info.receive_maximum or self.config.max_inflight)
+        if self._window < self.config.max_inflight and self._window < LOW_WINDOW and self._ordered:
+            log.info(
+                "MQTT: the broker takes at most %d unacknowledged messages (its Receive Maximum), which "
+                "bounds QoS 1 throughput; Mosquitto: raise max_inflight_messages (default 20)",
+                self._window,
+            )
         self._online = True
         self._set_state(STATE_CONNECTED, "")
         try:
@@ -321,8 +349,10 @@ class MqttSink(BrokerLink):
         """The connection dropped: what the broker did not acknowledge goes back to the backlog."""
         assert self._client is not None and self.backlog is not None
         self._online = False
-        unacked = list(self._inflight.values())
+        unacked = [*self._inflight.values(), *self._acks.values()]
         self._inflight.clear()
+        self._acks.clear()
+        self._out.clear()  # not written: their messages are among `unacked`
         self._client.take_back()
         self.backlog.put_front(unacked)
         self._commit()
@@ -465,7 +495,7 @@ class MqttSink(BrokerLink):
             self._online
             and not backlog
             and (
-                len(self._inflight) < self._window
+                len(self._inflight) + len(self._acks) < self._window
                 or (
                     qos == 0
                     and self._client is not None
@@ -492,6 +522,9 @@ class MqttSink(BrokerLink):
     ) -> None:
         client, backlog = self._client, self.backlog
         assert client is not None and backlog is not None
+        if qos == 1:
+            self._send_qos1(Message(backlog.next_seq(), topic, payload, qos, retain, machine, latest))
+            return
         try:
             mid = client.publish(topic, payload, qos, retain)
         except BrokerError as exc:  # a topic the broker library rejects; the config checks make this rare
@@ -499,6 +532,62 @@ class MqttSink(BrokerLink):
             return
         if qos or retain:
             self._inflight[mid] = Message(backlog.next_seq(), topic, payload, qos, retain, machine, latest)
+
+    def _send_qos1(self, msg: Message) -> None:
+        """Encode a QoS 1 message with the next packet id into this turn's write; it waits for its PUBACK."""
+        client = self._client
+        assert client is not None
+        head = self._heads.get(msg.topic)
+        if head is None:
+            try:
+                head = topic_head(msg.topic)
+            except ValueError as exc:
+                log.error("MQTT: cannot publish to %r: %s", msg.topic[:200], exc)
+                if msg.stored and self.backlog is not None:
+                    self.backlog.done(msg)
+                return
+            self._heads[msg.topic] = head
+        dup = msg.sent
+        if dup:
+            self.resent += 1
+        msg.sent = True
+        pid = client.packet_id()
+        self._acks[pid] = msg
+        first = qos1_first_byte(msg.retain, dup)
+        ident = pid.to_bytes(2, "big")
+        payload = msg.payload
+        if self._v5:  # no properties
+            self._out += (first, remaining_length(len(head) + 3 + len(payload)), head, ident, b"\0", payload)
+        else:
+            self._out += (first, remaining_length(len(head) + 2 + len(payload)), head, ident, payload)
+        if not self._flush_scheduled:
+            self._flush_scheduled = True
+            asyncio.get_running_loop().call_soon(self._flush_out)
+
+    def _flush_out(self) -> None:
+        """Write this turn's QoS 1 packets as one (their messages stay in `_acks` until acknowledged)."""
+        self._flush_scheduled = False
+        out, self._out = self._out, []
+        client = self._client
+        if not out or client is None or not client.connected:
+            return  # dropped meanwhile: `_on_lost` put their messages back in the backlog
+        with contextlib.suppress(BrokerError):  # as above
+            client.write_packets(b"".join(out))
+
+    def _acked(self, acks: list[tuple[int, int]]) -> None:
+        """The client: PUBACKs of QoS 1 packets, all those one read brought."""
+        pending, backlog = self._acks, self.backlog
+        for pid, reason in acks:
+            msg = pending.pop(pid, None)
+            if msg is None:
+                continue
+            if reason >= FAILURE:
+                self.refused += 1
+            if msg.stored and backlog is not None:
+                backlog.done(msg)
+        if backlog:
+            self._pump()
+        self._commit()
 
     def _published(self, mid: int) -> None:
         """paho: the broker acknowledged `mid` (QoS 1/2), or it was written (QoS 0)."""
@@ -519,11 +608,14 @@ class MqttSink(BrokerLink):
         backlog, client = self.backlog, self._client
         if not self._online or backlog is None or client is None:
             return
-        room = self._window - len(self._inflight)
+        room = self._window - len(self._inflight) - len(self._acks)
         if room <= 0 or not backlog:
             return
         inflight = self._inflight
         for msg in backlog.take(room):
+            if msg.qos == 1:
+                self._send_qos1(msg)
+                continue
             try:
                 mid = client.publish(msg.topic, msg.payload, msg.qos, msg.retain)
             except BrokerError as exc:

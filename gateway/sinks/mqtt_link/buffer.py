@@ -33,7 +33,7 @@ log = logging.getLogger("gateway.sinks.mqtt.buffer")  # the name log filters kne
 class Message:
     """One MQTT publication, with what store-and-forward needs to know about it."""
 
-    __slots__ = ("latest_only", "machine", "payload", "qos", "retain", "seq", "stored", "topic")
+    __slots__ = ("latest_only", "machine", "payload", "qos", "retain", "sent", "seq", "stored", "topic")
 
     def __init__(
         self,
@@ -53,6 +53,7 @@ class Message:
         self.machine = machine  # whose drop counter a drop of this message goes to
         self.latest_only = latest_only
         self.stored = False  # a row in the journal
+        self.sent = False  # handed to a broker once already: sent again, it carries the DUP flag
 
     def __repr__(self) -> str:
         flags = f"q{self.qos}{' r' if self.retain else ''}"

@@ -20,6 +20,16 @@ How paho meets asyncio here:
   paho's per-message objects, one socket write per batch instead of one per
   message. `on_drained` says when paho has handed everything to the socket, so
   that the sink gives it the next batch only then (the newest values, not a queue).
+* **QoS 1 on the same path** (issue 28). `packet_id()` hands out packet
+  identifiers from paho's own counter, skipping any still in use by either of
+  us, so that the two never share one; the sink encodes QoS 1 PUBLISH packets
+  with them and writes them with `write_packets`, like QoS 0. paho does not know
+  these messages: their PUBACKs are taken out of the receive buffer before paho
+  reads it (`read_puback`) and handed to `on_acked` in bulk, one call for all
+  that one read brought.
+* **One read per wake-up.** paho reads a packet with three `recv` calls (its
+  type, its length, its body). `_LimitedClient` reads what the socket holds
+  (up to 256 KiB) in one, and serves paho's reads from that buffer.
 * **PUBACKs without objects.** For each PUBACK paho builds a ReasonCode (which
   copies its table of reason names) and a Properties; a PUBACK of two bytes
   (success, no properties: nearly all of them) gets one shared pair instead
@@ -60,6 +70,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
+from gateway.codecs.mqtt_publish import FAILURE, read_puback
 from gateway.errors import BrokerError, BrokerRefused, SinkError
 from gateway.sinks.mqtt_link.broker import MqttTls
 
@@ -70,6 +81,7 @@ log = logging.getLogger("gateway.sinks.mqtt.client")  # the name log filters kne
 
 PUBLISH = MessageType.PUBLISH
 MISC_INTERVAL = 1.0  # s between paho.loop_misc calls (keepalive pings, dead-connection detection)
+READ_SIZE = 262_144  # bytes taken from the socket in one recv at most
 
 
 def _shared_success_acks() -> None:
@@ -93,11 +105,59 @@ def _shared_success_acks() -> None:
 
 
 class _LimitedClient(paho.Client):
-    """paho's client, refusing an incoming packet larger than `max_packet_size` once its fixed header says
-    so, before any of its body is read (paho would read it whole: one `recv` of its full length)."""
+    """paho's client reading from a buffer that `fill()` loads with one `recv`, and refusing an incoming
+    packet larger than `max_packet_size` once its fixed header says so, before any of its body is read
+    (paho would read it whole: one `recv` of its full length)."""
 
     max_packet_size: int | None = None
     oversized: int | None = None  # the size of the packet that ended the connection, until it is reported
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.received = bytearray()  # read from the socket, not yet taken (by paho or by `read_puback`)
+        self.taken = 0  # how much of `received` is taken
+        self.ended: OSError | None = None  # how the socket ended (EOF: ConnectionResetError), once it did
+
+    def fill(self) -> int:
+        """Read what the socket holds (TLS: with what it has decrypted); the number of bytes read."""
+        if self.taken:
+            del self.received[: self.taken]
+            self.taken = 0
+        got = 0
+        while self.ended is None:
+            try:
+                data = super()._sock_recv(READ_SIZE)
+            except BlockingIOError:
+                break
+            except OSError as exc:
+                self.ended = exc
+                break
+            if not data:
+                self.ended = ConnectionResetError(errno.ECONNRESET, "the broker closed the connection")
+                break
+            self.received += data
+            got += len(data)
+            # One read a wake-up (a huge packet is refused by its header, not read whole), and what TLS
+            # has decrypted already, which the selector cannot see.
+            if getattr(self._sock, "pending", _zero)() == 0:
+                break
+        if got:
+            self._last_bytes_received = paho.time_func()
+        return got
+
+    @property
+    def buffered(self) -> int:
+        return len(self.received) - self.taken
+
+    @property
+    def at_packet_start(self) -> bool:
+        """paho is between packets (has read no part of the next one)."""
+        return self._in_packet["command"] == 0
+
+    def forget_received(self) -> None:
+        self.received.clear()
+        self.taken = 0
+        self.ended = None
 
     def _sock_recv(self, bufsize: int) -> bytes:
         packet = self._in_packet
@@ -107,7 +167,16 @@ class _LimitedClient(paho.Client):
             if size > limit:
                 self.oversized = size
                 raise OSError(errno.EMSGSIZE, f"a packet of {size} bytes, more than max_packet_size {limit}")
-        return super()._sock_recv(bufsize)
+        start = self.taken
+        if start >= len(self.received):
+            if self.ended is None:
+                raise BlockingIOError(errno.EAGAIN, "nothing buffered")
+            if isinstance(self.ended, ConnectionResetError) and self.ended.errno == errno.ECONNRESET:
+                return b""  # paho's way of seeing the end of the stream
+            raise self.ended
+        end = min(start + bufsize, len(self.received))
+        self.taken = end
+        return bytes(self.received[start:end])
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,9 +266,12 @@ class MqttClient:
         on_lost: Callable[[str], None],
         on_unsubscribed: Callable[[int], None] | None = None,
         on_drained: Callable[[], None] | None = None,
+        on_acked: Callable[[list[tuple[int, int]]], None] | None = None,
     ) -> None:
         self.settings = settings
         self.on_drained = on_drained
+        self.on_acked = on_acked  # PUBACKs of `packet_id()` messages: (packet id, reason code), in bulk
+        self._ours: set[int] = set()  # packet ids handed out by `packet_id()` and not acknowledged yet
         self.on_message = on_message
         self.on_published = on_published
         self.on_lost = on_lost
@@ -357,6 +429,7 @@ class MqttClient:
             self._misc = None
         if self._sock is not None:
             self._client._sock_close()
+        self._client.forget_received()
 
     # --- paho's socket hooks -----------------------------------------------------------------
 
@@ -386,13 +459,46 @@ class MqttClient:
             self._loop.remove_writer(sock)
 
     def _readable(self) -> None:
+        """Read what arrived: our PUBACKs straight from the buffer, in bulk; every other packet through
+        paho, one at a time, from the same buffer."""
         client = self._client
-        client.loop_read()
+        client.fill()
         sock = self._sock
-        # TLS may hold decrypted bytes the selector cannot see; read them now, not at the next packet.
-        while sock is not None and sock is self._sock and getattr(sock, "pending", _zero)() > 0:
-            if client.loop_read() != MQTTErrorCode.MQTT_ERR_SUCCESS:
-                break
+        ours = self._ours
+        acks: list[tuple[int, int]] = []
+        try:
+            while sock is not None and sock is self._sock:
+                if ours and client.at_packet_start:
+                    received, pos = client.received, client.taken
+                    while True:
+                        try:
+                            ack = read_puback(received, pos)
+                        except ValueError:
+                            ack = None  # malformed: paho reads it, and ends the connection
+                        if ack is None or ack[0] not in ours:
+                            break
+                        ours.discard(ack[0])
+                        acks.append((ack[0], ack[1]))
+                        pos = ack[2]
+                    client.taken = pos
+                if client.buffered == 0 and client.ended is None:
+                    break
+                if client.loop_read() != MQTTErrorCode.MQTT_ERR_SUCCESS:
+                    break
+        finally:
+            if acks:
+                self._acked(acks)
+
+    def _acked(self, acks: list[tuple[int, int]]) -> None:
+        refused = [(mid, reason) for mid, reason in acks if reason >= FAILURE]
+        for _mid, reason in refused[:1]:
+            log.warning(
+                "the broker did not accept %d message(s) (%s)",
+                len(refused),
+                _reason_text(ReasonCode(PacketTypes.PUBACK, identifier=reason)),
+            )
+        if self.on_acked is not None:
+            self.on_acked(acks)
 
     def _writable(self) -> None:
         client = self._client
@@ -429,6 +535,7 @@ class MqttClient:
     ) -> None:
         was = self._connected
         self._connected = False
+        self._ours.clear()  # the caller sends its unacknowledged messages again, with new packet ids
         if self._misc is not None:
             self._misc.cancel()
             self._misc = None
@@ -528,6 +635,35 @@ class MqttClient:
         mid = client._mid_generate()
         client._packet_queue(PUBLISH, packets, mid, 0, paho.MQTTMessageInfo(mid))
         self._writable()  # now, not at the loop's next turn: what the socket does not take waits for it
+
+    def packet_id(self) -> int:
+        """A packet identifier for a QoS 1 PUBLISH the caller encodes, unique among those in flight (ours
+        and paho's: SUBSCRIBE, UNSUBSCRIBE, its own publications); its PUBACK goes to `on_acked`."""
+        client, ours = self._client, self._ours
+        in_use = client._out_messages
+        for _ in range(65_536):
+            mid = client._mid_generate()
+            if mid not in ours and mid not in in_use and mid not in self._pending_subs:
+                ours.add(mid)
+                return mid
+        raise BrokerError("every MQTT packet identifier is in use")  # pragma: no cover - window ≤ 65,000
+
+    def write_packets(self, packets: bytes) -> None:
+        """Write PUBLISH packets at QoS 1 (with ids from `packet_id()`), encoded by the caller, as one write.
+
+        Queued behind what paho already holds, like `publish_packets`; paho is told nothing about them
+        (its `on_published` is not called: the PUBACKs go to `on_acked`).
+        """
+        client = self._client
+        if not self._connected or self._sock is None:
+            raise BrokerError("not connected to the broker")
+        client._packet_queue(PUBLISH, packets, 0, 1, None)
+        self._writable()
+
+    @property
+    def unacknowledged(self) -> int:
+        """Packet ids from `packet_id()` whose PUBACK has not come."""
+        return len(self._ours)
 
     def publish_reply(self, topic: str, payload: bytes, correlation_data: bytes | None = None) -> None:
         """An answer to a request: QoS 1, not retained, with the request's correlation data (MQTT v5)."""

@@ -132,6 +132,11 @@ class _Gateway(Collector):
         messages = CounterMetricFamily(
             "cnc_gateway_sink_messages", "Changes taken from the hub", labels=labels
         )
+        resent = CounterMetricFamily(
+            "cnc_gateway_sink_resent",
+            "Messages sent again (MQTT DUP) after the link dropped before their acknowledgement",
+            labels=labels,
+        )
         hub = s.diagnostics.get("hub", {})
         sinks = s.diagnostics.get("sinks", {})
         for name, sub in sorted(hub.items()):
@@ -141,7 +146,9 @@ class _Gateway(Collector):
             messages.add_metric([name], sub.get("delivered", 0))
             if "dropped" in own:
                 dropped.add_metric([name], own["dropped"])
-        yield from (backlog, dropped, coalesced, messages)
+            if "resent" in own:
+                resent.add_metric([name], own["resent"])
+        yield from (backlog, dropped, coalesced, messages, resent)
 
 
 class Metrics:
