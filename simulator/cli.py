@@ -67,8 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
     fleet = p.add_argument_group("fleet mode (a plant's load for gateway shards)")
     fleet.add_argument(
         "--machines", type=int, default=1, metavar="N",
-        help="serve N laser cutters (laser-001 …), each its own OPC UA and FTP server on the base ports + i"
-        " (0: free ports); only OPC UA and FTP (default 1: the one machine with every face)",
+        help="serve N laser cutters (laser-001 …): one OPC UA server on the base port, a folder per machine,"
+        " and an FTP server each on the base FTP port + i (0: free ports); only OPC UA and FTP"
+        " (default 1: the one machine with every face)",
     )  # fmt: skip
     fleet.add_argument(
         "--fleet-mappings", type=Path, default=None, metavar="DIR",
@@ -246,7 +247,7 @@ async def serve(args: argparse.Namespace, dnc: DncOptions | None = None) -> int:
 
 
 async def serve_fleet(args: argparse.Namespace) -> int:
-    """`--machines N`: N laser cutters, each its own OPC UA and FTP server, until SIGINT/SIGTERM."""
+    """`--machines N`: N laser cutters, one OPC UA server and an FTP server each, until SIGINT/SIGTERM."""
     stop = _stop_on_signals()
     fleet = SimulatorFleet(
         args.machines,
@@ -270,9 +271,11 @@ async def serve_fleet(args: argparse.Namespace) -> int:
                         "cannot write the mappings into %s: %s", args.fleet_mappings, exc.strerror or exc
                     )
                     return 1
-            lines = [f"cnc-simulator: a fleet of {fleet.count} laser cutters"]
+            lines = [f"cnc-simulator: a fleet of {fleet.count} laser cutters, OPC UA {fleet.opcua.endpoint}"]
             for name, sim in fleet.names():
-                lines.append(f"  {name}  {sim.opcua_endpoint}  ftp://{sim.host}:{sim.ftp_port}/DATA/Programs")
+                lines.append(
+                    f"  {name}  {sim.opcua_endpoint} ({name}/)  ftp://{sim.host}:{sim.ftp_port}/DATA/Programs"
+                )
             if args.fleet_mappings is not None:
                 lines.append(f"  mappings written to {args.fleet_mappings}")
             lines.append("  stop     Ctrl-C")

@@ -1,9 +1,12 @@
-"""`SimulatorFleet`: N simulated laser cutters in one process, each its own OPC UA server and FTP store.
+"""`SimulatorFleet`: N simulated laser cutters in one process: one OPC UA server, an FTP store each.
 
-Enough machines to load a fleet of gateway shards on one host (issue 29). Machine i
-(laser-001, laser-002, …) listens on the base ports plus i - 1 (or on free ports when the
-base is 0) and keeps its programs in its own folder; every machine can loop a program, so
-values move. `mapping(i)` is a gateway mapping file for machine i: its key values over
+Enough machines to load a fleet of gateway shards on one host (issue 29). Every machine's
+PLC variables are in one OPC UA server (simulator/opcua_server.py `SharedOpcUa`), under a
+folder named after it, with node ids prefixed by its name (`ns=2;s=laser-001/::AsGlobalPV:…`):
+an asyncua server per machine cost about 40 MB and 1.5 s each, too much for 200. Machine i
+(laser-001, laser-002, …) has its FTP store on the base FTP port plus i - 1 (or a free port
+when the base is 0) and keeps its programs in its own folder; every machine can loop a
+program, so values move. `mapping(i)` is a gateway mapping file for machine i: its key values over
 OPC UA and its job queue over FTP, so that `cnc-simulator --machines N --fleet-mappings DIR`
 writes what a gateway needs to serve the whole fleet (with `shard: K/N`, a part of it).
 """
@@ -15,7 +18,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Self
 
-from simulator.runner import Simulator
+from simulator.opcua_server import SharedOpcUa
+from simulator.runner import Simulator, settle_after_stop
 
 # The laser's values a fleet gateway mirrors (a subset of mappings/laser-sim.yaml: the same node ids).
 FLEET_VARIABLES = (
@@ -56,10 +60,13 @@ class SimulatorFleet:
             raise ValueError("a fleet has at least one machine")
         self.count = count
         self.host = host
+        self.opcua = SharedOpcUa(host=host, port=opcua_port)
         self.machines: list[Simulator] = [
             Simulator(
                 host=host,
-                opcua_port=opcua_port + i if opcua_port else 0,
+                opcua_port=opcua_port,
+                opcua=self.opcua,
+                opcua_folder=machine_name(i + 1),
                 ftp_port=ftp_port + i if ftp_port else 0,
                 speed=speed,
                 tick=tick,
@@ -70,6 +77,8 @@ class SimulatorFleet:
             )
             for i in range(count)
         ]
+        for sim in self.machines:
+            sim.settle_on_exit = False
         self._stack: contextlib.AsyncExitStack | None = None
 
     def names(self) -> Iterator[tuple[str, Simulator]]:
@@ -80,6 +89,7 @@ class SimulatorFleet:
         stack = contextlib.AsyncExitStack()
         await stack.__aenter__()
         try:
+            await stack.enter_async_context(self.opcua)
             for sim in self.machines:
                 await stack.enter_async_context(sim)
         except BaseException:
@@ -90,8 +100,11 @@ class SimulatorFleet:
 
     async def __aexit__(self, *exc_info: object) -> None:
         stack, self._stack = self._stack, None
-        if stack is not None:
-            await stack.aclose()
+        try:
+            if stack is not None:
+                await stack.aclose()
+        finally:
+            settle_after_stop()  # once: a full collection per machine took 0.5 s each at 200
 
     def mapping(self, index: int) -> str:
         """A gateway mapping file (YAML text) for machine `index` (1-based), once the fleet is serving."""
@@ -112,7 +125,8 @@ class SimulatorFleet:
         ]
         for path, node, kind, extra in FLEET_VARIABLES:
             more = f", {extra}" if extra else ""
-            lines.append(f'  - {{path: {path}, source: "ns=2;s=::AsGlobalPV:{node}", type: {kind}{more}}}')
+            source = f"ns=2;s={machine_name(index)}/::AsGlobalPV:{node}"
+            lines.append(f'  - {{path: {path}, source: "{source}", type: {kind}{more}}}')
         lines += [
             "jobs:",
             "  controller:",

@@ -11,6 +11,12 @@ Values are pushed by `publish()`, which the runner calls every tick: only the
 variables that changed are written, stamped with the machine's clock. Variables
 marked `pushed` (benchmark noise, simulator/noise.py) are written by their own
 driver through `server` instead.
+
+A fleet (`cnc-simulator --machines N`, issue 29) serves every machine from one
+server, `SharedOpcUa`: each machine's PLC tree in a folder named after it, its
+node ids prefixed with that name (`ns=2;s=laser-001/::AsGlobalPV:…`), writes
+routed to the machine that owns the node. One asyncua server per machine cost
+about 40 MB and 1.5 s of start-up each.
 """
 
 from __future__ import annotations
@@ -68,27 +74,106 @@ class _PasswordUsers(UserManager):
 
 
 class _ControllerAttributeService(AttributeService):
-    """Client writes to the PLC namespace are judged by the variable table and the machine."""
+    """Client writes to the PLC namespace are judged by the variable table and the machine that owns the
+    node (`owner`: the one machine of a server, or a fleet's machine by node id)."""
 
-    def __init__(self, base: AttributeService, plc: PlcServer) -> None:
+    def __init__(
+        self, base: AttributeService, ns: int, owner: Callable[[ua.NodeId], PlcServer | None]
+    ) -> None:
         super().__init__(base._aspace)
-        self._plc = plc
+        self._ns = ns
+        self._owner = owner
 
     async def write(self, params: ua.WriteParameters, user: User | None = None) -> list[ua.StatusCode]:
         user = user if user is not None else User(role=UserRole.Admin)
         results: list[ua.StatusCode] = []
         for wv in params.NodesToWrite:
-            if wv.NodeId.NamespaceIndex != self._plc.ns:
+            plc = self._owner(wv.NodeId) if wv.NodeId.NamespaceIndex == self._ns else None
+            if plc is None and wv.NodeId.NamespaceIndex == self._ns and wv.NodeId not in self._aspace:
+                results.append(new_status_code(ua.StatusCodes.BadNodeIdUnknown))
+            elif plc is None:  # another namespace, or a node no machine owns yet (its folder being built)
                 one = ua.WriteParameters()
                 one.NodesToWrite = [wv]
                 results.extend(await super().write(one, user))
             else:
-                results.append(await self._plc.client_write(wv))
+                results.append(await plc.client_write(wv))
         return results
 
 
+async def _stop_server(server: Server) -> None:
+    # asyncua's clock task sleeps 1 s between updates; cancel it rather than wait for it.
+    task = getattr(server.iserver, "time_task", None)
+    if task is not None:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        server.iserver.time_task = None
+    await server.stop()
+
+
+class SharedOpcUa:
+    """One OPC UA server for a fleet of machines, each a `PlcServer(shared=…)` in a folder of its own.
+
+    Async context manager: enter it before the machines, leave it after them."""
+
+    def __init__(self, *, host: str = "127.0.0.1", port: int = 4841) -> None:
+        self.host = host
+        self.port = port
+        self.ns = 2
+        self._server: Server | None = None
+        self._owners: dict[ua.NodeId, PlcServer] = {}
+
+    @property
+    def endpoint(self) -> str:
+        return f"opc.tcp://{self.host}:{self.port}"
+
+    @property
+    def server(self) -> Server:
+        if self._server is None:
+            raise SimulatorError("the fleet's OPC UA server is not running")
+        return self._server
+
+    async def __aenter__(self) -> Self:
+        server = Server()
+        self._server = server
+        await server.init()
+        server.set_endpoint(self.endpoint)
+        server.set_server_name("cnc-simulator fleet (simulated B&R-style PLCs, a folder per machine)")
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        server.set_identity_tokens([ua.AnonymousIdentityToken])
+        self.ns = await server.register_namespace(NAMESPACE_URI)
+        base = server.iserver.attribute_service
+        server.iserver.attribute_service = _ControllerAttributeService(base, self.ns, self._owners.get)
+        try:
+            await server.start()
+        except OSError as exc:
+            self._server = None
+            await _stop_server(server)
+            raise SimulatorError(
+                f"OPC UA server cannot listen on {self.host}:{self.port}: {exc.strerror or exc}"
+            ) from None
+        if server.bserver is not None and self.port == 0:
+            self.port = server.bserver.port or 0
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        server, self._server = self._server, None
+        self._owners.clear()
+        if server is not None:
+            await _stop_server(server)
+
+    def adopt(self, plc: PlcServer, nodes: Iterable[ua.NodeId]) -> None:
+        for node in nodes:
+            self._owners[node] = plc
+
+    def forget(self, plc: PlcServer) -> None:
+        for node in [n for n, owner in self._owners.items() if owner is plc]:
+            del self._owners[node]
+
+
 class PlcServer:
-    """An asyncua Server holding the PLC variables of one machine. Async context manager."""
+    """The PLC variables of one machine, in an asyncua Server of its own, or in a folder `folder` of a
+    fleet's `shared` one. Async context manager."""
 
     def __init__(
         self,
@@ -100,9 +185,18 @@ class PlcServer:
         user: str | None = None,
         password: str | None = None,
         clock: Clock = utcnow,
+        shared: SharedOpcUa | None = None,
+        folder: str | None = None,
     ) -> None:
         if (user is None) != (password is None):
             raise ValueError("give both an OPC UA user and a password, or neither")
+        if (shared is None) != (folder is None):
+            raise ValueError("a machine on a shared OPC UA server needs a folder of its own, and only then")
+        if shared is not None and user is not None:
+            raise ValueError("a fleet's shared OPC UA server has no per-machine users")
+        self._shared = shared
+        self.folder = folder
+        self._prefix = f"{folder}/" if folder else ""  # before each node id string
         self.machine = machine
         self.variables = list(variables)
         self.host = host
@@ -129,6 +223,14 @@ class PlcServer:
         return self._server
 
     async def __aenter__(self) -> Self:
+        if self._shared is not None:
+            shared = self._shared
+            self._server, self.ns = shared.server, shared.ns
+            self.host, self.port = shared.host, shared.port
+            await self._build()
+            shared.adopt(self, [*self._by_id, *self._objects])
+            await self.publish()
+            return self
         users = _PasswordUsers(*self._auth) if self._auth else None
         server = Server(user_manager=users)
         self._server = server
@@ -139,7 +241,8 @@ class PlcServer:
         server.set_identity_tokens([ua.UserNameIdentityToken] if self._auth else [ua.AnonymousIdentityToken])
         self.ns = await server.register_namespace(NAMESPACE_URI)
         await self._build()
-        server.iserver.attribute_service = _ControllerAttributeService(server.iserver.attribute_service, self)
+        base = server.iserver.attribute_service
+        server.iserver.attribute_service = _ControllerAttributeService(base, self.ns, lambda _node: self)
         try:
             await server.start()
         except OSError as exc:
@@ -160,39 +263,41 @@ class PlcServer:
         if server is None:
             return
         self._server = None
-        # asyncua's clock task sleeps 1 s between updates; cancel it rather than wait for it.
-        task = getattr(server.iserver, "time_task", None)
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-            server.iserver.time_task = None
-        await server.stop()
+        if self._shared is not None:  # the fleet's server stays up for the others; its nodes go with it
+            self._shared.forget(self)
+            return
+        await _stop_server(server)
 
     # --- address space -------------------------------------------------------------------------
 
     async def _build(self) -> None:
         assert self._server is not None
-        ns = self.ns
-        objects = self._server.nodes.objects
-        plc = await objects.add_folder(new_node_id(PLC_FOLDER, ns), ua.QualifiedName("PLC", ns))
+        ns, prefix = self.ns, self._prefix
+        root = self._server.nodes.objects
+        if self.folder is not None:
+            root = await root.add_folder(new_node_id(self.folder, ns), ua.QualifiedName(self.folder, ns))
+        plc = await root.add_folder(new_node_id(prefix + PLC_FOLDER, ns), ua.QualifiedName("PLC", ns))
         nodes = {PLC_FOLDER: plc}
         for folder_id, name in ((GLOBAL_FOLDER, "Global"), (TASKS_FOLDER, "Tasks")):
-            nodes[folder_id] = await plc.add_folder(new_node_id(folder_id, ns), ua.QualifiedName(name, ns))
+            nodes[folder_id] = await plc.add_folder(
+                new_node_id(prefix + folder_id, ns), ua.QualifiedName(name, ns)
+            )
         self._objects = {n.nodeid for n in nodes.values()}
+        if root is not self._server.nodes.objects:
+            self._objects.add(root.nodeid)
         for var in self.variables:
             parent = plc
             for node_id, name in var.ancestors:
                 if node_id not in nodes:
                     nodes[node_id] = await parent.add_object(
-                        new_node_id(node_id, ns), ua.QualifiedName(name, ns)
+                        new_node_id(prefix + node_id, ns), ua.QualifiedName(name, ns)
                     )
                     self._objects.add(nodes[node_id].nodeid)
                 parent = nodes[node_id]
             vtype, array = variant_type(var.type)
             initial = var.read(self.machine)
             node = await parent.add_variable(
-                new_node_id(var.node_id, ns),
+                new_node_id(prefix + var.node_id, ns),
                 ua.QualifiedName(var.name, ns),
                 ua.Variant(initial, vtype, is_array=array),
                 datatype=ua.NodeId(getattr(ua.ObjectIds, vtype.name)),

@@ -33,7 +33,7 @@ from simulator.haas_mdc import HaasMdcFace
 from simulator.machine import Machine, MachineState
 from simulator.modbus import Chiller, ModbusFace
 from simulator.noise import Noise, NoiseSpec
-from simulator.opcua_server import PlcServer, utcnow
+from simulator.opcua_server import PlcServer, SharedOpcUa, utcnow
 from simulator.s7_face import S7Face
 from simulator.shdr import ShdrFace
 from simulator.store import DirectoryStore
@@ -73,6 +73,8 @@ class Simulator:
         haas_port: int | None = None,
         modbus_port: int | None = None,
         s7_port: int | None = None,
+        opcua: SharedOpcUa | None = None,
+        opcua_folder: str | None = None,
     ) -> None:
         if speed <= 0:
             raise ValueError("speed must be > 0")
@@ -119,6 +121,8 @@ class Simulator:
         self.s7_port = s7_port
         self.s7: S7Face | None = None
         self._opcua_auth = (opcua_user, opcua_password)
+        self._shared_opcua, self.opcua_folder = opcua, opcua_folder  # a fleet's one server, this one's folder
+        self.settle_on_exit = True  # a full collection after stopping; a fleet does one for all its machines
         self.clock = clock  # the PLC's clock, which stamps values (SourceTimestamp)
         self._stack: contextlib.AsyncExitStack | None = None
         self._opcua: PlcServer | None = None
@@ -153,7 +157,8 @@ class Simulator:
         except OSError as exc:
             raise SimulatorError(f"cannot use {self.store} as the program store: {exc}") from None
         # Fail fast and in one line (asyncua logs a traceback, after a second of set-up, otherwise).
-        _check_port(self.host, self.opcua_port, "OPC UA server")
+        if self._shared_opcua is None:
+            _check_port(self.host, self.opcua_port, "OPC UA server")
         _check_port(self.host, self.ftp_port, "FTP server")
         user, password = self._opcua_auth
         self._opcua = await stack.enter_async_context(
@@ -165,6 +170,8 @@ class Simulator:
                 user=user,
                 password=password,
                 clock=self.clock,
+                shared=self._shared_opcua,
+                folder=self.opcua_folder,
             )
         )
         self.opcua_port = self._opcua.port
@@ -225,7 +232,8 @@ class Simulator:
             if stack is not None:
                 await stack.aclose()
         finally:
-            settle_after_stop()
+            if self.settle_on_exit:
+                settle_after_stop()
 
     async def _tick_loop(self) -> None:
         assert self._opcua is not None
