@@ -29,6 +29,7 @@ COMMANDS = (
     "sparkplug",
     "tokens",
     "shards",
+    "fleet",
 )
 MODULE_OF = {name: name for name in COMMANDS if name != "passwords"} | {"hash-password": "passwords"}
 
