@@ -587,11 +587,13 @@ def judge_28(ctx: Context) -> list[Target]:
     if c1 and c0:
         s1, s0 = c1["steps"][0], c0["steps"][0]
         a, b = s1["cpu_ms_per_1000"], s0["cpu_ms_per_1000"]
+        both = s1.get("sustained") and s0.get("sustained")
         targets.append(Target(
             "QoS 1 CPU per 1,000 changes vs QoS 0 in the same run", 2.0, 1.3, "×", higher_is_better=False,
-            value=_ratio(a, b),
+            value=_ratio(a, b) if both else None,
             source=f"{a:.1f} vs {b:.1f} ms per 1,000 at {d.get('cpu_rate') or 0:,.0f}/s offered "
-            f"(delivered {s1['delivered']:,.0f} vs {s0['delivered']:,.0f}/s)",
+            f"(delivered {s1['delivered']:,.0f} vs {s0['delivered']:,.0f}/s)"
+            + ("" if both else "; NOT sustained at both, so not comparable"),
         ))  # fmt: skip
     rs = d.get("restarts")
     if rs:
