@@ -17,9 +17,10 @@
 3. CPU per 1,000 changes at QoS 1 and at QoS 0, in the same run, on fresh gateways at the same
    offered rate, 5,000/s (the drill's), which both must sustain (alternately, three times; medians):
    the gateway process's CPU time over the window (all its threads, the injector included as in
-   mirror's `inproc`) per 1,000 changes delivered. Not at a share of the flat-out rate: today's QoS 1 delivered 14k/s flat out from a full
-   backlog but fell behind at 11.5k/s paced, and a sink that falls behind works in large batches,
-   which made its CPU per change look lower than QoS 0's in small ones (0.65 x).
+   mirror's `inproc`) per 1,000 changes delivered. Not at a share of the flat-out rate: today's QoS 1
+   delivered 14k/s flat out from a full backlog but fell behind at 11.5k/s paced, and a sink that
+   falls behind works in large batches, which made its CPU per change look lower than QoS 0's in
+   small ones (0.65 x).
 4. Broker restarts (the drill's figure as a bench row; the drill itself is
    tests/integration/drills/test_broker_restarts_qos1.py): 1,000 variables at QoS 1, 5,000/s offered,
    Mosquitto with persistence stopped (SIGTERM) and started again 30 times (quick: 3) with a persistent
