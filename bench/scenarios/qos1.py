@@ -95,9 +95,9 @@ def _merged(runs: list[dict[str, Any]], key: str = "delivered") -> dict[str, Any
     middle["sustained"] = all(st["sustained"] for st in steps)
     verdict = dict(runs[0]["verdict"])
     for run in runs[1:]:
-        for key, value in run["verdict"].items():
+        for count, value in run["verdict"].items():
             if isinstance(value, int) and not isinstance(value, bool):
-                verdict[key] += value
+                verdict[count] += value
     verdict["passed"] = all(run["verdict"]["passed"] for run in runs)
     values = [st[key] for st in steps]
     return {"qos": runs[0]["qos"], "steps": [middle], "verdict": verdict, "rounds": runs, key: values}
