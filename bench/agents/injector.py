@@ -13,6 +13,7 @@ backlog that grows until store-and-forward drops changes (issue 28's row: every 
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 
@@ -37,7 +38,7 @@ class Injector(Pacer):
         ingests = [(node, node.machine.ingest) for node in nodes]
         hold = self.hold
         while True:
-            if hold is not None and hold():
+            if hold is not None and math.isinf(self.rate) and hold():  # flat out only: a set rate is paced
                 self.held += 1
                 # Polls: the sink's figures change by callback and acknowledgement, with no event to await.
                 while hold():  # noqa: ASYNC110

@@ -135,7 +135,8 @@ async def configuration(ctx: Context, qos: int, rates: list[float], *, name: str
                 ctx.log(
                     f"  QoS {qos} @{'max' if math.isinf(rate) else f'{rate:,.0f}/s'}"
                     f"{'' if step['sustained'] else ' (NOT sustained)'}: offered "
-                    f"{step['offered']:,.0f}/s, delivered {step['delivered']:,.0f}/s, gateway CPU "
+                    f"{step['offered']:,.0f}/s, acknowledged {step['acked']:,.0f}/s, "
+                    f"delivered {step['delivered']:,.0f}/s, gateway CPU "
                     f"{step['cpu']:.0f}% ({step['cpu_ms_per_1000']:.1f} ms/1,000), subscriber CPU "
                     f"{step['sub_cpu']:.0f}%"
                 )
@@ -175,6 +176,7 @@ async def window(
     return {
         "rate": None if math.isinf(rate) else rate,
         "offered": offered,
+        "acked": offered - piled / seconds,  # what left the gateway's hands (the broker acknowledged)
         "delivered": rate_in,
         "sustained": rate_in >= SUSTAINED * offered and piled <= max(500.0, 0.05 * delivered),
         "redelivered": m1["redelivered"] - m0["redelivered"],
@@ -311,7 +313,8 @@ def report(ctx: Context, d: dict[str, Any]) -> None:
         "qos1.n10000.max.delivered", SECTION, f"N={N:,} QoS 1 flat out: delivered, every change checked",
         flat["delivered"], "changes/s", baseline=paho, baseline_label="paho QoS 1 ceiling, same subscriber",
         note=f"missing {v['missing']}, out of order {v['out_of_order']}, duplicates {v['duplicates']}, "
-        f"redelivered {v['redelivered']}; gateway CPU {flat['cpu']:.0f}%, subscriber {flat['sub_cpu']:.0f}%; "
+        f"redelivered {v['redelivered']}; acknowledged by the broker {flat['acked']:,.0f}/s; gateway CPU "
+        f"{flat['cpu']:.0f}%, subscriber {flat['sub_cpu']:.0f}%; "
         f"median of {len(d['qos1']['delivered'])}: " + ", ".join(f"{x:,.0f}" for x in d["qos1"]["delivered"]),
     )  # fmt: skip
     rate = d["cpu_rate"]
