@@ -13,6 +13,7 @@ import contextlib
 import getpass
 import json
 import os
+import random
 import shutil
 import signal
 import socket
@@ -35,6 +36,25 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def listener_port() -> int:
+    """A free port below Linux's ephemeral range (32768-60999), for a server that restarts on it.
+
+    While a server is down, a client reconnecting to 127.0.0.1:P can be given P itself as its source
+    port and connect to itself (TCP's simultaneous open), or another process's outgoing connection
+    can take P: the server's next start then fails with "Address already in use" (seen at the 13th
+    of 30 broker restarts on a port from `free_port()`)."""
+    rng = random.Random()
+    for _ in range(200):
+        port = rng.randrange(20000, 32000)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    return free_port()
 
 
 def child_env() -> dict[str, str]:
@@ -134,21 +154,30 @@ def _tail(path: Path, lines: int = 15) -> str:
 
 class Mosquitto:
     """A private Mosquitto on a free port; no persistence, deep queues, a wide QoS 1 window, and
-    Nagle's algorithm off towards its clients, as a latency-minded installation sets it."""
+    Nagle's algorithm off towards its clients, as a latency-minded installation sets it.
 
-    def __init__(self, workdir: Path) -> None:
+    `persistence=True`: sessions and queued messages saved to its folder (on SIGTERM, and every
+    second), so that `stop()` and `start()` keep a persistent subscriber's session; its port is then
+    below the ephemeral range (`listener_port`), where no client can take it while it is down."""
+
+    def __init__(self, workdir: Path, *, persistence: bool = False) -> None:
         self.dir = workdir / f"mosquitto-{time.monotonic_ns()}"
-        self.port = free_port()
+        self.persistence = persistence
+        self.port = listener_port() if persistence else free_port()
         self.proc: asyncio.subprocess.Process | None = None
 
     async def __aenter__(self) -> Self:
         self.dir.mkdir(parents=True)
-        conf = self.dir / "mosquitto.conf"
-        conf.write_text(
+        persistence = (
+            f"persistence true\npersistence_location {self.dir}/\nautosave_interval 1\n"
+            if self.persistence
+            else "persistence false\n"
+        )
+        (self.dir / "mosquitto.conf").write_text(
             f"listener {self.port} 127.0.0.1\n"
             "allow_anonymous true\n"
             f"user {getpass.getuser()}\n"
-            "persistence false\n"
+            f"{persistence}"
             "max_queued_messages 1000000\n"
             "max_inflight_messages 1000\n"
             "set_tcp_nodelay true\n"  # QoS 0 latency: see README, MQTT, "Latency at QoS 0"
@@ -157,36 +186,33 @@ class Mosquitto:
         )
         if not Path(MOSQUITTO).exists():
             raise BenchError("mosquitto is not installed (make system-deps installs it)")
-        with (self.dir / "mosquitto.log").open("ab") as log:
-            self.proc = await asyncio.create_subprocess_exec(
-                MOSQUITTO, "-c", str(conf), stdout=log, stderr=log
-            )
-        deadline = time.monotonic() + 10
-        while not _listening(self.port):
-            if self.proc.returncode is not None or time.monotonic() > deadline:
-                raise BenchError(f"mosquitto did not start (see {self.dir / 'mosquitto.log'})")
-            await asyncio.sleep(0.02)
+        await self.start()
         return self
 
     @property
     def pid(self) -> int:
         return self.proc.pid if self.proc is not None else 0
 
-    async def restart(self) -> None:
-        """Stop the broker (SIGTERM) and start it again on the same port (every client loses its session)."""
-        await self.__aexit__()
-        conf = self.dir / "mosquitto.conf"
+    async def start(self) -> None:
+        """Start the broker (again) on its port, with its configuration; return once it listens."""
         with (self.dir / "mosquitto.log").open("ab") as log:
             self.proc = await asyncio.create_subprocess_exec(
-                MOSQUITTO, "-c", str(conf), stdout=log, stderr=log
+                MOSQUITTO, "-c", str(self.dir / "mosquitto.conf"), stdout=log, stderr=log
             )
         deadline = time.monotonic() + 10
         while not _listening(self.port):
             if self.proc.returncode is not None or time.monotonic() > deadline:
-                raise BenchError(f"mosquitto did not start again (see {self.dir / 'mosquitto.log'})")
+                raise BenchError(f"mosquitto did not start (see {self.dir / 'mosquitto.log'})")
             await asyncio.sleep(0.02)
 
-    async def __aexit__(self, *exc: object) -> None:
+    async def restart(self) -> None:
+        """Stop the broker (SIGTERM) and start it again on the same port (without persistence, every
+        client loses its session)."""
+        await self.stop()
+        await self.start()
+
+    async def stop(self) -> None:
+        """SIGTERM (with persistence, Mosquitto saves its sessions and queues then); kill after 5 s."""
         if self.proc is not None and self.proc.returncode is None:
             self.proc.send_signal(signal.SIGTERM)
             try:
@@ -195,6 +221,9 @@ class Mosquitto:
             except TimeoutError:
                 self.proc.kill()
                 await self.proc.wait()
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
 
 
 def _listening(port: int) -> bool:

@@ -35,6 +35,7 @@ from bench.scenarios import (
     naive,
     peer,
     plc,
+    qos1,
     queue,
     scale,
     sparkplug,
@@ -60,6 +61,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "plc": plc.run,
     "umati": umati.run,
     "queue": queue.run,
+    "qos1": qos1.run,
 }
 
 

@@ -136,6 +136,7 @@ def judge(ctx: Context) -> None:
     r.targets_25 = judge_25(ctx)
     r.targets_26 = judge_26(ctx)
     r.targets_27 = judge_27(ctx)
+    r.targets_28 = judge_28(ctx)
 
 
 def _dnc_runs(ctx: Context) -> list[tuple[str, dict[str, Any]]]:
@@ -557,5 +558,53 @@ def judge_27(ctx: Context) -> list[Target]:
             f"{tag}: {what} with the umati view relative to without", 1.3, 1.1, "×",
             higher_is_better=False, value=_ratio(with_, without),
             source=f"{(with_ or 0) * scale:.2f} vs {(without or 0) * scale:.2f} {unit} (medians, same run)",
+        ))  # fmt: skip
+    return targets
+
+
+def judge_28(ctx: Context) -> list[Target]:
+    """Issue 28 (MQTT QoS 1 at full speed), from bench/scenarios/qos1.py; nothing when it did not run.
+
+    A QoS 1 rate counts only when every change arrived once and in order (the subscriber's verdict,
+    bench/delivery.py); byte-identical redeliveries are allowed and named."""
+    d: dict[str, Any] = ctx.results.details.get("qos1", {})
+    targets: list[Target] = []
+    paho = d.get("paho", {}).get("rate")
+    q1 = d.get("qos1")
+    if q1:
+        flat, v = q1["steps"][0], q1["verdict"]
+        whole = v["passed"]
+        rate = flat["delivered"] if whole else None
+        targets.append(Target(
+            "QoS 1 sustained changes/s, N=10,000, every change delivered once in order, vs paho's raw QoS 1",
+            1.0, 1.5, "×", value=_ratio(rate, paho),
+            source=f"{flat['delivered']:,.0f} vs {paho or 0:,.0f} msg/s (paho, window 200, same subscriber); "
+            + ("every change once, in order" if whole else f"NOT every change: missing {v['missing']}, "
+               f"out of order {v['out_of_order']}, duplicates {v['duplicates']}")
+            + f"; redelivered {v['redelivered']}",
+        ))  # fmt: skip
+    c1, c0 = d.get("cpu_qos1"), d.get("cpu_qos0")
+    if c1 and c0:
+        s1, s0 = c1["steps"][0], c0["steps"][0]
+        a, b = s1["cpu_ms_per_1000"], s0["cpu_ms_per_1000"]
+        both = s1.get("sustained") and s0.get("sustained")
+        targets.append(Target(
+            "QoS 1 CPU per 1,000 changes vs QoS 0 in the same run", 2.0, 1.3, "×", higher_is_better=False,
+            value=_ratio(a, b) if both else None,
+            source=f"{a:.1f} vs {b:.1f} ms per 1,000 at {d.get('cpu_rate') or 0:,.0f}/s offered "
+            f"(delivered {s1['delivered']:,.0f} vs {s0['delivered']:,.0f}/s)"
+            + ("" if both else "; NOT sustained at both, so not comparable"),
+        ))  # fmt: skip
+    rs = d.get("restarts")
+    if rs:
+        rv = rs["verdict"]
+        targets.append(Target(
+            f"Changes lost over {rs['restarts']} broker restarts at QoS 1, {rs['offered']:,.0f}/s"
+            + (" (quick: 3; the drill's soak runs 30)" if rs["restarts"] < 30 else ""),
+            0, 0, "changes", higher_is_better=False, value=rv["missing"],
+            source=f"{rv['written']:,} written at {rs['achieved']:,.0f}/s; out of order "
+            f"{rv['out_of_order']}, duplicates {rv['duplicates']}, redelivered by the gateway "
+            f"{rv['redelivered'] - rv['redelivered_dup']} (bound {rs['redelivery_bound']}) and by the broker "
+            f"{rv['redelivered_dup']}, dropped {rs['dropped']}, sessions resumed {rs['resumed']}",
         ))  # fmt: skip
     return targets

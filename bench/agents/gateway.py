@@ -1,7 +1,10 @@
 """The real gateway (gateway.app.Gateway) in its own process, with its diagnostics on request.
 
 `--inject` replaces the sources by the in-process injector (bench/agents/injector.py),
-so that the sinks are measured alone; `rate` then sets its load.
+so that the sinks are measured alone; `rate` then sets its load. `--inject-bound N` holds the
+injector back while the MQTT sink has N or more changes on its hands (waiting in its hub
+subscription, in its backlog, or in flight): flat out, it then measures the sink's capacity with
+every change kept (bench/scenarios/qos1.py).
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import asyncio
 import contextlib
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +37,10 @@ async def main(args: argparse.Namespace) -> None:
     injector: Injector | None = None
     if args.inject:
         gateway.sources = []
-        injector = Injector([n for m in gateway.tree.machines.values() for n in m.mapped])
+        nodes = [n for m in gateway.tree.machines.values() for n in m.mapped]
+        injector = Injector(
+            nodes, hold=_mqtt_holds(gateway, args.inject_bound) if args.inject_bound else None
+        )
         for machine in gateway.tree.machines.values():  # the injector is their controller, and it is there
             machine.status.connected()
     tasks: list[asyncio.Task[None]] = []
@@ -73,10 +80,23 @@ async def main(args: argparse.Namespace) -> None:
                     await task
 
 
+def _mqtt_holds(gateway: Gateway, bound: int) -> Callable[[], bool]:
+    """True while the MQTT sink has `bound` or more changes on its hands (its public figures)."""
+    sink = next(s for s in gateway.sinks if s.name == "mqtt")
+
+    def holds() -> bool:
+        waiting = sum(s.backlog for s in gateway.tree.hub.subscriptions if s.name == "mqtt")
+        health = sink.health()
+        return waiting + (health.backlog or 0) + (health.in_flight or 0) >= bound
+
+    return holds
+
+
 if __name__ == "__main__":
     parser = argparse.ArgumentParser()
     parser.add_argument("--config", type=Path, required=True)
     parser.add_argument("--inject", action="store_true")
+    parser.add_argument("--inject-bound", type=int, default=0, help="hold the injector back at N pending")
     parser.add_argument("--ages", action="store_true", help="record the age of changes at ingest and write")
     parser.add_argument("--loop", choices=LOOPS, default=None, help=f"default: ${ENV}, else asyncio")
     setup_logging()

@@ -6,6 +6,11 @@ its `ts` (the controller's source timestamp, millisecond resolution). The value 
 the noise sequence number, so the last value per topic tells which change a topic
 ended at.
 
+With `--check`, every message also goes through bench/delivery.py (order per topic, retransmissions,
+duplicates; `check` compares with what the in-process source wrote), and `--persistent` keeps a
+session the broker holds across its restarts (clean session off, a fixed client id, the
+subscription made only when the broker did not keep it), as a historian subscribes at QoS 1.
+
 A Python subscriber has a ceiling of its own (the baselines' paho → Mosquitto →
 paho figure). When messages arrive faster than it reads them, they wait in its
 socket, and their latency grows there, after the gateway. So a thread samples the
@@ -29,6 +34,7 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
 from bench.agents.protocol import percentiles, serve_in_thread, setup_logging
+from bench.delivery import DeliveryCheck
 
 TS_KEY = b'"ts":'
 VALUE_KEY = b'"value":'
@@ -36,7 +42,11 @@ GOOD = (b'"quality":"good"', b'"quality": "good"')
 
 
 class Counter:
-    def __init__(self, expect: int) -> None:
+    def __init__(self, expect: int, check: bool = False) -> None:
+        self.check = DeliveryCheck() if check else None
+        self._check_lock = threading.Lock()
+        self.connects = 0
+        self.resumed = 0  # connections that found the broker still holding our session
         self.count = 0
         self.retained = 0
         self.latencies: list[float] = []  # since the last snap
@@ -67,6 +77,10 @@ class Counter:
         payload = msg.payload
         topic = msg.topic
         self.bytes += len(payload) + len(topic)
+        check = self.check
+        if check is not None:
+            with self._check_lock:
+                check.feed(topic, payload, msg.dup)
         if msg.retain:
             self.retained += 1
         self.count += 1
@@ -115,7 +129,27 @@ class Counter:
             "last_at": self.last_at,
             "bytes": self.bytes,
             "backlog": percentiles(self.backlog),
+            "connects": self.connects,
+            "resumed": self.resumed,
+            **self._check_counts(),
         }
+
+    def _check_counts(self) -> dict[str, Any]:
+        check = self.check
+        if check is None:
+            return {}
+        return {
+            "distinct": check.distinct,
+            "redelivered": check.redelivered,
+            "redelivered_dup": check.redelivered_dup,
+        }
+
+    def verdict(self, request: dict[str, Any]) -> dict[str, Any]:
+        """`{"cmd": "check", "topics": [...], "written": n}`: bench/delivery.py's verdict."""
+        if self.check is None:
+            raise RuntimeError("check needs --check")
+        with self._check_lock:
+            return self.check.verdict(request["topics"], int(request["written"])).as_dict()
 
     def values(self, request: dict[str, Any]) -> dict[str, Any]:
         return {"last": dict(self.last)}
@@ -142,19 +176,43 @@ def main() -> None:
     parser.add_argument("--topic", action="append", required=True)
     parser.add_argument("--qos", type=int, default=0)
     parser.add_argument("--expect", type=int, default=0, help="topics whose quality must all be good")
+    parser.add_argument("--check", action="store_true", help="check order and duplicates (bench/delivery.py)")
+    parser.add_argument("--persistent", action="store_true", help="a session the broker keeps (QoS 1)")
+    parser.add_argument("--client-id", default=None)
     args = parser.parse_args()
     setup_logging()
-    counter = Counter(args.expect)
-    client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"bench-sub-{uuid.uuid4().hex[:8]}")
+    counter = Counter(args.expect, check=args.check)
+    client = paho.Client(
+        CallbackAPIVersion.VERSION2,
+        client_id=args.client_id or f"bench-sub-{uuid.uuid4().hex[:8]}",
+        clean_session=not args.persistent,
+    )
+    client.reconnect_delay_set(0.05, 0.5)
     subscribed: list[bool] = []
     client.on_message = counter.on_message
-    client.on_connect = lambda c, u, f, r, p: c.subscribe([(t, args.qos) for t in args.topic])
+
+    def on_connect(c: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+        if reason.is_failure:
+            return
+        counter.connects += 1
+        if args.persistent and flags.session_present:
+            counter.resumed += 1  # the broker kept our subscription and queued messages: rely on it
+            return
+        c.subscribe([(t, args.qos) for t in args.topic])
+
+    client.on_connect = on_connect
     client.on_subscribe = lambda *a: subscribed.append(True)
     client.connect("127.0.0.1", args.port, keepalive=60)
     while not subscribed:
         client.loop(timeout=0.05)
     threading.Thread(target=sample_backlog, args=(client, counter), name="backlog", daemon=True).start()
-    serve_in_thread({"snap": counter.snap, "mark": counter.mark, "values": counter.values}, client.disconnect)
+    handlers = {
+        "snap": counter.snap,
+        "mark": counter.mark,
+        "values": counter.values,
+        "check": counter.verdict,
+    }
+    serve_in_thread(handlers, client.disconnect)
     client.loop_forever()
 
 

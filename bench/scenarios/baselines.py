@@ -24,6 +24,7 @@ import itertools
 import json
 import statistics
 import sys
+from typing import Any
 
 from bench.context import Context
 from bench.procs import Agent, Mosquitto, free_port
@@ -133,39 +134,12 @@ async def asyncua_ceiling(ctx: Context) -> None:
 
 
 async def paho_ceiling(ctx: Context) -> None:
-    s, r = ctx.settings, ctx.results
+    r = ctx.results
     reference = {0: 20_000, 1: 14_000}
     for qos in (0, 1):
         ctx.log(f"paho → Mosquitto → paho, QoS {qos}, 80-byte payloads, flat out")
-        async with Mosquitto(ctx.workdir) as broker:
-            sub = await Agent.start(
-                f"raw-mqtt-sub-q{qos}",
-                "bench.agents.mqtt_sub",
-                ["--port", str(broker.port), "--topic", "raw/#", "--qos", str(qos)],
-                ctx.workdir,
-            )
-            pub = await Agent.start(
-                f"raw-mqtt-pub-q{qos}",
-                "bench.agents.paho_pub",
-                ["--port", str(broker.port), "--qos", str(qos)],
-                ctx.workdir,
-            )
-            try:
-                step = s.window / 2
-                total = s.warmup + s.repeats * step + 0.5
-                publishing = asyncio.create_task(pub.ask("run", seconds=total, timeout=total + 30))
-                await asyncio.sleep(s.warmup)
-                snaps = [await sub.ask("snap")]
-                for _ in range(s.repeats):
-                    await asyncio.sleep(step)
-                    snaps.append(await sub.ask("snap"))
-                await publishing
-            finally:
-                await pub.stop()
-                await sub.stop()
-        rates = [(b["count"] - a["count"]) / (b["mono"] - a["mono"]) for a, b in itertools.pairwise(snaps)]
+        rates, latency = await paho_rates(ctx, qos, f"raw-mqtt-q{qos}")
         ctx.ceilings[f"paho_qos{qos}"] = statistics.median(rates)
-        latency = snaps[-1]["latency"]
         ctx.results.details.setdefault("baselines", {})[f"paho_qos{qos}"] = {
             "rates": rates,
             "latency_ms": latency,
@@ -179,6 +153,52 @@ async def paho_ceiling(ctx: Context) -> None:
             baseline=reference[qos],
             baseline_label=ISSUE,
         )
+
+
+async def paho_rates(
+    ctx: Context, qos: int, name: str, *, check: bool = False
+) -> tuple[list[float], dict[str, Any]]:
+    """One paho publisher flat out (bench/agents/paho_pub.py; QoS 1: a window of 200) through a fresh
+    Mosquitto to one paho subscriber: msg/s at the subscriber in `repeats` windows, and the latency.
+    Also issue 28's ceiling beside the gateway's QoS 1 rate (bench/scenarios/qos1.py), whose subscriber
+    checks order and duplicates as it reads (`check`): this one then does the same work per message."""
+    s = ctx.settings
+    async with Mosquitto(ctx.workdir) as broker:
+        sub = await Agent.start(
+            f"{name}-sub",
+            "bench.agents.mqtt_sub",
+            [
+                "--port",
+                str(broker.port),
+                "--topic",
+                "raw/#",
+                "--qos",
+                str(qos),
+                *(["--check"] if check else []),
+            ],
+            ctx.workdir,
+        )
+        pub = await Agent.start(
+            f"{name}-pub",
+            "bench.agents.paho_pub",
+            ["--port", str(broker.port), "--qos", str(qos)],
+            ctx.workdir,
+        )
+        try:
+            step = s.window / 2
+            total = s.warmup + s.repeats * step + 0.5
+            publishing = asyncio.create_task(pub.ask("run", seconds=total, timeout=total + 30))
+            await asyncio.sleep(s.warmup)
+            snaps = [await sub.ask("snap")]
+            for _ in range(s.repeats):
+                await asyncio.sleep(step)
+                snaps.append(await sub.ask("snap"))
+            await publishing
+        finally:
+            await pub.stop()
+            await sub.stop()
+    rates = [(b["count"] - a["count"]) / (b["mono"] - a["mono"]) for a, b in itertools.pairwise(snaps)]
+    return rates, snaps[-1]["latency"]
 
 
 async def noise_ceiling(ctx: Context) -> None:
