@@ -41,6 +41,7 @@ from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.diagnostics import snapshot
+from gateway.sinks.mqtt.config import MqttConfig
 from simulator.noise import NoiseSpec, noise_mapping
 from tests.integration.drills.conftest import Report, count
 from tests.integration.mqtt.conftest import Mosquitto, mqtt_config
@@ -51,7 +52,7 @@ MACHINE = "noise"
 VARIABLES = 1000
 RATE = 5000.0  # changes/s offered by the source
 AWAY = 1.0  # s of changes the source makes while the broker is down, each time
-MAX_INFLIGHT = 200  # the gateway's window of unacknowledged messages (mqtt.max_inflight)
+MAX_INFLIGHT: int = MqttConfig().max_inflight  # the gateway's window of unacknowledged messages, as shipped
 # A queue for the subscriber deep enough for every change of a soak run (the tests' broker keeps 100,000,
 # and drops the rest silently: the gateway's backlog, delivered after a reconnect faster than a
 # subscriber on a busy machine reads, can pass that), and the notices that say when it drops anyway.
