@@ -136,6 +136,7 @@ def judge(ctx: Context) -> None:
     r.targets_25 = judge_25(ctx)
     r.targets_26 = judge_26(ctx)
     r.targets_27 = judge_27(ctx)
+    r.targets_28 = judge_28(ctx)
 
 
 def _dnc_runs(ctx: Context) -> list[tuple[str, dict[str, Any]]]:
@@ -314,6 +315,30 @@ def judge_17(ctx: Context) -> list[Target]:
             value=mirror.get("ratio"), source=f"{five:,.0f}/s vs {none:,.0f}/s (window medians)",
         ),
     ]  # fmt: skip
+
+
+def judge_28(ctx: Context) -> list[Target]:
+    """Issue 28 §2, the readers' fixed cost: the mirror with 5 console pages (bench/scenarios/web.py) and
+    with 5 MTConnect streaming clients (bench/scenarios/mtconnect.py), each per CPU second of the gateway's
+    process beside the same with no reader, the wall-clock ratio in "From" (on two shared cores it also
+    counts the readers' own process). Empty when neither scenario ran."""
+    web = (ctx.results.details.get("web") or {}).get("mirror") or {}
+    mtc = (ctx.results.details.get("mtconnect") or {}).get("mirror") or {}
+    targets = []
+    if web:
+        targets.append(Target(
+            "Mirror with 5 console pages open, changes per CPU-s vs none", 0.9, 0.97, "×",
+            value=web.get("ratio"),
+            source=f"wall clock {web.get('wall_ratio') or 0:.2f}",
+        ))  # fmt: skip
+    if mtc:
+        targets.append(Target(
+            "Mirror with 5 MTConnect streaming clients, changes per CPU-s vs none", 0.9, 0.97, "×",
+            value=mtc.get("cpu_ratio"),
+            source=(f"{mtc.get('cpu_clients_5') or 0:,.0f} vs {mtc.get('cpu_clients_0') or 0:,.0f} "
+                    f"per CPU-s; wall clock {mtc.get('ratio') or 0:.2f}"),
+        ))  # fmt: skip
+    return targets
 
 
 def judge_16(ctx: Context) -> list[Target]:
