@@ -247,12 +247,11 @@ class Live:
         self.tick = tick
         self.clients: set[Client] = set()
         self._scans: list[_Scan] = []
-        self._someone = asyncio.Event()
+        self._watched = asyncio.Event()  # set when some page watches variables
 
     async def serve(self, socket: LiveSocket) -> None:
         client = Client(socket)
         self.clients.add(client)
-        self._someone.set()
         writer = asyncio.ensure_future(client.write())
         writer.set_name("web:live:writer")
         try:
@@ -325,6 +324,8 @@ class Live:
                 scan.changes = old.changes
             scans.append(scan)
         self._scans = scans
+        if scans:
+            self._watched.set()
 
     def changes(self) -> list[Change]:
         """What changed among the watched variables since the last look, per machine."""
@@ -351,9 +352,9 @@ class Live:
         """Until cancelled: while pages are open, every tick, hand each its share of what changed."""
         rang = False
         while True:
-            if not self.clients:
-                self._someone.clear()
-                await self._someone.wait()
+            if not self._scans:  # no page open, or none watching variables (events come by event())
+                self._watched.clear()
+                await self._watched.wait()
                 continue
             batch = self.changes()
             if batch:

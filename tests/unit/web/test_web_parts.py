@@ -3,6 +3,7 @@ encoding, coalescing per page), the OpenAPI document, the http: section and its 
 
 from __future__ import annotations
 
+import asyncio
 import json
 from datetime import UTC, datetime
 from pathlib import Path
@@ -27,6 +28,7 @@ from gateway.sinks.web.live import Client, Live, encode, parse_watch, row
 from gateway.sinks.web.openapi import document
 from gateway.sinks.web.routes import Router
 from gateway.sinks.web.sessions import COOKIE, LoginRequired, Sessions
+from tests.waiting import wait_until
 
 
 async def _handler() -> None:
@@ -239,6 +241,29 @@ async def test_a_page_watching_anew_leaves_the_others_their_change_not_yet_looke
     m1.set_internal(node, 6)
     m1.ingest(m1.nodes["A/x"], 5.0, ts)
     assert _values(live.changes()) == {"m1/A/x": 5.0}
+
+
+async def test_pages_without_a_watch_cost_the_hub_nothing_and_a_watch_wakes_the_ticker() -> None:
+    tree = _tree()
+    m1 = tree.machines["m1"]
+    live = Live(tree, tick=0.01)
+    ticker = asyncio.create_task(live.run())
+    try:
+        events_only = Client(socket=None)  # type: ignore[arg-type]
+        live.clients.add(events_only)
+        live._message(events_only, json.dumps({"events": True}))
+        for n in range(50):
+            m1.ingest(m1.nodes["A/x"], float(n), datetime.now(UTC))
+            await asyncio.sleep(0)
+        assert not tree.hub.subscriptions  # nothing watched: no doorbell either
+        page = _page(live, [{"machine": "m1", "paths": ["A/x"]}])
+        page.pending.clear()  # the snapshot, as the page's writer would have sent it
+        m1.ingest(m1.nodes["A/x"], 99.0, datetime.now(UTC))
+        await wait_until(lambda: page.ready is not None, message="the change handed to the page")
+        assert page.ready is not None and '"A/x",99.0,' in page.ready
+    finally:
+        ticker.cancel()
+        await asyncio.gather(ticker, return_exceptions=True)
 
 
 def test_the_openapi_document_is_complete_and_every_reference_resolves() -> None:
