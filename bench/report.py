@@ -84,7 +84,7 @@ class Results:
     targets_25: list[Target] = field(default_factory=list)  # issue 25's: FOCAS
     targets_26: list[Target] = field(default_factory=list)  # issue 26's: the Modbus TCP and S7 drivers
     targets_27: list[Target] = field(default_factory=list)  # issue 27's: the umati view at scale
-    targets_28: list[Target] = field(default_factory=list)  # issue 28's: MQTT QoS 1 at full speed
+    targets_28: list[Target] = field(default_factory=list)  # issue 28's: QoS 1, the readers, start-up
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)

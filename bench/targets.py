@@ -317,6 +317,30 @@ def judge_17(ctx: Context) -> list[Target]:
     ]  # fmt: skip
 
 
+def _readers_28(ctx: Context) -> list[Target]:
+    """Issue 28 §2, the readers' fixed cost: the mirror with 5 console pages (bench/scenarios/web.py) and
+    with 5 MTConnect streaming clients (bench/scenarios/mtconnect.py), each per CPU second of the gateway's
+    process beside the same with no reader, the wall-clock ratio in "From" (on two shared cores it also
+    counts the readers' own process). Empty when neither scenario ran."""
+    web = (ctx.results.details.get("web") or {}).get("mirror") or {}
+    mtc = (ctx.results.details.get("mtconnect") or {}).get("mirror") or {}
+    targets = []
+    if web:
+        targets.append(Target(
+            "Mirror with 5 console pages open, changes per CPU-s vs none", 0.9, 0.97, "×",
+            value=web.get("ratio"),
+            source=f"wall clock {web.get('wall_ratio') or 0:.2f}",
+        ))  # fmt: skip
+    if mtc:
+        targets.append(Target(
+            "Mirror with 5 MTConnect streaming clients, changes per CPU-s vs none", 0.9, 0.97, "×",
+            value=mtc.get("cpu_ratio"),
+            source=(f"{mtc.get('cpu_clients_5') or 0:,.0f} vs {mtc.get('cpu_clients_0') or 0:,.0f} "
+                    f"per CPU-s; wall clock {mtc.get('ratio') or 0:.2f}"),
+        ))  # fmt: skip
+    return targets
+
+
 def judge_16(ctx: Context) -> list[Target]:
     """The web console (bench/scenarios/web.py); empty when the scenario did not run."""
     web: dict[str, Any] = ctx.results.details.get("web", {})
@@ -562,7 +586,7 @@ def judge_27(ctx: Context) -> list[Target]:
     return targets
 
 
-def judge_28(ctx: Context) -> list[Target]:
+def _qos1_28(ctx: Context) -> list[Target]:
     """Issue 28 (MQTT QoS 1 at full speed), from bench/scenarios/qos1.py; nothing when it did not run.
 
     A QoS 1 rate counts only when every change arrived once and in order (the subscriber's verdict,
@@ -608,3 +632,8 @@ def judge_28(ctx: Context) -> list[Target]:
             f"{rv['redelivered_dup']}, dropped {rs['dropped']}, sessions resumed {rs['resumed']}",
         ))  # fmt: skip
     return targets
+
+
+def judge_28(ctx: Context) -> list[Target]:
+    """Issue 28: QoS 1 on the packet path (scenario qos1), the readers' fixed cost (web, mtconnect)."""
+    return [*_qos1_28(ctx), *_readers_28(ctx)]

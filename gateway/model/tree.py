@@ -176,7 +176,9 @@ class Machine:
         self.methods: dict[tuple[str, str], Method] = {}
         self._hub = tree.hub
         self._last_change_push = 0.0
-        self.changes = 0  # samples published to the hub (/metrics: changes/s); counted here, not by a sink
+        # Samples published to the hub (/metrics: changes/s), counted here, not by a sink. It moves whenever a
+        # node's sample is replaced: the console's live pages look only at machines whose count moved.
+        self.changes = 0
         now = utcnow()
         waiting: dict[TypeSpec, Sample] = {}  # scalars only: an array's empty list is its own
         for variable in definition.variables:

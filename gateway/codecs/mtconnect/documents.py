@@ -25,7 +25,7 @@ from gateway.codecs.mtconnect.model import (
     Device,
     Node,
 )
-from gateway.codecs.mtconnect.xmltext import xml_attr, xml_text
+from gateway.codecs.mtconnect.xmltext import TEXT_SPECIAL, xml_attr, xml_text
 
 SCHEMA_VERSION = "2.4"
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
@@ -185,9 +185,34 @@ def _streams_header(window: Window, info: DocumentInfo) -> str:
 def streams_body(catalog: Catalog, entries: Iterable[Entry]) -> str:
     """The `<Streams>` element alone (also what one chunk of a streamed /sample carries)."""
     buckets: dict[int, list[str]] = {}
+    needs_escaping = TEXT_SPECIAL.search
     for entry in entries:
-        key = entry.info.bucket
-        fragment = entry.xml_cache or entry_xml(entry)
+        info = entry.info
+        key = info.bucket
+        fragment = entry.xml_cache
+        if fragment is None:
+            # entry_xml's common case inline (a value or event without extra attributes): a streamed chunk
+            # renders every observation once for all its clients, and the call per entry was a fifth of it.
+            if (
+                info.prefix  # not a condition
+                and entry.sample_count is None
+                and entry.reset_triggered is None
+                and entry.duration is None
+                and entry.asset_type is None
+            ):
+                value = entry.value
+                if value:
+                    if needs_escaping(value) is not None:
+                        value = xml_text(value)
+                    fragment = (
+                        f'{info.prefix}{entry.sequence}" timestamp="{entry.timestamp}">'
+                        f"{value}</{info.element}>"
+                    )
+                else:
+                    fragment = f'{info.prefix}{entry.sequence}" timestamp="{entry.timestamp}"/>'
+                entry.xml_cache = fragment
+            else:
+                fragment = entry_xml(entry)
         bucket = buckets.get(key)
         if bucket is None:
             buckets[key] = [fragment]

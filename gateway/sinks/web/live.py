@@ -1,4 +1,4 @@
-"""Live values for the console's pages: one hub subscription, coalesced per variable, pushed per page.
+"""Live values for the console's pages: what they watch, looked at once a tick, encoded once per watch.
 
 A page opens a WebSocket (`/api/live`) and says what it shows:
 
@@ -11,10 +11,15 @@ and gets, at most every `TICK` seconds, what changed among them:
     {"v": [[machine, path, value, status, source time], …]}
     {"job": {…record…}}  {"alarms": {"machine": …, "active": […]}}
 
-Nothing is subscribed while no page is open: the hub then pays nothing for the
-console. While pages are open, one subscription keeps the latest sample per
-variable (the hub's own coalescing); every tick the batch is split per watch and
-encoded once per distinct watch, so five browsers on one page cost one encoding.
+Nothing is looked at while no page is open: the console then costs the mirror nothing.
+While pages are open, what they watch is looked at once a tick, not at each change: a machine
+whose change counter moved since the last tick has its watched variables compared (by sample
+identity) with what the pages were last handed, so that a machine changing 400,000 times a
+second costs the pages 20 looks at its 500 variables, not 400,000 hub pushes. Only after a tick
+in which nothing watched changed does a hub subscription wait for the next change (a doorbell:
+a quiet page hears of a change at once, not a tick later), closed again as soon as it rings.
+The changes of a tick are split per watch and encoded once per distinct watch, so five browsers
+on one page cost one encoding and five socket writes of the same text.
 A page whose socket is slow gets its changes merged per variable until it can
 take them: memory is bounded by what it watches, never by how long it lags.
 A malformed message gets an error reply (`{"error": {"status", "reason"}}`), never a
@@ -27,13 +32,15 @@ import asyncio
 import json
 import logging
 from collections.abc import Iterable, Sequence
+from itertools import compress
+from operator import attrgetter, is_not
 from typing import Any
 
 from gateway.errors import MalformedRequest, RequestError, UnknownVariable
 from gateway.model.events import Event
 from gateway.model.hub import Subscription
 from gateway.model.sample import Sample
-from gateway.model.tree import VariableNode, VariableTree
+from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.web.http import plain
 from gateway.sinks.web.server import LiveSocket
 
@@ -198,6 +205,40 @@ def encode(changes: Iterable[Change]) -> str:
     return '{"v":[' + ",".join([_row_text(n, s) for n, s in changes]) + "]}"
 
 
+class _Scan:
+    """One machine's watched variables, and the samples the pages were last handed of them."""
+
+    __slots__ = ("changes", "machine", "nodes", "samples", "whole")
+
+    def __init__(
+        self, machine: Machine, whole: bool, nodes: tuple[VariableNode, ...], samples: list[Any]
+    ) -> None:
+        self.machine = machine
+        self.whole = whole  # every variable of the machine, also those added later
+        self.nodes = nodes
+        self.samples = samples  # per node: the sample last handed out (None: none yet)
+        self.changes = machine.changes  # the machine's change counter when last looked at
+
+    def look(self, out: list[Change]) -> None:
+        """Append what changed since the last look (by sample identity: every change is a new Sample)."""
+        machine = self.machine
+        if machine.changes == self.changes:
+            return
+        self.changes = machine.changes
+        if self.whole and len(machine.nodes) != len(self.nodes):
+            known = set(self.nodes)
+            added = tuple(n for n in machine.nodes.values() if n not in known)
+            self.nodes += added
+            self.samples += [None] * len(added)
+        nodes = self.nodes
+        now = list(map(_SAMPLE, nodes))
+        out.extend(compress(zip(nodes, now, strict=True), map(is_not, now, self.samples)))
+        self.samples = now
+
+
+_SAMPLE = attrgetter("sample")
+
+
 class Live:
     """The pages' live updates; `serve()` one socket, `run()` the ticker."""
 
@@ -205,13 +246,12 @@ class Live:
         self.tree = tree
         self.tick = tick
         self.clients: set[Client] = set()
-        self._sub: Subscription[VariableNode] | None = None
-        self._someone = asyncio.Event()
+        self._scans: list[_Scan] = []
+        self._watched = asyncio.Event()  # set when some page watches variables
 
     async def serve(self, socket: LiveSocket) -> None:
         client = Client(socket)
         self.clients.add(client)
-        self._someone.set()
         writer = asyncio.ensure_future(client.write())
         writer.set_name("web:live:writer")
         try:
@@ -229,6 +269,7 @@ class Live:
                     client.say({"error": {"status": exc.status, "reason": exc.reason}})
         finally:
             self.clients.discard(client)
+            self._rewatch()
             writer.cancel()
             await asyncio.gather(writer, return_exceptions=True)
 
@@ -247,15 +288,51 @@ class Live:
             client.events = message["events"]
         if "watch" in message:
             watch = parse_watch(self.tree, message["watch"])
-            self._subscribe()  # before the snapshot: nothing between the two is lost
             client.watch = watch
             client.pending = dict(watch.current(self.tree))
             client.ready, client.ready_changes = None, ()
+            self._rewatch()  # with the snapshot, no await between: nothing between the two is lost
             client.wake.set()
 
-    def _subscribe(self) -> None:
-        if self._sub is None:
-            self._sub = self.tree.hub.subscribe("web:live")
+    def _rewatch(self) -> None:
+        """What the pages watch, per machine, after a page came, went or changed its watch.
+
+        A variable watched before keeps the sample last handed out (a change not yet looked at still
+        reaches the pages that watched it); one watched anew starts from its sample now, which the page
+        that asked for it got in its snapshot.
+        """
+        whole: set[str] = set()
+        chosen: dict[str, set[VariableNode]] = {}
+        for client in self.clients:
+            watch = client.watch
+            if watch is None:
+                continue
+            whole.update(watch.machines)
+            for node in watch.nodes:
+                chosen.setdefault(node.machine.name, set()).add(node)
+        before = {scan.machine.name: scan for scan in self._scans}
+        scans = []
+        for name, machine in self.tree.machines.items():
+            if name not in whole and name not in chosen:
+                continue
+            mine = chosen.get(name, set())
+            nodes = tuple(n for n in machine.nodes.values() if name in whole or n in mine)
+            old = before.get(name)
+            last = dict(zip(old.nodes, old.samples, strict=True)) if old is not None else {}
+            scan = _Scan(machine, name in whole, nodes, [last.get(n, n.sample) for n in nodes])
+            if old is not None:
+                scan.changes = old.changes
+            scans.append(scan)
+        self._scans = scans
+        if scans:
+            self._watched.set()
+
+    def changes(self) -> list[Change]:
+        """What changed among the watched variables since the last look, per machine."""
+        out: list[Change] = []
+        for scan in self._scans:
+            scan.look(out)
+        return out
 
     def event(self, event: Event) -> None:
         """A job record or an alarm list changed: tell the pages that asked for events."""
@@ -273,28 +350,36 @@ class Live:
 
     async def run(self) -> None:
         """Until cancelled: while pages are open, every tick, hand each its share of what changed."""
-        try:
-            while True:
-                if not self.clients:
-                    if self._sub is not None:
-                        self._sub.close()
-                        self._sub = None
-                    self._someone.clear()
-                    await self._someone.wait()
-                    continue
-                self._subscribe()
-                assert self._sub is not None
-                try:
-                    async with asyncio.timeout(1.0):  # look again for closed pages now and then
-                        batch = await self._sub.next_batch()
-                except TimeoutError:
-                    continue
+        rang = False
+        while True:
+            if not self._scans:  # no page open, or none watching variables (events come by event())
+                self._watched.clear()
+                await self._watched.wait()
+                continue
+            batch = self.changes()
+            if batch:
                 self.deliver(batch)
-                await asyncio.sleep(self.tick)  # meanwhile the subscription keeps the latest per variable
+                rang = False
+            elif not rang:
+                await self._doorbell()
+                rang = True
+                continue  # look at once
+            else:
+                rang = False  # it rang for a variable no page watches: a tick before listening again
+            await asyncio.sleep(self.tick)
+
+    async def _doorbell(self) -> None:
+        """Wait for the next change anywhere in the tree (at most a second, to look for closed pages).
+
+        A hub subscription only while waiting: a busy machine is looked at once a tick instead."""
+        sub: Subscription[VariableNode] = self.tree.hub.subscribe("web:live")
+        try:
+            async with asyncio.timeout(1.0):
+                await sub.next_batch()
+        except TimeoutError:
+            pass
         finally:
-            if self._sub is not None:
-                self._sub.close()
-                self._sub = None
+            sub.close()
 
     def deliver(self, batch: Sequence[Change]) -> None:
         encoded: dict[Any, tuple[list[Change], str]] = {}

@@ -185,3 +185,55 @@ async def test_an_unclean_stop_starts_a_new_numbering(tmp_path: Path) -> None:
     async with agent_sink(config) as (_tree, _sink, http):
         _, _, second = await http.get("/current")
     assert header(second)["instanceId"] != header(first)["instanceId"]
+
+
+async def test_streams_that_follow_together_are_sent_the_same_bytes_rendered_once(tmp_path: Path) -> None:
+    async with agent_sink(state_config(tmp_path, machines=1, items=60)) as (tree, sink, http):
+        connect_all(tree)
+        await fed(sink)
+        machine = tree.machines["laser01"]
+        node = tree.find("laser01", "Axes/X/Position")
+        start = sink.agent.buffer.next_sequence
+        for n in range(500):
+            machine.ingest(node, float(n), T1)
+        await fed(sink)
+        query = f"/sample?from={start}&interval=100&heartbeat=1000&count=200"
+        rendered = sink.server.parts_sent - sink.server.parts_shared
+        async with http.stream(query) as first, http.stream(query) as second:
+            a = [await anext(first) for _ in range(3)]
+            b = [await anext(second) for _ in range(3)]
+        assert a == b  # byte for byte, the creation time in each header included
+        assert [o.sequence for part in a for o in parse_streams(part).observations] == list(
+            range(start, start + 500)
+        )
+        assert sink.server.parts_sent - sink.server.parts_shared == rendered + 3  # each chunk rendered once
+
+
+async def test_a_stream_that_does_not_read_holds_up_no_other_and_then_gets_everything(tmp_path: Path) -> None:
+    async with agent_sink(state_config(tmp_path, machines=1, items=60)) as (tree, sink, http):
+        connect_all(tree)
+        await fed(sink)
+        machine = tree.machines["laser01"]
+        node = tree.find("laser01", "Axes/X/Position")
+        start = sink.agent.buffer.next_sequence
+        total = 60_000  # about 8 MB of parts: more than the sockets of the stream that does not read hold
+        query = f"/sample?from={start}&interval=0&heartbeat=1000&count=1000"
+        async with http.stream(query) as stalled, http.stream(query) as reading:
+            await anext(stalled)  # started, then never read again
+            seen: list[int] = []
+            for n in range(total):
+                machine.ingest(node, float(n), T1)
+                if n % 500 == 0:
+                    await asyncio.sleep(0)
+            async for part in reading:
+                seen += [o.sequence for o in parse_streams(part).observations]
+                if len(seen) >= total:
+                    break
+            assert seen == list(range(start, start + total))
+            assert len(sink.server.streams) == 2  # the one that does not read is still open, waiting
+            late: list[int] = []
+            async for part in stalled:  # and, reading at last, it gets every observation in order
+                late += [o.sequence for o in parse_streams(part).observations]
+                if len(late) >= total:
+                    break
+            assert late == seen

@@ -3,6 +3,7 @@ encoding, coalescing per page), the OpenAPI document, the http: section and its 
 
 from __future__ import annotations
 
+import asyncio
 import json
 from datetime import UTC, datetime
 from pathlib import Path
@@ -23,10 +24,11 @@ from gateway.model.tree import VariableTree
 from gateway.model.types import TypeSpec
 from gateway.settings.masking import MASK, masked
 from gateway.sinks.web.http import HttpRequest
-from gateway.sinks.web.live import Client, encode, parse_watch, row
+from gateway.sinks.web.live import Client, Live, encode, parse_watch, row
 from gateway.sinks.web.openapi import document
 from gateway.sinks.web.routes import Router
 from gateway.sinks.web.sessions import COOKIE, LoginRequired, Sessions
+from tests.waiting import wait_until
 
 
 async def _handler() -> None:
@@ -188,6 +190,80 @@ async def test_a_page_that_lags_gets_its_changes_merged_per_variable() -> None:
     assert client.ready is None and {n: s.value for n, s in client.pending.items()} == {a: 2.0, b: 5}
     client.offer([(a, Sample(3.0, ts))], "unused")
     assert {n: s.value for n, s in client.pending.items()} == {a: 3.0, b: 5}
+
+
+def _page(live: Live, watch: Any) -> Client:
+    """A page that sent `watch`, as `Live.serve` would register it (no socket: nothing is sent)."""
+    client = Client(socket=None)  # type: ignore[arg-type]
+    live.clients.add(client)
+    live._message(client, json.dumps({"watch": watch}))
+    return client
+
+
+def _values(changes: list[Any]) -> dict[str, Any]:
+    return {f"{n.machine.name}/{n.path}": s.value for n, s in changes}
+
+
+async def test_the_pages_get_what_changed_among_what_they_watch_since_the_last_look() -> None:
+    tree = _tree()
+    m1, m2 = tree.machines["m1"], tree.machines["m2"]
+    ts = datetime.now(UTC)
+    live = Live(tree)
+    _page(live, [{"machine": "m1", "paths": ["A/x"]}])
+    assert live.changes() == []  # the page's snapshot has what is there now
+    m1.ingest(m1.nodes["A/x"], 1.0, ts)
+    m1.ingest(m1.nodes["A/x"], 2.0, ts)  # the latest per variable, as the hub's coalescing gave
+    m1.ingest(m1.nodes["A/y"], 7, ts)  # not watched
+    m2.ingest(m2.nodes["A/x"], 9.0, ts)  # nor is this machine
+    assert _values(live.changes()) == {"m1/A/x": 2.0}
+    assert live.changes() == []  # handed out once
+    m1.ingest(m1.nodes["A/x"], 2.0, ts)  # the same value is no change (the tree publishes nothing)
+    assert live.changes() == []
+    assert not tree.hub.subscriptions  # nothing is paid per change while pages are looked at per tick
+
+
+async def test_a_page_watching_anew_leaves_the_others_their_change_not_yet_looked_at() -> None:
+    tree = _tree()
+    m1 = tree.machines["m1"]
+    ts = datetime.now(UTC)
+    live = Live(tree)
+    _page(live, [{"machine": "m1", "paths": ["A/x"]}])
+    m1.ingest(m1.nodes["A/x"], 1.0, ts)
+    second = _page(live, [{"machine": "m1", "paths": None}])  # the whole machine, between two looks
+    assert _values(list(second.pending.items()))["m1/A/x"] == 1.0  # in its snapshot
+    assert _values(live.changes()) == {"m1/A/x": 1.0}  # and still due to the first page
+    m1.ingest(m1.nodes["A/y"], 3, ts)
+    node = m1.add_internal("Status/Later", "Int32", "added after the watch", 5)
+    assert _values(live.changes()) == {"m1/A/y": 3, "m1/Status/Later": 5}  # whole machine: new ones too
+    live.clients.discard(second)
+    live._rewatch()  # the second page goes: its variables are no longer looked at
+    m1.ingest(m1.nodes["A/y"], 4, ts)
+    m1.set_internal(node, 6)
+    m1.ingest(m1.nodes["A/x"], 5.0, ts)
+    assert _values(live.changes()) == {"m1/A/x": 5.0}
+
+
+async def test_pages_without_a_watch_cost_the_hub_nothing_and_a_watch_wakes_the_ticker() -> None:
+    tree = _tree()
+    m1 = tree.machines["m1"]
+    live = Live(tree, tick=0.01)
+    ticker = asyncio.create_task(live.run())
+    try:
+        events_only = Client(socket=None)  # type: ignore[arg-type]
+        live.clients.add(events_only)
+        live._message(events_only, json.dumps({"events": True}))
+        for n in range(50):
+            m1.ingest(m1.nodes["A/x"], float(n), datetime.now(UTC))
+            await asyncio.sleep(0)
+        assert not tree.hub.subscriptions  # nothing watched: no doorbell either
+        page = _page(live, [{"machine": "m1", "paths": ["A/x"]}])
+        page.pending.clear()  # the snapshot, as the page's writer would have sent it
+        m1.ingest(m1.nodes["A/x"], 99.0, datetime.now(UTC))
+        await wait_until(lambda: page.ready is not None, message="the change handed to the page")
+        assert page.ready is not None and '"A/x",99.0,' in page.ready
+    finally:
+        ticker.cancel()
+        await asyncio.gather(ticker, return_exceptions=True)
 
 
 def test_the_openapi_document_is_complete_and_every_reference_resolves() -> None:

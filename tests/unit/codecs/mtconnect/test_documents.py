@@ -9,13 +9,14 @@ from typing import Any
 import pytest
 
 from gateway.codecs.mtconnect.assets import AssetRejected, make_asset, removed_copy
-from gateway.codecs.mtconnect.buffer import ObservationBuffer
+from gateway.codecs.mtconnect.buffer import ObservationBuffer, entry_xml
 from gateway.codecs.mtconnect.documents import (
     DocumentInfo,
     assets_xml,
     devices_xml,
     error_xml,
     namespace,
+    streams_body,
     streams_xml,
 )
 from gateway.codecs.mtconnect.errors import ErrorCode, InvalidPath, ModelError, OutOfRange, RequestError
@@ -198,6 +199,24 @@ def test_sample_validates_in_sequence_order(schemas: dict[str, Any]) -> None:
     xs = [int(e.get("sequence", "0")) for e in observations(root)["m1_Xpos"]]
     assert xs == sorted(xs) and len(xs) == 2
     assert root.find("m:Header", NS).get("nextSequence") == str(buffer.next_sequence)  # type: ignore[union-attr]
+
+
+def test_a_chunk_renders_each_observation_as_entry_xml_does() -> None:
+    """streams_body renders the common observations inline (a streamed chunk's cost): the same text as
+    entry_xml for every kind (escaped text, empty values, time series, assets, conditions)."""
+    catalog = shop()
+    buffer = started(catalog)
+    busy(buffer)
+    buffer.add_value("m1_program", T1, "")
+    entries = list(buffer.sample(None, from_=1, count=1000).entries)
+    for e in entries:
+        e.xml_cache = None
+    inline = streams_body(catalog, entries)
+    rendered = [e.xml_cache for e in entries]
+    for e in entries:
+        e.xml_cache = None
+    assert rendered == [entry_xml(e) for e in entries]
+    assert inline == streams_body(catalog, entries)  # and the chunk from cached fragments is the same
 
 
 def test_an_empty_sample_validates(schemas: dict[str, Any]) -> None:
