@@ -17,8 +17,8 @@ from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.config.loader import load_mapping
-from gateway.model.tree import Machine, VariableNode
 from gateway.model.sample import utcnow
+from gateway.model.tree import Machine, VariableNode
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, gateway_config, mqtt_config, subscriber
 from tests.waiting import free_port, wait_until
 
@@ -27,7 +27,9 @@ AFTER = 50  # turns of the event loop the source goes on changing every variable
 
 
 def noise_mapping(folder: Path) -> Any:
-    lines = [f"  - {{path: Noise/v{i:02d}, source: 'ns=2;s=v{i:02d}', type: Double}}" for i in range(VARIABLES)]
+    lines = [
+        f"  - {{path: Noise/v{i:02d}, source: 'ns=2;s=v{i:02d}', type: Double}}" for i in range(VARIABLES)
+    ]
     path = folder / "eager.yaml"
     path.write_text(
         "machine: eager\ndriver: {type: opcua, endpoint: 'opc.tcp://127.0.0.1:1'}\nvariables:\n"
@@ -74,7 +76,9 @@ async def test_sinks_get_every_value_a_source_brings_while_they_start(
 ) -> None:
     rec = subscriber(recorders, mosquitto.port, topics=["cnc/eager/noise/#"])
     opcua_port = free_port()
-    config = gateway_config(noise_mapping(tmp_path), tmp_path / "state", mqtt_config(mosquitto.port), opcua_port)
+    config = gateway_config(
+        noise_mapping(tmp_path), tmp_path / "state", mqtt_config(mosquitto.port), opcua_port
+    )
     gw = Gateway(config)
     source = EagerSource(gw.tree.machines["eager"])
     gw.sources = [source]
