@@ -84,6 +84,7 @@ class Results:
     targets_25: list[Target] = field(default_factory=list)  # issue 25's: FOCAS
     targets_26: list[Target] = field(default_factory=list)  # issue 26's: the Modbus TCP and S7 drivers
     targets_27: list[Target] = field(default_factory=list)  # issue 27's: the umati view at scale
+    targets_28: list[Target] = field(default_factory=list)  # issue 28 section 3: start-up, RSS at scale
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -132,6 +133,7 @@ class Results:
             "targets_25": [t.as_dict() for t in self.targets_25],
             "targets_26": [t.as_dict() for t in self.targets_26],
             "targets_27": [t.as_dict() for t in self.targets_27],
+            "targets_28": [t.as_dict() for t in self.targets_28],
             "details": self.details,
             "errors": self.errors,
         }
@@ -204,6 +206,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 26)", _targets(results.targets_26)]
     if results.targets_27:
         out += ["", "Targets (issue 27)", _targets(results.targets_27)]
+    if results.targets_28:
+        out += ["", "Targets (issue 28)", _targets(results.targets_28)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)
