@@ -204,8 +204,10 @@ class Gateway:
                 if self.jobs is not None:
                     await self._stack.enter_async_context(self.jobs)
         except BaseException:
-            await self._stop_tasks()
-            await self._stack.aclose()
+            try:
+                await self._stop_tasks()  # a task's own failure, if any, is raised from here (as a group)
+            finally:
+                await self._stack.aclose()
             raise
         return self
 

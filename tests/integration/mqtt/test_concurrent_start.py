@@ -10,13 +10,16 @@ end with its last values (MQTT through Mosquitto, OPC UA through a client's Read
 from __future__ import annotations
 
 import asyncio
+import socket
 from pathlib import Path
 from typing import Any, Self
 
+import pytest
 from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.config.loader import load_mapping
+from gateway.errors import SinkError
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, gateway_config, mqtt_config, subscriber
@@ -101,3 +104,22 @@ async def test_sinks_get_every_value_a_source_brings_while_they_start(
         finally:
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
+
+
+async def test_a_sink_that_cannot_start_leaves_no_source_or_sink_task_running(
+    mosquitto: Mosquitto, tmp_path: Path
+) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        opcua_port = taken.getsockname()[1]
+        config = gateway_config(
+            noise_mapping(tmp_path), tmp_path / "state", mqtt_config(mosquitto.port), opcua_port
+        )
+        gw = Gateway(config)
+        source = EagerSource(gw.tree.machines["eager"])
+        gw.sources = [source]
+        with pytest.raises(SinkError, match="cannot listen"):
+            async with gw:
+                pass
+    assert not [t for t in asyncio.all_tasks() if t.get_name().startswith(("source:", "sink:"))]
