@@ -635,5 +635,29 @@ def _qos1_28(ctx: Context) -> list[Target]:
 
 
 def judge_28(ctx: Context) -> list[Target]:
-    """Issue 28: QoS 1 on the packet path (scenario qos1), the readers' fixed cost (web, mtconnect)."""
-    return [*_qos1_28(ctx), *_readers_28(ctx)]
+    """Issue 28: QoS 1 on the packet path (scenario qos1), the readers' fixed cost (web, mtconnect), the
+    start-up and RSS aims left from issue 13 (scale)."""
+    return [*_qos1_28(ctx), *_readers_28(ctx), *_startup_28(ctx)]
+
+
+def _startup_28(ctx: Context) -> list[Target]:
+    """Issue 28's rows from the scale scenario (its section 3, "the aims left from issue 13"). Nothing when
+    the scale scenario did not run."""
+    scale: dict[str, Any] = ctx.results.details.get("scale", {})
+    if not scale:
+        return []
+    tag = f"{scale.get('machines', '?')} machines × {scale.get('per_machine', '?')}"
+    rss = scale.get("rss")
+    raw_rss = ctx.ceilings.get("asyncua_rss_10k")
+    return [
+        Target(
+            "10,000 variables over 20 machines: start-up to all Good", 2.5, 1.5, "s", higher_is_better=False,
+            value=scale.get("startup"), source=f"{tag}; raw asyncua build of 10k vars "
+            f"{ctx.ceilings['asyncua_build_10k']:.2f} s" if "asyncua_build_10k" in ctx.ceilings else tag,
+        ),
+        Target(
+            "10,000 variables over 20 machines: RSS", 150, 120, "MB", higher_is_better=False,
+            value=rss / 1e6 if rss else None,
+            source=f"{tag}; a raw asyncua server of 10k vars {raw_rss / 1e6:.0f} MB" if raw_rss else tag,
+        ),
+    ]  # fmt: skip

@@ -1,8 +1,13 @@
 """The running gateway: one variable tree, its sources and sinks, one TaskGroup.
 
-Start-up order matters to users: sinks start first, so that SCADA clients can
-browse the tree (with Bad values) even while controllers are still unreachable;
-then the sources connect. Shutdown is the reverse, and quick.
+Start-up: the sources begin to connect first, and connect while the sinks start
+(an OPC UA server of 10,000 variables takes about a second to build: the
+controllers' sessions and subscriptions are made meanwhile, not after it). Each
+sink subscribes to the hub before it reads the tree's current samples, so a value
+that arrives while it starts is in one or the other; a sink's task starts as soon
+as it is up. SCADA clients can still browse the tree (with Bad values) while
+controllers are unreachable. Shutdown stops every task, then leaves the
+components in the reverse order, quickly.
 """
 
 from __future__ import annotations
@@ -142,6 +147,10 @@ class Gateway:
         self.sinks: list[Sink] = build_sinks(self)
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
+        # The one TaskGroup of every component's task, from __aenter__ (the sources', then each sink's as it
+        # is up) to __aexit__; run() adds the job service's, the alarms' and its own extras.
+        self._group: asyncio.TaskGroup | None = None
+        self._tasks: list[asyncio.Task[None]] = []
 
     @overload
     def sink(self, name: str) -> Sink: ...
@@ -181,37 +190,70 @@ class Gateway:
                 await self._stack.enter_async_context(self.audit)  # first in, last out: it sees every write
                 if self.alarms is not None:  # before the sinks: OPC UA offers the alarms open from the start
                     await self._stack.enter_async_context(self.alarms)
+                for source in self.sources:  # cheap: the machine's writer, its invalid addresses
+                    await self._stack.enter_async_context(source)
+                self._group = asyncio.TaskGroup()
+                await self._group.__aenter__()
+                # The controllers' sessions are opened while the sinks start: a sink reads the tree's samples
+                # after it has subscribed to the hub, so a value a source brings meanwhile reaches it.
+                for source in self.sources:
+                    self._start(source.run(), f"source:{source.machine.name}")
                 for sink in self.sinks:
                     await self._stack.enter_async_context(sink)
-                for source in self.sources:
-                    await self._stack.enter_async_context(source)
+                    self._start(sink.run(), f"sink:{sink.name}")
                 if self.jobs is not None:
                     await self._stack.enter_async_context(self.jobs)
         except BaseException:
-            await self._stack.aclose()
+            try:
+                await self._stop_tasks()  # a task's own failure, if any, is raised from here (as a group)
+            finally:
+                await self._stack.aclose()
             raise
         return self
 
+    def _start(self, coro: Coroutine[object, object, None], name: str) -> None:
+        assert self._group is not None, "enter the gateway first"
+        self._tasks.append(self._group.create_task(coro, name=name))
+
+    async def _stop_tasks(self) -> None:
+        """Cancel every component's task and wait for them (a task's failure is raised, as a group)."""
+        group, self._group = self._group, None
+        if group is None:
+            return
+        for task in self._tasks:
+            task.cancel()
+        self._tasks = []
+        await group.__aexit__(None, None, None)
+
     async def __aexit__(self, *exc_info: object) -> None:
         try:
-            await self._stack.aclose()
+            try:
+                await self._stop_tasks()  # first: no sink or source task runs while the components close
+            finally:
+                await self._stack.aclose()
         finally:
             gc.unfreeze()  # what this gateway built becomes collectable again (tests run many in one process)
 
     async def run(self, *extra: tuple[str, Callable[[], Coroutine[object, object, None]]]) -> None:
-        """Run every component until cancelled. `extra` adds named tasks (the demo's driver)."""
-        async with asyncio.TaskGroup() as tg:
-            for sink in self.sinks:
-                tg.create_task(sink.run(), name=f"sink:{sink.name}")
-            for source in self.sources:
-                tg.create_task(source.run(), name=f"source:{source.machine.name}")
-            if self.jobs is not None:
-                tg.create_task(self.jobs.run(), name="jobs")
-            if self.alarms is not None:
-                tg.create_task(self.alarms.run(), name="alarms")
-            for name, factory in extra:
-                tg.create_task(factory(), name=name)
-            self.ready.set()
+        """Run every component until cancelled. `extra` adds named tasks (the demo's driver).
+
+        The sources' and sinks' tasks are already running (since `__aenter__`); this adds the job
+        service's, the alarms' and `extra`, in the same TaskGroup. Cancelling it stops them all."""
+        if self._group is None:
+            raise RuntimeError("enter the gateway before running it")
+        if self.jobs is not None:
+            self._start(self.jobs.run(), "jobs")
+        if self.alarms is not None:
+            self._start(self.alarms.run(), "alarms")
+        for name, factory in extra:
+            self._start(factory(), name)
+        self.ready.set()
+        try:
+            if self._tasks:
+                await asyncio.wait(self._tasks)  # every task ends only when cancelled, or when one fails
+        except asyncio.CancelledError:
+            await self._stop_tasks()
+            raise
 
 
 async def run_until_signalled(main: Awaitable[None]) -> None:

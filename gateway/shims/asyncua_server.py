@@ -136,6 +136,46 @@ class SlimAttributeValue:
     __repr__ = __str__
 
 
+class NameAttributeValue:
+    """The record of a node's NodeId, BrowseName or DisplayName, which holds the value (the NodeId, the
+    QualifiedName, the LocalizedText: objects the node and its parent's reference hold anyway) and builds
+    the DataValue when something reads it.
+
+    asyncua keeps a DataValue and a Variant per node for each of the three (about 150 bytes apiece, 4.5 MB
+    over 10,000 variables), which only a client's Read of these attributes looks at. Reading `value` gives
+    a DataValue equal to the one asyncua would have kept (a Variant of the attribute's type, no time
+    stamps); assigning it (asyncua's write_attribute_value) keeps what is assigned, as asyncua's record
+    does. Everything else asyncua reads or assigns is there under the same names, as in SlimAttributeValue.
+    """
+
+    __slots__ = ("_assigned", "_held", "_vtype", "datachange_callbacks", "value_callback", "value_setter")
+
+    def __init__(self, held: Any, vtype: Any) -> None:
+        self._held = held
+        self._vtype = vtype
+        self._assigned: Any = None
+        self.value_callback: Any = None
+        self.value_setter: Any = None
+        self.datachange_callbacks: dict[int, Any] = NO_CALLBACKS
+
+    @property
+    def value(self) -> Any:
+        if self._assigned is not None:
+            return self._assigned
+        from asyncua import ua
+
+        return ua.DataValue(ua.Variant(self._held, self._vtype))
+
+    @value.setter
+    def value(self, value: Any) -> None:
+        self._assigned = value
+
+    def __str__(self) -> str:
+        return f"AttributeValue({self.value_callback or self.value})"
+
+    __repr__ = __str__
+
+
 class SharedAttributeValue(SlimAttributeValue):
     """A record that many nodes hold for one constant attribute (their DataType, ValueRank, ...).
 

@@ -15,14 +15,16 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol, Self
+from typing import TYPE_CHECKING, Any, Protocol, Self
 
-from gateway.alarms.service import AlarmService
 from gateway.audit.trail import AuditTrail
 from gateway.auth.ratelimit import LoginLimiter
 from gateway.model.tree import VariableTree
 from gateway.settings.sections import Section
 from gateway.sinks.ports import GatewayPort, JobsPort, TrustPort
+
+if TYPE_CHECKING:  # built (and imported) only when some machine has alarms: (gateway/app.py)
+    from gateway.alarms.service import AlarmService
 
 
 @dataclass(frozen=True, slots=True)

@@ -62,6 +62,7 @@ if TYPE_CHECKING:
         UnknownMetric,
         WrongDatatype,
     )
+    from gateway.codecs.sparkplug.limits import MAX_PAYLOAD
     from gateway.codecs.sparkplug.payloads import (
         BDSEQ,
         PROP_DESCRIPTION,
@@ -103,7 +104,7 @@ if TYPE_CHECKING:
         parse_topic,
         state_topic,
     )
-    from gateway.codecs.sparkplug.wire import MAX_PAYLOAD, parse_payload
+    from gateway.codecs.sparkplug.wire import parse_payload
 
 _HOMES = {
     "Aliases": "aliases",
@@ -118,7 +119,7 @@ _HOMES = {
     "Command": "commands",
     "Definition": "commands",
     "HostState": "state",
-    "MAX_PAYLOAD": "wire",
+    "MAX_PAYLOAD": "limits",
     "MalformedPayload": "errors",
     "MessageType": "topics",
     "Metric": "payloads",

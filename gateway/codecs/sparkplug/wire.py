@@ -10,10 +10,10 @@ from __future__ import annotations
 from google.protobuf.message import DecodeError, EncodeError
 
 from gateway.codecs.sparkplug.errors import MalformedPayload, Unencodable
+from gateway.codecs.sparkplug.limits import MAX_PAYLOAD
 from gateway.codecs.sparkplug.sparkplug_b_pb2 import Payload
 
-# Commands are a handful of metrics; anything this large is not a command we carry out.
-MAX_PAYLOAD = 1 << 20
+__all__ = ["MAX_PAYLOAD", "parse_payload", "serialize"]
 
 
 def parse_payload(data: bytes, *, limit: int = MAX_PAYLOAD) -> Payload:

@@ -38,7 +38,7 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import NodeData
 
-from gateway.shims.asyncua_server import SharedAttributeValue
+from gateway.shims.asyncua_server import NameAttributeValue, SharedAttributeValue
 from gateway.shims.ua import new_data_value, new_node_id, new_variant
 from gateway.sinks.opcua.asyncua_tuning import SHAREABLE
 
@@ -139,14 +139,23 @@ class NodeWriter:
         self, node: NodeData, item: ua.AddNodesItem, stamp: datetime | None, server_stamp: datetime | None
     ) -> None:
         """asyncua's _add_node_attributes: NodeId, BrowseName, NodeClass, then every specified one."""
-        attributes = node.attributes
+        attributes: dict[Any, Any] = node.attributes  # asyncua's records, or our slimmer ones
         value_of = self._attribute_value
-        attributes[ua.AttributeIds.NodeId] = value_of(
-            new_data_value(new_variant(node.nodeid, ua.VariantType.NodeId))
-        )
-        attributes[ua.AttributeIds.BrowseName] = value_of(
-            new_data_value(new_variant(item.BrowseName, ua.VariantType.QualifiedName))
-        )
+        # Our nodes' names: records that build their DataValue when read (check=False: the standard
+        # namespace, whose records are pickled into its cache as asyncua's builder made them).
+        named = stamp is not None
+        if named:
+            attributes[ua.AttributeIds.NodeId] = NameAttributeValue(node.nodeid, ua.VariantType.NodeId)
+            attributes[ua.AttributeIds.BrowseName] = NameAttributeValue(
+                item.BrowseName, ua.VariantType.QualifiedName
+            )
+        else:
+            attributes[ua.AttributeIds.NodeId] = value_of(
+                new_data_value(new_variant(node.nodeid, ua.VariantType.NodeId))
+            )
+            attributes[ua.AttributeIds.BrowseName] = value_of(
+                new_data_value(new_variant(item.BrowseName, ua.VariantType.QualifiedName))
+            )
         attributes[ua.AttributeIds.NodeClass] = self._shared(
             ua.AttributeIds.NodeClass, item.NodeClass, ua.VariantType.Int32, False
         )
@@ -166,6 +175,9 @@ class NodeWriter:
                 )
             elif attribute in SHAREABLE:
                 attributes[attribute] = self._shared(attribute, value, vtype, is_array)
+                continue
+            elif named and name == "DisplayName" and isinstance(value, ua.LocalizedText):
+                attributes[attribute] = NameAttributeValue(value, vtype)
                 continue
             else:
                 dv = new_data_value(new_variant(value, vtype, is_array=is_array))

@@ -154,8 +154,7 @@ def _unusable(pki: Pki, application_uri: str) -> str | None:
         return "missing" if not pki.cert.exists() and not pki.key.exists() else "certificate or key missing"
     try:
         cert = x509.load_der_x509_certificate(pki.cert.read_bytes())
-        # Readable is enough here: asyncua checks the key's numbers when it loads it next (about 35 ms of
-        # CPU each time, at every start).
+        # Readable is enough here (secure_server loads it the same way next).
         serialization.load_pem_private_key(
             pki.key.read_bytes(), password=None, unsafe_skip_rsa_key_validation=True
         )
@@ -364,7 +363,13 @@ async def secure_server(
             ensure_certificate, pki, application_uri, name, certificate_hosts(endpoint_host)
         )
         await server.load_certificate(str(pki.cert))
-        await server.load_private_key(str(pki.key))
+        # What Server.load_private_key sets, without its check of the key's numbers: 0.1-0.4 s of the event
+        # loop at every start (holding the GIL even in a thread), while the sources are already connecting
+        # (app.py). The key is the gateway's own (generated here, in a folder only its user may write);
+        # ensure_certificate has just read it the same way.
+        server.iserver.private_key = serialization.load_pem_private_key(
+            pki.key.read_bytes(), password=None, unsafe_skip_rsa_key_validation=True
+        )
     except OSError as exc:
         raise SinkError(f"OPC UA server certificate in {pki.own}: {exc.strerror or exc}") from None
     check = ClientCertificates(pki)

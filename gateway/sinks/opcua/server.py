@@ -618,6 +618,7 @@ class OpcUaSink:
             plan.add_machines([machine])
             methods += plan_methods(plan, [machine])
             await self.add_nodes(plan.take())
+            await asyncio.sleep(0)  # sources connect meanwhile (app.py): their replies are read here
         self._register(plan)
         owners = {id(m): machine for machine in self.tree.machines.values() for m in machine.methods.values()}
         for nodeid, method in methods:

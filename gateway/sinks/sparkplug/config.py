@@ -17,8 +17,8 @@ from __future__ import annotations
 from pydantic import Field, field_validator
 
 from gateway.codecs.sparkplug.errors import SparkplugError
+from gateway.codecs.sparkplug.limits import MAX_PAYLOAD
 from gateway.codecs.sparkplug.topics import check_id
-from gateway.codecs.sparkplug.wire import MAX_PAYLOAD
 from gateway.settings.base import Strict
 from gateway.sinks.mqtt_link.broker import MAX_PACKET_SIZE, MIB, BrokerConnection, MqttReconnect, SharedBroker
 

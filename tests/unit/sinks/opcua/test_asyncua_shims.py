@@ -10,6 +10,7 @@ from asyncua.server import address_space
 
 from gateway.shims.asyncua_server import (
     NO_CALLBACKS,
+    NameAttributeValue,
     SlimAttributeValue,
     forget_standard_namespace_code,
     slim_attribute_values,
@@ -59,3 +60,32 @@ async def test_the_code_that_builds_the_standard_namespace_goes_and_comes_back()
     ids = set(first.iserver.aspace.keys())
     assert ids == set(second.iserver.aspace.keys()) and len(ids) > 5000
     assert address_space.AttributeValue is not None
+
+
+async def test_name_records_build_what_asyncua_keeps_and_keep_what_is_written() -> None:
+    """bulk.py's records of a node's NodeId, BrowseName, DisplayName: read, monitored and written through
+    asyncua's own address space as its records are."""
+    slim_attribute_values()
+    space = address_space.AddressSpace()
+    nodeid = ua.NodeId("m1/A", 2)
+    node = address_space.NodeData(nodeid)
+    name = ua.LocalizedText("A")
+    node.attributes[ua.AttributeIds.NodeId] = NameAttributeValue(nodeid, ua.VariantType.NodeId)  # type: ignore[assignment]
+    node.attributes[ua.AttributeIds.DisplayName] = NameAttributeValue(name, ua.VariantType.LocalizedText)  # type: ignore[assignment]
+    space[nodeid] = node
+    read = space.read_attribute_value(nodeid, ua.AttributeIds.DisplayName)
+    assert read == ua.DataValue(ua.Variant(name, ua.VariantType.LocalizedText))
+    assert space.read_attribute_value(nodeid, ua.AttributeIds.NodeId) == ua.DataValue(
+        ua.Variant(nodeid, ua.VariantType.NodeId)
+    )
+    seen: list[object] = []
+
+    async def callback(handle: int, value: ua.DataValue) -> None:
+        seen.append(value.Value.Value)
+
+    status, _ = space.add_datachange_callback(nodeid, ua.AttributeIds.DisplayName, callback)
+    assert status.is_good()
+    renamed = ua.DataValue(ua.Variant(ua.LocalizedText("B"), ua.VariantType.LocalizedText))
+    assert (await space.write_attribute_value(nodeid, ua.AttributeIds.DisplayName, renamed)).is_good()
+    assert space.read_attribute_value(nodeid, ua.AttributeIds.DisplayName) == renamed
+    assert seen == [ua.LocalizedText("B")]
