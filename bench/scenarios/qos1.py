@@ -10,10 +10,13 @@
    the sustained rate. 1 and 2 alternate three times (quick: once); the medians are compared, since
    on a shared machine either moves by 30 % from minute to minute. Offered above delivered in such a
    window means the broker's queue for the subscriber grew ("NOT sustained": the subscriber, not the
-   gateway, set the pace). The subscriber
-   (bench/agents/mqtt_sub.py `--check`, bench/delivery.py) checks every message: after the steps,
-   every change the source wrote must have arrived once (byte-identical redeliveries counted apart)
-   and in order per topic, or the rate is not counted as sustained.
+   gateway, set the pace). The subscriber is Mosquitto's C `mosquitto_sub` (bench/agents/c_sub.py
+   feeds its lines to bench/delivery.py): the paho one (bench/agents/mqtt_sub.py `--check`) read
+   10-16k/s and so set the pace for the gateway and paho alike. It checks every message: after the
+   steps, every change the source wrote must have arrived once (byte-identical redeliveries counted
+   apart) and in order per topic, or the rate is not counted as sustained. paho's changes are checked
+   the same way. The broker of these steps has no queue limit (bench/procs.py `unbounded`), so that it
+   never drops what it acknowledged; its "dropped" notices are counted (`broker_drops`, must be 0).
 3. CPU per 1,000 changes at QoS 1 and at QoS 0, in the same run, on fresh gateways at the same
    offered rate, 5,000/s (the drill's), which both must sustain (alternately, three times; medians):
    the gateway process's CPU time over the window (all its threads, the injector included as in
