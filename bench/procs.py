@@ -160,9 +160,13 @@ class Mosquitto:
     second), so that `stop()` and `start()` keep a persistent subscriber's session; its port is then
     below the ephemeral range (`listener_port`), where no client can take it while it is down."""
 
-    def __init__(self, workdir: Path, *, persistence: bool = False) -> None:
+    def __init__(self, workdir: Path, *, persistence: bool = False, unbounded: bool = False) -> None:
         self.dir = workdir / f"mosquitto-{time.monotonic_ns()}"
         self.persistence = persistence
+        # `unbounded`: no limit on a subscriber's queue (count or bytes), so that the broker never drops
+        # what it acknowledged to a publisher (issue 28's QoS 1 row); its notices are logged, and
+        # `drops()` counts the "being dropped" ones, which must stay 0.
+        self.unbounded = unbounded
         self.port = listener_port() if persistence else free_port()
         self.proc: asyncio.subprocess.Process | None = None
 
@@ -178,8 +182,12 @@ class Mosquitto:
             "allow_anonymous true\n"
             f"user {getpass.getuser()}\n"
             f"{persistence}"
-            "max_queued_messages 1000000\n"
-            "max_inflight_messages 1000\n"
+            + (
+                "max_queued_messages 0\nmax_queued_bytes 0\nlog_type notice\n"
+                if self.unbounded
+                else "max_queued_messages 1000000\n"
+            )
+            + "max_inflight_messages 1000\n"
             "set_tcp_nodelay true\n"  # QoS 0 latency: see README, MQTT, "Latency at QoS 0"
             "log_dest stderr\nlog_type error\nlog_type warning\n",
             encoding="utf-8",
@@ -188,6 +196,12 @@ class Mosquitto:
             raise BenchError("mosquitto is not installed (make system-deps installs it)")
         await self.start()
         return self
+
+    def drops(self) -> int:
+        """Mosquitto's notices that it dropped outgoing messages for a client (from its log)."""
+        log = self.dir / "mosquitto.log"
+        text = log.read_text(encoding="utf-8", errors="replace") if log.exists() else ""
+        return sum(1 for line in text.splitlines() if "dropped" in line.lower())
 
     @property
     def pid(self) -> int:

@@ -156,13 +156,15 @@ async def paho_ceiling(ctx: Context) -> None:
 
 
 async def paho_rates(
-    ctx: Context, qos: int, name: str, *, check: bool = False
+    ctx: Context, qos: int, name: str, *, check: bool = False, c_sub: bool = False
 ) -> tuple[list[float], dict[str, Any]]:
     """One paho publisher flat out (bench/agents/paho_pub.py; QoS 1: a window of 200) through a fresh
     Mosquitto to one paho subscriber: msg/s at the subscriber in `repeats` windows, and the latency.
     Also issue 28's ceiling beside the gateway's QoS 1 rate (bench/scenarios/qos1.py), whose subscriber
     checks order and duplicates as it reads (`check`): this one then does the same work per message."""
     s = ctx.settings
+    if c_sub:
+        return await _paho_c_sub(ctx, qos, name)
     async with Mosquitto(ctx.workdir) as broker:
         sub = await Agent.start(
             f"{name}-sub",
@@ -199,6 +201,68 @@ async def paho_rates(
             await sub.stop()
     rates = [(b["count"] - a["count"]) / (b["mono"] - a["mono"]) for a, b in itertools.pairwise(snaps)]
     return rates, snaps[-1]["latency"]
+
+
+PAHO_TOPICS = 1000  # bench/agents/paho_pub.py's TOPICS: change `seq` goes to raw/t{seq % 1000}
+
+
+async def _paho_c_sub(ctx: Context, qos: int, name: str) -> tuple[list[float], dict[str, Any]]:
+    """paho_rates through mosquitto_sub (bench/agents/c_sub.py) and an unbounded broker queue: the
+    rates are distinct changes delivered and checked; the last snap carries `acked` (published per
+    second of the publisher's run: its window of 200 and queue of 1,000 are all that is not yet
+    acknowledged) and the delivery verdict over everything it published."""
+    s = ctx.settings
+    async with Mosquitto(ctx.workdir, unbounded=True) as broker:
+        sub = await Agent.start(
+            f"{name}-csub", "bench.agents.c_sub", ["--port", str(broker.port), "--topic", "raw/#",
+                                                  "--qos", str(qos)], ctx.workdir,
+        )  # fmt: skip
+        pub = await Agent.start(
+            f"{name}-pub",
+            "bench.agents.paho_pub",
+            ["--port", str(broker.port), "--qos", str(qos)],
+            ctx.workdir,
+        )
+        try:
+            step = s.window / 2
+            total = s.warmup + s.repeats * step + 0.5
+            publishing = asyncio.create_task(pub.ask("run", seconds=total, timeout=total + 30))
+            await asyncio.sleep(s.warmup)
+            snaps = [await sub.ask("snap")]
+            for _ in range(s.repeats):
+                await asyncio.sleep(step)
+                snaps.append(await sub.ask("snap"))
+            run = await publishing
+            await settle_count(sub)
+            published = int(run["published"])
+            topics = [f"raw/t{(i + 1) % PAHO_TOPICS:04d}" for i in range(PAHO_TOPICS)]
+            verdict = await sub.ask("check", topics=topics, written=published, timeout=120)
+            drops = broker.drops()
+        finally:
+            await pub.stop()
+            await sub.stop()
+    rates = [(b["distinct"] - a["distinct"]) / (b["mono"] - a["mono"]) for a, b in itertools.pairwise(snaps)]
+    last = {
+        **snaps[-1],
+        "acked": published / float(run["elapsed"]),
+        "verdict": verdict,
+        "broker_drops": drops,
+    }
+    return rates, last
+
+
+async def settle_count(sub: Agent, timeout: float = 120.0) -> None:
+    """Until the subscriber has seen nothing new for half a second."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    last, since = -1, loop.time()
+    while loop.time() < deadline:
+        count = int((await sub.ask("snap"))["count"])
+        if count != last:
+            last, since = count, loop.time()
+        elif loop.time() - since >= 0.5:
+            return
+        await asyncio.sleep(0.1)
 
 
 async def noise_ceiling(ctx: Context) -> None:
