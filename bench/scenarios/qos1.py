@@ -1,7 +1,7 @@
 """Issue 28: MQTT QoS 1 at full speed, every change once and in order, beside paho's raw QoS 1 ceiling.
 
 1. paho's raw QoS 1 ceiling in this run: bench/agents/paho_pub.py (a window of 200 in flight, the
-   gateway's default `max_inflight`) through a fresh Mosquitto to the same subscriber as below,
+   gateway's `max_inflight` before issue 28; it now ships 4,000) through a fresh Mosquitto to the same subscriber as below,
    checking order as it reads (bench/scenarios/baselines.py `paho_rates`).
 2. The gateway at QoS 1, N = 10,000 variables, the in-process source (mirror's `inproc`,
    bench/agents/injector.py) flat out but held back while the MQTT sink has BOUND changes on its
@@ -42,6 +42,7 @@ from bench.context import Context, poll
 from bench.procs import Agent, Mosquitto
 from bench.scenarios.baselines import paho_rates
 from bench.scenarios.common import noise_paths, noise_topic, profile, write_gateway
+from gateway.sinks.mqtt.config import MqttConfig
 from simulator.noise import NoiseSpec, noise_mapping
 
 SECTION = "MQTT QoS 1 (issue 28): in-process source → MQTT sink → a checking QoS 1 subscriber"
@@ -53,7 +54,7 @@ ROUNDS = 3  # paho's ceiling and the gateway flat out, alternately (quick: once)
 SUSTAINED = 0.95  # a window is sustained when this share of the offer was delivered, and nothing piled up
 RESTART_N = 1000
 RESTART_RATE = 5000.0
-MAX_INFLIGHT = 200  # the gateway's default mqtt.max_inflight (and paho_pub's window)
+MAX_INFLIGHT = MqttConfig().max_inflight  # the gateway's window as shipped: its re-sends per restart at most
 
 
 async def run(ctx: Context) -> None:
