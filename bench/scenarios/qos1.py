@@ -1,8 +1,8 @@
 """Issue 28: MQTT QoS 1 at full speed, every change once and in order, beside paho's raw QoS 1 ceiling.
 
 1. paho's raw QoS 1 ceiling in this run: bench/agents/paho_pub.py (a window of 200 in flight, the
-   gateway's `max_inflight` before issue 28; it now ships 4,000) through a fresh Mosquitto to the same subscriber as below,
-   checking order as it reads (bench/scenarios/baselines.py `paho_rates`).
+   gateway's `max_inflight` before issue 28; it now ships 4,000) through a fresh Mosquitto to the same
+   subscriber as below, checking order as it reads (bench/scenarios/baselines.py `paho_rates`).
 2. The gateway at QoS 1, N = 10,000 variables, the in-process source (mirror's `inproc`,
    bench/agents/injector.py) flat out but held back while the MQTT sink has BOUND changes on its
    hands, so that it always has more to send and nothing is dropped at the store-and-forward limit:
