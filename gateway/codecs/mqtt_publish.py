@@ -92,38 +92,36 @@ def read_puback(buf: bytes | bytearray, pos: int = 0) -> tuple[int, int, int] | 
     end = len(buf)
     if end - pos < 2 or buf[pos] != PUBACK:
         return None
-    length = 0
-    shift = 0
-    at = pos + 1
-    while True:  # the remaining length, a variable byte integer of at most 4 bytes
-        if at >= end:
-            return None
-        byte = buf[at]
-        length |= (byte & 0x7F) << shift
-        at += 1
-        if not byte & 0x80:
-            break
-        shift += 7
-        if shift > 21:
-            raise ValueError("a PUBACK whose remaining length takes more than 4 bytes")
+    found = _varint(buf, pos + 1, end, "remaining length")
+    if found is None:
+        return None
+    length, at = found
     if length < 2:
         raise ValueError(f"a PUBACK of remaining length {length} (a packet id takes 2)")
     if end - at < length:
         return None
     reason = buf[at + 2] if length > 2 else 0
     if length > 3:  # MQTT 5: properties follow, their length first; they must fill the packet exactly
-        size, shift, prop = 0, 0, at + 3
-        while True:
-            if prop >= at + length:
-                raise ValueError("a PUBACK whose properties' length is cut short")
-            byte = buf[prop]
-            size |= (byte & 0x7F) << shift
-            prop += 1
-            if not byte & 0x80:
-                break
-            shift += 7
-            if shift > 21:
-                raise ValueError("a PUBACK whose properties' length takes more than 4 bytes")
+        props = _varint(buf, at + 3, at + length, "properties' length")
+        if props is None:
+            raise ValueError("a PUBACK whose properties' length is cut short")
+        size, prop = props
         if prop + size != at + length:
             raise ValueError(f"a PUBACK whose properties ({size} bytes) do not fill its remaining length")
     return (buf[at] << 8) | buf[at + 1], reason, at + length
+
+
+def _varint(buf: bytes | bytearray, at: int, end: int, what: str) -> tuple[int, int] | None:
+    """The variable byte integer at `buf[at:end]` and where it ends; None when `end` cuts it short."""
+    value = shift = 0
+    while True:
+        if at >= end:
+            return None
+        byte = buf[at]
+        value |= (byte & 0x7F) << shift
+        at += 1
+        if not byte & 0x80:
+            return value, at
+        shift += 7
+        if shift > 21:
+            raise ValueError(f"a PUBACK whose {what} takes more than 4 bytes")
