@@ -23,6 +23,7 @@ from pydantic import BaseModel, ValidationError
 from gateway.alarms.config import SOURCE_TAGS
 from gateway.auth.known_passwords import is_known, known_passwords_of
 from gateway.config.gateway import GatewayConfig
+from gateway.config.jobs import JobsConfig
 from gateway.config.mapping import MachineMapping, tree_conflicts
 from gateway.errors import AddressError, ConfigError, ConfigIssue
 from gateway.model.definitions import MachineDefinition
@@ -241,6 +242,9 @@ class Config:
     machines: tuple[MachineMapping, ...]
     base_dir: Path
     files: tuple[Path, ...] = ()
+    # With `shard:`, the jobs sections of the fleet's machines that other shards serve: an inbox on a shared
+    # (PostgreSQL) queue takes and validates their jobs too (gateway/jobs/service.py). Empty otherwise.
+    jobs_elsewhere: Mapping[str, JobsConfig] = field(default_factory=dict)
 
     @property
     def state_dir(self) -> Path:
@@ -435,10 +439,14 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     issues.extend(_shared_links(machines, seen))
     if issues:
         raise ConfigError(issues)
+    elsewhere: dict[str, JobsConfig] = {}
     if gateway.shard is not None and gateway_located is not None and gateway_file is not None:
+        fleet = machines
         machines = _shard_machines(gateway, machines, gateway_located, gateway_file)
         mapping_files = [seen[m.machine] for m in machines]
-    return Config(gateway, tuple(machines), base_dir, tuple(mapping_files))
+        mine = {m.machine for m in machines}
+        elsewhere = {m.machine: m.jobs for m in fleet if m.machine not in mine and m.jobs is not None}
+    return Config(gateway, tuple(machines), base_dir, tuple(mapping_files), elsewhere)
 
 
 def _shard_machines(

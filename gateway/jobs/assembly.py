@@ -16,6 +16,7 @@ from gateway.config.jobs import JobsConfig
 from gateway.config.validation import ValidationRules
 from gateway.jobs.backups import BackupShelf
 from gateway.jobs.delivery.autostart import AutoStarter
+from gateway.jobs.delivery.fetch import ProgramFetch
 from gateway.jobs.delivery.supervisor import DeliverySupervisor
 from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.intake import Intake
@@ -77,9 +78,18 @@ def assemble_machines(
         deliveries = registry.find(kind).assemble(group, core)
         supervisor.transports[kind] = deliveries
         supervisor.deliveries.update(deliveries.machines)
+    # A program another shard took in is read from the queue's database, where the queue carries them.
+    fetch = ProgramFetch(supervisor.queue, threads.work) if supervisor.queue.shares_programs else None
     return {
         name: build_machine(
-            tree, name, jobs, supervisor=supervisor, spool=spool, intake=intake, backups=backups_dir
+            tree,
+            name,
+            jobs,
+            supervisor=supervisor,
+            spool=spool,
+            intake=intake,
+            backups=backups_dir,
+            fetch=fetch,
         )
         for name, jobs in machines.items()
     }
@@ -94,6 +104,7 @@ def build_machine(
     spool: Spool,
     intake: Intake,
     backups: Path,
+    fetch: ProgramFetch | None = None,
 ) -> BackupShelf:
     """One machine's worker (with its transport and auto-start) and its `Programs` methods."""
     machine = tree.machines[name]
@@ -110,6 +121,7 @@ def build_machine(
         supervisor.q,
         delivery.transport,
         autostart=autostart,
+        fetch=fetch,
     )
     supervisor.add(name, worker, autostart)
     shelf = BackupShelf(backups / name, jobs.backups)

@@ -14,12 +14,13 @@ import logging
 import os
 import re
 import uuid
-from collections.abc import Awaitable, Mapping
+from collections.abc import Awaitable, Collection, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
 from gateway.config.jobs import JobsConfig
-from gateway.errors import JobError, PathRefused
+from gateway.errors import DeliveryError, JobError, PathRefused
+from gateway.jobs.delivery.fetch import ProgramFetch
 from gateway.jobs.delivery.supervisor import DeliverySupervisor
 from gateway.jobs.inbox.inbox import STAGING, Upload, UploadReply
 from gateway.jobs.inbox.paths import check_file_name
@@ -45,12 +46,15 @@ def summarize(verdict: Verdict) -> str:
 
 
 class Intake:
-    """Takes uploads in for the machines of `machines` (those with a `jobs:` section)."""
+    """Takes uploads in for the machines of `machines` (those with a `jobs:` section): this process's, and
+    on a queue that carries programs (PostgreSQL) the fleet's machines other shards serve, whose jobs are
+    validated here by their own rules and delivered by their shard (`serves`: this process's machines)."""
 
     def __init__(
         self,
         machines: Mapping[str, JobsConfig],
         *,
+        serves: Collection[str] | None = None,
         queue: JobStore,
         spool: Spool,
         threads: JobThreads,
@@ -59,6 +63,7 @@ class Intake:
         reply_within: float,
     ) -> None:
         self.machines = machines
+        self.serves = frozenset(machines if serves is None else serves)
         self.queue = queue
         self.spool = spool
         self.threads = threads
@@ -67,6 +72,8 @@ class Intake:
         self.inbox_root = state_dir / "inbox"
         self.reply_within = reply_within
         self.tasks: set[asyncio.Task[Any]] = set()
+        # Where the queue carries programs, one this spool lacks is read back from it (for requests).
+        self.fetch = ProgramFetch(queue, threads.work) if queue.shares_programs else None
 
     def _spawn(self, coro: Awaitable[T], name: str) -> asyncio.Task[T]:
         task: asyncio.Task[T] = asyncio.ensure_future(coro)
@@ -130,9 +137,21 @@ class Intake:
             if not matches(job, name):
                 continue
             data = await self.threads.work(self._spooled, job)
+            if data is None and self.fetch is not None and job.state is not JobState.DELIVERED:
+                data = await self._from_queue(job)  # another shard took it in
             if data is not None:
                 return QueuedProgram(data, job.filename, job.user, job.id)
         return None
+
+    async def _from_queue(self, job: Job) -> bytes | None:
+        """A job's program read back (checked) from the queue's database into the spool, for a request."""
+        assert self.fetch is not None
+        try:
+            await self.fetch(job, self.spool.program(job))
+        except DeliveryError as exc:
+            log.warning("%s: %s's program cannot be read for a request: %s", job.machine, job.id, exc.reason)
+            return None
+        return await self.threads.work(self._spooled, job)
 
     def _spooled(self, job: Job) -> bytes | None:
         for path in (self.spool.program(job), self.spool.kept(job)):
@@ -152,7 +171,8 @@ class Intake:
         return None
 
     async def _take(self, upload: Upload, holder: dict[str, Job]) -> UploadReply:
-        self.supervisor.processing[upload.machine] += 1
+        processing = self.supervisor.processing
+        processing[upload.machine] = processing.get(upload.machine, 0) + 1
         try:
             try:
                 job = await self.supervisor.q(
@@ -181,7 +201,7 @@ class Intake:
             )
             return await self._process(job, upload.check)
         finally:
-            self.supervisor.processing[upload.machine] -= 1
+            processing[upload.machine] -= 1
 
     async def _process(self, job: Job, check: UploadCheck | None = None) -> UploadReply:
         """RECEIVED -> validated and QUEUED, or REJECTED with the reason (the file kept in rejected/)."""
@@ -215,6 +235,7 @@ class Intake:
             log.warning("%s: %s (%s) rejected: %s", job.machine, job.id, job.filename, reason)
             return UploadReply(False, f"{job.id} rejected: {reason}", job.id)
         received.unlink(missing_ok=True)
+        program = self.spool.program(job)
         job, replaced = await self.supervisor.q(
             self.queue.accept,
             job.seq,
@@ -225,6 +246,7 @@ class Intake:
             estimate=verdict.estimate.as_dict() if verdict.estimate is not None else None,
             warnings=verdict.warnings,
             reason=_validated_reason(verdict),
+            program=program,  # stored with the job where the queue carries programs (PostgreSQL)
         )
         for old in replaced:
             log.info("%s: %s replaced by %s (same content)", job.machine, old.id, job.id)
@@ -232,6 +254,8 @@ class Intake:
             self.spool.discard(job)
             log.info("%s: %s skipped: %s", job.machine, job.id, job.reason)
             return UploadReply(True, f"{job.id} skipped: {job.reason}", job.id)
+        if job.machine not in self.serves:  # another shard delivers it, from the queue's copy
+            await self.threads.work(self.spool.discard, job)
         self.supervisor.wake(job.machine)
         seconds = (job.estimate or {}).get("seconds")
         estimate = f", estimated {seconds:.0f} s" if isinstance(seconds, (int, float)) else ""
@@ -277,9 +301,7 @@ class Intake:
 
     async def resume(self) -> None:
         """Jobs an earlier run left between arrival and the queue: finish them, or reject lost ones."""
-        for job in await self.threads.queue(
-            self.queue.list, states=(JobState.RECEIVED,), limit=10_000, newest_first=False
-        ):
+        for job in await self.threads.queue(self.queue.received_here):  # not other shards' uploads
             if job.machine not in self.machines:
                 continue
             if self.spool.received(job).is_file():

@@ -81,10 +81,18 @@ class JobService:
         self.spool = Spool(state / "jobs" / "spool")  # what it keeps per machine: the machine's transport
         self.backups_dir = state / "backups"
         self.queue: JobStore = job_store(config.gateway.queue, state)  # gateway file's `queue:`, else SQLite
+        # A shard's inbox takes jobs for the fleet's other machines too when the queue carries programs
+        # (PostgreSQL): their shard delivers them. On a SQLite queue it refuses them, saying where they go.
+        self.elsewhere = dict(config.jobs_elsewhere)
+        self.accepts: dict[str, JobsConfig] = {
+            **(self.elsewhere if self.queue.shares_programs else {}),
+            **self.machines,
+        }
         self.threads = JobThreads()
         self.delivery = DeliverySupervisor(self.queue, self.threads, JobPublisher(tree, self.machines))
         self.intake = Intake(
-            self.machines,
+            self.accepts,
+            serves=self.machines,
             queue=self.queue,
             spool=self.spool,
             threads=self.threads,
@@ -159,7 +167,8 @@ class JobService:
             )
             return None
         try:
-            accounts = Accounts.from_config(cfg, self.machines, self.environ)
+            refused = [] if self.queue.shares_programs else list(self.elsewhere)
+            accounts = Accounts.from_config(cfg, self.accepts, self.environ, elsewhere=refused)
         except ConfigError as exc:
             raise SinkError(f"FTP inbox: {exc}") from None
         if not len(accounts):
@@ -169,7 +178,7 @@ class JobService:
         return Inbox(
             cfg,
             root=self.intake.inbox_root,
-            machines=self.machines,
+            machines=self.accepts,
             accounts=accounts,
             logins=self.logins,
             submit=self.intake.submit,
@@ -181,9 +190,9 @@ class JobService:
     def _upload_check(self, machine: str) -> UploadCheck | None:
         """A check for an upload as it streams in; None where the reader is pure Python (it would hold the
         GIL for seconds: the validation process does that work instead)."""
-        if compiled.plain is None or machine not in self.machines:
+        if compiled.plain is None or machine not in self.accepts:
             return None
-        return UploadCheck(self.machines[machine].validation, self.threads.checking)
+        return UploadCheck(self.accepts[machine].validation, self.threads.checking)
 
     async def run(self) -> None:
         """Deliver and publish until cancelled (the delivery supervisor)."""

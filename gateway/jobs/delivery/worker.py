@@ -15,6 +15,10 @@ Otherwise what the interrupted delivery left is removed and the job is sent agai
 How a program travels is the transport's business (transport.py); this module
 knows jobs, attempts, backoff and auto-start, and nothing of FTP.
 
+A program missing from this process's spool (a job another shard's inbox took in) is read from the job
+queue's database when the queue carries programs (`fetch`, delivery/fetch.py), checked against the
+SHA-256 validation gave it, before it goes.
+
 Shards (docs/scaling.md): given a `lease` (gateway/shards/holder.py), the worker acts only while
 its process holds the machine's lease, and presents the lease's fencing token with the claim
 and with its outcome, so that the queue refuses a worker whose process lost the machine.
@@ -69,6 +73,9 @@ class LeaseView(Protocol):
     def fence(self, machine: str) -> Fence | None: ...
 
 
+# Writes a job's stored program to a path, checked (delivery/fetch.py ProgramFetch); raises DeliveryError.
+FetchProgram = Callable[[Job, Path], Awaitable[None]]
+
 # Runs a JobStore method off the event loop (and tells the publisher something may have changed).
 QueueCall = Callable[..., Awaitable[Any]]
 
@@ -88,6 +95,7 @@ class DeliveryWorker:
         *,
         autostart: AutoStarter | None = None,
         lease: LeaseView | None = None,
+        fetch: FetchProgram | None = None,
     ) -> None:
         self.machine = machine
         self.config = config
@@ -98,6 +106,7 @@ class DeliveryWorker:
         self.transport = transport
         self.autostart = autostart
         self.lease = lease  # None: this process owns the machine (no shards)
+        self.fetch = fetch  # None: programs are only in the spool (the SQLite queue)
         self._wake = asyncio.Event()
 
     def wake(self) -> None:
@@ -175,6 +184,8 @@ class DeliveryWorker:
             self.publisher.progress(job, progress.sent, total, progress_record(progress))
 
         try:
+            if self.fetch is not None and not program.path.is_file():
+                await self.fetch(job, program.path)  # taken in by another shard: from the database
             if not program.path.is_file():
                 missing = f"the program file {program.path} is missing from the spool"
                 raise DeliveryError(missing, permanent=True)

@@ -29,6 +29,9 @@ def _dummy_hash() -> str:
 class Account:
     user: str
     machines: frozenset[str]  # the machines this login may use (already intersected with the served ones)
+    # Machines this login could use that another shard serves, on a queue that cannot take their jobs here
+    # (SQLite): named in the refusal, so that the sender knows where to go.
+    elsewhere: frozenset[str] = frozenset()
     password_hash: str | None = None
     password: str | None = None  # from the environment
     anonymous: bool = False
@@ -52,11 +55,18 @@ class Accounts:
 
     @classmethod
     def from_config(
-        cls, config: InboxConfig, machines: Collection[str], environ: Mapping[str, str] | None = None
+        cls,
+        config: InboxConfig,
+        machines: Collection[str],
+        environ: Mapping[str, str] | None = None,
+        *,
+        elsewhere: Collection[str] = (),
     ) -> Accounts:
-        """`machines` are those with a jobs section. ConfigError if a password_env is not set."""
+        """`machines` are those with a jobs section the inbox takes jobs for; `elsewhere`, those another
+        shard serves that it does not. ConfigError if a password_env is not set."""
         env = os.environ if environ is None else environ
         served = sorted(machines)
+        others = sorted(set(elsewhere) - set(machines))
         out: dict[str, Account] = {}
         issues: list[ConfigIssue] = []
         for index, acc in enumerate(config.accounts):
@@ -74,13 +84,15 @@ class Accounts:
                         )
                     )
                     continue
-            out[acc.user] = Account(acc.user, allowed, acc.password_hash, password)
+            refused = frozenset(m for m in others if machines_allowed(acc.machines, m))
+            out[acc.user] = Account(acc.user, allowed, refused, acc.password_hash, password)
         if issues:
             raise ConfigError(issues)
         anonymous = None
         if config.anonymous:
             allowed = frozenset(m for m in served if machines_allowed(config.anonymous_machines, m))
-            anonymous = Account("anonymous", allowed, anonymous=True)
+            refused = frozenset(m for m in others if machines_allowed(config.anonymous_machines, m))
+            anonymous = Account("anonymous", allowed, refused, anonymous=True)
         return cls(out, anonymous)
 
     def __len__(self) -> int:

@@ -101,10 +101,11 @@ def check_file_name(name: str) -> str:
     return name
 
 
-def resolve(cwd: str, argument: str, machines: Collection[str]) -> InboxPath:
+def resolve(cwd: str, argument: str, machines: Collection[str], elsewhere: Collection[str] = ()) -> InboxPath:
     """Where `argument` (absolute, or relative to `cwd`) points, for a login that may use `machines`.
 
-    `cwd` is a virtual path this module produced earlier. Raises PathRefused.
+    `cwd` is a virtual path this module produced earlier; `elsewhere` names machines another shard
+    serves, whose jobs this inbox cannot take (the refusal says so). Raises PathRefused.
     """
     if "\x00" in argument or "\r" in argument or "\n" in argument:
         raise PathRefused("control characters in the path", "501")
@@ -120,6 +121,12 @@ def resolve(cwd: str, argument: str, machines: Collection[str]) -> InboxPath:
         return InboxPath("root")
     machine, rest = parts[0], parts[1:]
     if machine not in machines:
+        if machine in elsewhere:
+            raise PathRefused(
+                f"/{machine}: {machine} is served by another shard, and this gateway's job queue is its own"
+                " (SQLite): send its jobs to that shard's inbox, or give the shards one PostgreSQL queue"
+                " (queue: postgresql://…), whose inboxes take jobs for every machine"
+            )
         raise PathRefused(f"/{machine}: no such machine folder")
     if not rest:
         return InboxPath("machine", machine)

@@ -368,7 +368,8 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
     def _where(self, connection: Connection, rest: str | PurePosixPath) -> InboxPath:
         session = session_of(connection)
         assert session is not None and session.account is not None
-        place = resolve(str(connection.current_directory), str(rest), session.account.machines)
+        account = session.account
+        place = resolve(str(connection.current_directory), str(rest), account.machines, account.elsewhere)
         real = self.root
         for part in place.parts:
             real = real / part

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 from pathlib import Path
 
 from gateway.jobs.queue.base import JobStore
@@ -18,5 +19,6 @@ def job_store(queue: str | None, state_dir: Path) -> JobStore:
     if queue is not None:  # checked by the gateway file's model: a PostgreSQL URL
         from gateway.jobs.queue.postgres import PostgresJobQueue
 
-        return PostgresJobQueue(queue)
+        # Which intake received a job: this host's state directory (each shard has its own).
+        return PostgresJobQueue(queue, received_by=f"{socket.gethostname()}:{state_dir.resolve()}")
     return JobQueue(sqlite_path(state_dir))

@@ -12,12 +12,17 @@ a worker thread (gateway/jobs/threads.py).
 fencing token of the claimer's lease on the machine; a store that holds leases checks it in
 the same transaction and refuses a stale one (JobError). The SQLite store holds no leases
 and refuses a fence: one process owns a SQLite queue.
+
+`shares_programs`: the PostgreSQL store also carries each queued job's program (given to `accept`,
+read back with `program_chunks`, gone when the job is DELIVERED), so that any shard delivers a job
+any shard took in; the SQLite store leaves programs to the spool of its one process.
 """
 
 from __future__ import annotations
 
 import builtins
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any, Literal, Protocol, Self
 
 from gateway.jobs.queue.records import Job, JobState, Transition
@@ -26,6 +31,8 @@ from gateway.shards.fence import Fence
 
 class JobStore(Protocol):
     """The durable queue, as the job service, the delivery workers and `cnc-gateway jobs` use it."""
+
+    shares_programs: bool  # True: the queue carries the programs (PostgreSQL), any shard reads them
 
     def open(self) -> Self: ...
 
@@ -61,7 +68,12 @@ class JobStore(Protocol):
         estimate: dict[str, Any] | None = None,
         warnings: Sequence[str] = (),
         reason: str = "",
+        program: Path | None = None,
     ) -> tuple[Job, builtins.list[Job]]: ...
+
+    def program_chunks(self, seq: int) -> Iterator[bytes]: ...
+
+    def received_here(self, limit: int = 10_000) -> builtins.list[Job]: ...
 
     def head(self, machine: str) -> Job | None: ...
 

@@ -17,16 +17,28 @@ write it at once, so:
 - Times are the database's TIMESTAMPTZ; `data_version` is the revision (it also moves with
   this process's own writes, which only wakes the watcher once more).
 - Database errors are JobStoreError (a StoreError and a JobError), through gateway/postgres.py.
+
+The queue also carries each accepted job's program (schema 2, `job_programs`), so that the shard
+that serves a machine can deliver a job another shard's inbox took in (docs/scaling.md). The bytes
+go in as rows of PROGRAM_CHUNK bytes (bytea), in the transaction that queues the job, and come back
+a chunk at a time: a 50 MB program is never whole in memory. Chunked rows rather than large
+objects: they are ordinary rows (deleted with a DELETE in the transaction that delivers the job,
+never orphaned in pg_largeobject, dumped with the table, no large-object privileges to grant), and
+psycopg has no large-object API, so large objects would be read by offset through lo_get anyway.
+The chunks are written before the revision row is locked: the other writers (claims on every
+shard) do not wait while a large program goes in.
 """
 
 from __future__ import annotations
 
 import builtins
+import hashlib
 import json
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any, Literal, Self
 
 from gateway.errors import JobError, JobStoreError, StaleFence
@@ -78,7 +90,18 @@ MIGRATIONS = (
     CREATE TABLE meta (key TEXT PRIMARY KEY, value BIGINT NOT NULL);
     INSERT INTO meta (key, value) VALUES ('rev', 0);
     """,
+    # 2: programs where every shard reads them; which process's intake received each job
+    """
+    CREATE TABLE job_programs (
+        seq BIGINT NOT NULL,
+        part INTEGER NOT NULL,
+        data BYTEA NOT NULL,
+        PRIMARY KEY (seq, part)
+    );
+    ALTER TABLE jobs ADD COLUMN received_by TEXT NOT NULL DEFAULT '';
+    """,
 )
+PROGRAM_CHUNK = 1024 * 1024  # bytes per job_programs row: what is in memory at once, either way
 
 _COLUMNS = frozenset(Job.__slots__) - {"seq", "rev"}  # what _move may set
 
@@ -123,11 +146,17 @@ def _transition(row: Row) -> Transition:
 
 
 class PostgresJobQueue:
-    """The queue in a PostgreSQL database: `with PostgresJobQueue(url) as q:` (or open()/close())."""
+    """The queue in a PostgreSQL database: `with PostgresJobQueue(url) as q:` (or open()/close()).
 
-    def __init__(self, url: str, *, clock: Any = time.time) -> None:
+    `received_by` names this process's intake (its host and state directory) on the jobs it receives,
+    so that after a restart it resumes its own uploads and leaves other shards' alone."""
+
+    shares_programs = True  # the queue carries the programs: any shard can deliver any job
+
+    def __init__(self, url: str, *, clock: Any = time.time, received_by: str = "") -> None:
         self.db = Database(url, noun="job queue", error=JobStoreError)
         self.clock = clock
+        self.received_by = received_by
 
     def __str__(self) -> str:
         return str(self.db)
@@ -155,8 +184,12 @@ class PostgresJobQueue:
     def _write(self) -> Iterator[Transaction]:
         """One write transaction, the queue's revision row locked first (see the module's docstring)."""
         with self.db.transaction() as tx:
-            tx.execute("SELECT value FROM meta WHERE key = 'rev' FOR UPDATE")
+            self._lock_revision(tx)
             yield tx
+
+    @staticmethod
+    def _lock_revision(tx: Transaction) -> None:
+        tx.execute("SELECT value FROM meta WHERE key = 'rev' FOR UPDATE")
 
     @staticmethod
     def _next_rev(tx: Transaction) -> int:
@@ -233,10 +266,22 @@ class PostgresJobQueue:
             seq = int(
                 tx.scalar(
                     'INSERT INTO jobs (machine, filename, "user", origin, size, sha256, priority, state,'
-                    " reason, received_at, updated_at, rev)"
-                    " VALUES (%s, %s, %s, %s, %s, %s, %s, 'RECEIVED', '', %s, %s, %s)"
+                    " reason, received_at, updated_at, rev, received_by)"
+                    " VALUES (%s, %s, %s, %s, %s, %s, %s, 'RECEIVED', '', %s, %s, %s, %s)"
                     " RETURNING seq",
-                    (machine, filename, user, origin, size, sha256, priority, now, now, rev),
+                    (
+                        machine,
+                        filename,
+                        user,
+                        origin,
+                        size,
+                        sha256,
+                        priority,
+                        now,
+                        now,
+                        rev,
+                        self.received_by,
+                    ),
                 )
             )
             tx.execute(
@@ -261,10 +306,15 @@ class PostgresJobQueue:
         estimate: dict[str, Any] | None = None,
         warnings: Sequence[str] = (),
         reason: str = "",
+        program: Path | None = None,
     ) -> tuple[Job, builtins.list[Job]]:
-        """Validation passed: VALIDATED, then QUEUED, or REJECTED as a duplicate, in one transaction."""
+        """Validation passed: VALIDATED, then QUEUED, or REJECTED as a duplicate, in one transaction, with
+        the validated `program` (a file: its bytes, checked against `program_sha256`) stored with the job."""
         replaced: builtins.list[Job] = []
-        with self._write() as tx:
+        with self.db.transaction() as tx:
+            if program is not None:  # before the revision lock: see the module's docstring
+                self._store_program(tx, seq, program, program_size, program_sha256)
+            self._lock_revision(tx)
             job = self._move(
                 tx,
                 seq,
@@ -288,12 +338,57 @@ class PostgresJobQueue:
             if earlier and (duplicates == "skip" or any(e.state is S.SENDING for e in earlier)):
                 first = earlier[0]
                 reason = f"duplicate of {first.id} ({first.filename}), which is {first.state.value.lower()}"
+                tx.execute("DELETE FROM job_programs WHERE seq = %s", (seq,))
                 return self._move(tx, seq, S.REJECTED, reason, expect=(S.VALIDATED,)), []
             for old in earlier:
                 replaced.append(
                     self._move(tx, old.seq, S.CANCELLED, f"replaced by {job.id}", expect=(S.QUEUED,))
                 )
             return self._move(tx, seq, S.QUEUED, "", expect=(S.VALIDATED,), next_attempt_at=None), replaced
+
+    @staticmethod
+    def _store_program(tx: Transaction, seq: int, program: Path, size: int, sha256: str) -> None:
+        """The program's bytes as rows of PROGRAM_CHUNK, read from its file a chunk at a time."""
+        digest = hashlib.sha256()
+        total = 0
+        tx.execute("DELETE FROM job_programs WHERE seq = %s", (seq,))  # an earlier, interrupted accept
+        with program.open("rb") as f:
+            part = 0
+            while chunk := f.read(PROGRAM_CHUNK):
+                digest.update(chunk)
+                total += len(chunk)
+                tx.execute(
+                    "INSERT INTO job_programs (seq, part, data) VALUES (%s, %s, %s)", (seq, part, chunk)
+                )
+                part += 1
+        if total != size or digest.hexdigest() != sha256:
+            raise JobError(
+                f"{job_id(seq)}: the program {program} changed after validation"
+                f" ({total} bytes, SHA-256 {digest.hexdigest()}; validated: {size} bytes, {sha256})"
+            )
+
+    def program_chunks(self, seq: int) -> Iterator[bytes]:
+        """The stored program of job `seq`, a chunk at a time, each read in a transaction of its own (the
+        connection is free between chunks). JobError if none is stored. The caller checks the SHA-256."""
+        part = 0
+        while True:
+            with self.db.transaction() as tx:
+                data = tx.scalar("SELECT data FROM job_programs WHERE seq = %s AND part = %s", (seq, part))
+            if data is None:
+                if part == 0:
+                    raise JobError(f"{job_id(seq)} has no program in the job queue's database at {self}")
+                return
+            yield data
+            part += 1
+
+    def received_here(self, limit: int = 10_000) -> builtins.list[Job]:
+        """Jobs still RECEIVED that this process's intake took in (their uploads are in its spool)."""
+        with self.db.transaction() as tx:
+            rows = tx.all(
+                "SELECT * FROM jobs WHERE state = 'RECEIVED' AND received_by = %s ORDER BY seq LIMIT %s",
+                (self.received_by, limit),
+            )
+        return [_job(r) for r in rows]
 
     def head(self, machine: str) -> Job | None:
         """The job a machine's worker handles next: SENDING (after a crash) first, then by priority, FIFO."""
@@ -314,8 +409,11 @@ class PostgresJobQueue:
             return self._move(tx, seq, S.SENDING, reason, expect=(S.QUEUED,), attempts=job.attempts + 1)
 
     def delivered(self, seq: int, name: str, reason: str = "", *, fence: Fence | None = None) -> Job:
+        """SENDING -> DELIVERED; the stored program goes in the same transaction (its copy is on the
+        controller, and in the delivering process's spool where its machine keeps delivered programs)."""
         with self._write() as tx:
             self._fenced(tx, fence, self._get(tx, seq, lock=True), "record the delivery of")
+            tx.execute("DELETE FROM job_programs WHERE seq = %s", (seq,))
             return self._move(
                 tx,
                 seq,

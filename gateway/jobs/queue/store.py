@@ -24,7 +24,7 @@ import builtins
 import json
 import sqlite3
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -122,6 +122,7 @@ class JobQueue(SqliteFile):
     """The queue file. Open it with `with JobQueue(path) as q:` (or open()/close())."""
 
     noun = "job queue"
+    shares_programs = False  # one process's queue: its spool keeps the programs
     schema = _SCHEMA
     schema_version = SCHEMA_VERSION
     error = JobError
@@ -213,10 +214,12 @@ class JobQueue(SqliteFile):
         estimate: dict[str, Any] | None = None,
         warnings: Sequence[str] = (),
         reason: str = "",
+        program: Path | None = None,
     ) -> tuple[Job, list[Job]]:
         """Validation passed: VALIDATED, then QUEUED, or REJECTED as a duplicate, in one transaction.
 
-        Returns the job and the earlier jobs it replaced (now CANCELLED).
+        Returns the job and the earlier jobs it replaced (now CANCELLED). `program` is not stored: the
+        SQLite queue belongs to one process, whose spool keeps the program.
         """
         replaced: list[Job] = []
         with self._write() as db:
@@ -249,6 +252,14 @@ class JobQueue(SqliteFile):
                     self._move(db, old.seq, S.CANCELLED, f"replaced by {job.id}", expect=(S.QUEUED,))
                 )
             return self._move(db, seq, S.QUEUED, "", expect=(S.VALIDATED,), next_attempt_at=None), replaced
+
+    def program_chunks(self, seq: int) -> Iterator[bytes]:
+        """The SQLite queue keeps no programs (the spool does): JobError."""
+        raise JobError(f"{job_id(seq)}: the job queue {self.path} keeps no programs; they wait in the spool")
+
+    def received_here(self, limit: int = 10_000) -> list[Job]:
+        """Jobs still RECEIVED: all of them (one process takes uploads into a SQLite queue)."""
+        return self.list(states=(S.RECEIVED,), limit=limit, newest_first=False)
 
     def head(self, machine: str) -> Job | None:
         """The job a machine's worker handles next: SENDING (after a crash) first, then by priority, FIFO."""

@@ -373,26 +373,35 @@ class Api:
         """multipart/form-data: `machine`, `file`, optional `name` (on the controller) and `priority`."""
         jobs = self._jobs()
         machine_name = req.form.get("machine", "")
-        machine = self._machine(machine_name) if machine_name else None
+        # A machine of the fleet that another shard serves is not in this tree; on a shared (PostgreSQL)
+        # queue it is among the job machines all the same: its job is validated and queued here.
+        elsewhere = machine_name not in self.tree.machines and machine_name in jobs.job_machines
+        machine = self._machine(machine_name) if machine_name and not elsewhere else None
         ctx = caller.context()
         target = f"Jobs/{(req.form.get('name') or (req.files[0].filename if req.files else ''))[:80]}"
+
+        def audit(target: str, new: str, error: RequestError | None) -> None:
+            if machine is not None:
+                machine.audit("job", target, ctx, new=new, error=error)
+            elif elsewhere:
+                self._audit_gateway("job", target, caller, error=error, machine=machine_name, new=new)
+
         try:
-            if machine is None:
+            if not machine_name:
                 raise MalformedRequest("multipart form field `machine` is missing")
-            if machine.name not in jobs.job_machines:
-                raise InvalidArgument(f"{machine.name} takes no jobs (its mapping has no jobs section)")
+            if machine_name not in jobs.job_machines:
+                raise InvalidArgument(f"{machine_name} takes no jobs (its mapping has no jobs section)")
             if len(req.files) != 1:
                 raise MalformedRequest("send exactly one file, in the multipart field `file`")
             upload = req.files[0]
             name = req.form.get("name") or upload.filename
             priority = _int(req.form.get("priority", "0"), "priority")
-            self._may_operate_jobs(caller, f"submit jobs to {machine.name}")
+            self._may_operate_jobs(caller, f"submit jobs to {machine_name}")
         except RequestError as exc:
-            if machine is not None:
-                machine.audit("job", target, ctx, new=as_text(["submit"]), error=exc)
+            audit(target, as_text(["submit"]), exc)
             raise
         reply = await jobs.submit_file(
-            machine.name,
+            machine_name,
             name,
             upload.path,
             size=upload.size,
@@ -403,10 +412,10 @@ class Api:
         )
         body = {"ok": reply.ok, "message": reply.message, "job_id": reply.job_id}
         if reply.ok:
-            machine.audit("job", f"Jobs/{name[:80]}", ctx, new=as_text(["submit", reply.job_id]))
+            audit(f"Jobs/{name[:80]}", as_text(["submit", reply.job_id]), None)
             return json_response(body, 201)
         refusal = InvalidArgument(reply.message)  # validation's verdict: the job is REJECTED, with its reason
-        machine.audit("job", f"Jobs/{name[:80]}", ctx, new=as_text(["submit", reply.job_id]), error=refusal)
+        audit(f"Jobs/{name[:80]}", as_text(["submit", reply.job_id]), refusal)
         return json_response({**body, "error": {"status": refusal.status, "reason": reply.message}}, 422)
 
     async def retry(self, req: HttpRequest, caller: Caller) -> HttpResponse:
@@ -550,19 +559,22 @@ class Api:
         error: RequestError | None,
         at: datetime | None = None,
         started: float | None = None,
+        machine: str = GATEWAY,
+        new: str | None = None,
     ) -> None:
-        """An audit entry for a change to the gateway itself, or one refused before it named a machine."""
+        """An audit entry for a change to the gateway itself, or one refused before it named a machine (or
+        for a job sent to a machine of the fleet that another shard serves: `machine`)."""
         self.tree.audit(
             AuditEntry(
                 at or utcnow(),
                 kind,
-                GATEWAY,
+                machine,
                 target,
                 "http",
                 caller.user,
                 caller.role,
                 None,
-                None,
+                new,
                 "Good" if error is None else error.status,
                 "" if error is None else error.reason,
                 0.0 if started is None else time.monotonic() - started,

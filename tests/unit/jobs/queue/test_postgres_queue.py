@@ -151,7 +151,7 @@ def test_the_schema_is_versioned_and_a_newer_one_is_refused(postgres_url: str) -
             "SELECT version FROM schema_versions WHERE component = %s", (COMPONENT,)
         ).fetchone() == (len(MIGRATIONS),)
         conn.execute("UPDATE schema_versions SET version = 99 WHERE component = %s", (COMPONENT,))
-    with pytest.raises(JobError, match=r"schema 99, from a newer cnc-gateway .*knows schema 1"):
+    with pytest.raises(JobError, match=r"schema 99, from a newer cnc-gateway .*knows schema 2"):
         PostgresJobQueue(postgres_url).open()
 
 
