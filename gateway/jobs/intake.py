@@ -301,7 +301,8 @@ class Intake:
 
     async def resume(self) -> None:
         """Jobs an earlier run left between arrival and the queue: finish them, or reject lost ones."""
-        for job in await self.threads.queue(self.queue.received_here):  # not other shards' uploads
+        # This intake's uploads, not other shards' (on a shared queue).
+        for job in await self.threads.queue(self.queue.received_here, sorted(self.serves)):
             if job.machine not in self.machines:
                 continue
             if self.spool.received(job).is_file():

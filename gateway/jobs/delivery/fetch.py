@@ -12,6 +12,7 @@ when the database cannot be read.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -20,6 +21,8 @@ from typing import Any
 from gateway.errors import DeliveryError, JobError, JobStoreError
 from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.records import Job
+
+log = logging.getLogger("gateway.jobs.delivery")
 
 # Runs blocking file and database work off the event loop (JobThreads.work).
 Work = Callable[..., Awaitable[Any]]
@@ -67,3 +70,6 @@ class ProgramFetch:
                 permanent=True,
             )
         os.replace(temp, path)
+        log.info(
+            "%s: %s's program read from the job queue (%d bytes, SHA-256 checked)", job.machine, job.id, size
+        )

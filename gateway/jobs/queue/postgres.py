@@ -381,12 +381,16 @@ class PostgresJobQueue:
             yield data
             part += 1
 
-    def received_here(self, limit: int = 10_000) -> builtins.list[Job]:
-        """Jobs still RECEIVED that this process's intake took in (their uploads are in its spool)."""
+    def received_here(self, serves: Sequence[str] = (), limit: int = 10_000) -> builtins.list[Job]:
+        """Jobs still RECEIVED that this process's intake took in (their uploads are in its spool), and
+        those of the machines it `serves` received before intakes were named (schema 1: each shard's
+        inbox took only its own machines' jobs)."""
         with self.db.transaction() as tx:
             rows = tx.all(
-                "SELECT * FROM jobs WHERE state = 'RECEIVED' AND received_by = %s ORDER BY seq LIMIT %s",
-                (self.received_by, limit),
+                "SELECT * FROM jobs WHERE state = 'RECEIVED'"
+                " AND (received_by = %s OR (received_by = '' AND machine = ANY(%s)))"
+                " ORDER BY seq LIMIT %s",
+                (self.received_by, list(serves), limit),
             )
         return [_job(r) for r in rows]
 

@@ -257,7 +257,7 @@ class JobQueue(SqliteFile):
         """The SQLite queue keeps no programs (the spool does): JobError."""
         raise JobError(f"{job_id(seq)}: the job queue {self.path} keeps no programs; they wait in the spool")
 
-    def received_here(self, limit: int = 10_000) -> list[Job]:
+    def received_here(self, serves: Sequence[str] = (), limit: int = 10_000) -> list[Job]:
         """Jobs still RECEIVED: all of them (one process takes uploads into a SQLite queue)."""
         return self.list(states=(S.RECEIVED,), limit=limit, newest_first=False)
 

@@ -95,7 +95,11 @@ def users_config() -> list[dict[str, str]]:
 
 
 @asynccontextmanager
-async def web_gateway(tmp_path: Path, *, speed: float = 20.0, **gateway: Any) -> AsyncIterator[WebRig]:
+async def web_gateway(
+    tmp_path: Path, *, speed: float = 20.0, elsewhere: tuple[str, ...] = (), **gateway: Any
+) -> AsyncIterator[WebRig]:
+    """The gateway with its console over a simulator; `elsewhere`: machines of the fleet that another shard
+    serves (with the simulator's jobs section), as `shard:` leaves them in the configuration."""
     sim_port, ftp_port, port, http_port = free_port(), free_port(), free_port(), free_port()
     state = tmp_path / "state"
     settings: dict[str, Any] = {
@@ -113,7 +117,10 @@ async def web_gateway(tmp_path: Path, *, speed: float = 20.0, **gateway: Any) ->
     assert mapping.jobs is not None
     jobs = mapping.jobs.model_copy(update={"retry": mapping.jobs.retry.model_copy(update={"initial": 0.2})})
     config = Config(
-        GatewayConfig.model_validate(settings), (mapping.model_copy(update={"jobs": jobs}),), tmp_path
+        GatewayConfig.model_validate(settings),
+        (mapping.model_copy(update={"jobs": jobs}),),
+        tmp_path,
+        jobs_elsewhere=dict.fromkeys(elsewhere, jobs),
     )
     async with (
         Simulator(opcua_port=sim_port, ftp_port=ftp_port, speed=speed, store=tmp_path / "store") as sim,
