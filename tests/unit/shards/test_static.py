@@ -57,6 +57,10 @@ def test_a_gateway_file_with_a_shard_loads_only_its_machines(tmp_path: Path) -> 
     assert seen == [["fanuc-sim", "laser-sim"], ["haas-sim"]]
     config = load([gateway_file(tmp_path, "[laser-sim]")], environ={})
     assert [m.machine for m in config.machines] == ["laser-sim"]
+    with_jobs = {m.machine for m in load([gateway_file(tmp_path, "null")], environ={}).machines if m.jobs}
+    # The jobs sections of the others' machines stay, for an inbox on a shared queue (docs/scaling.md).
+    assert set(config.jobs_elsewhere) == with_jobs - {"laser-sim"}
+    assert not load([gateway_file(tmp_path, "null")], environ={}).jobs_elsewhere
     config = load([gateway_file(tmp_path, "${CNC_SHARD}")], environ={"CNC_SHARD": "2/2"})
     assert [m.machine for m in config.machines] == ["haas-sim"]
     assert sorted(m.machine for m in load([gateway_file(tmp_path, "null")], environ={}).machines) == fleet

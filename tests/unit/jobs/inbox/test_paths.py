@@ -113,3 +113,11 @@ def test_whatever_a_client_sends_stays_inside_the_inbox(cwd: str, arg: str) -> N
     assert real == str(root) or real.startswith(str(root) + os.sep)
     assert all(part not in ("..", ".", "") and "/" not in part for part in place.parts)
     assert place.machine is None or place.machine in MACHINES
+
+
+def test_a_machine_another_shard_serves_is_refused_saying_so() -> None:
+    with pytest.raises(PathRefused, match=r"/press: press is served by another shard.*queue: postgresql://"):
+        resolve("/", "/press/part.nc", MACHINES, elsewhere={"press"})
+    with pytest.raises(PathRefused, match="/drill: no such machine folder"):
+        resolve("/", "/drill/part.nc", MACHINES, elsewhere={"press"})
+    assert resolve("/", "/laser/part.nc", MACHINES, elsewhere={"press"}).machine == "laser"
