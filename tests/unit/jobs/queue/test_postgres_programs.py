@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tracemalloc
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -14,6 +15,7 @@ import psycopg
 import pytest
 
 from gateway.errors import JobError
+from gateway.jobs.delivery.fetch import ProgramFetch
 from gateway.jobs.queue import postgres
 from gateway.jobs.queue.postgres import COMPONENT, MIGRATIONS, PostgresJobQueue
 from gateway.jobs.queue.records import JobState
@@ -135,3 +137,28 @@ def test_a_schema_1_database_is_migrated_with_its_jobs(postgres_url: str, tmp_pa
         conn.execute("UPDATE schema_versions SET version = 3 WHERE component = %s", (COMPONENT,))
     with pytest.raises(JobError, match=r"schema 3, from a newer cnc-gateway \(this one knows schema 2\)"):
         PostgresJobQueue(postgres_url).open()
+
+
+def test_a_large_program_is_never_whole_in_memory(queue: PostgresJobQueue, tmp_path: Path) -> None:
+    """16 MiB stored and read back (to a file, checked) with at most a few 1 MiB chunks allocated at once."""
+    path, digest = a_program(tmp_path, 16 * 1024 * 1024)
+    size = path.stat().st_size
+    job = queue.receive("laser", "big.nc", size, digest)
+    tracemalloc.start()
+    try:
+        job, _ = queue.accept(
+            job.seq, duplicates="skip", program_size=size, program_sha256=digest, program=path
+        )
+        stored = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        out = tmp_path / "fetched.program"
+        ProgramFetch(queue, _no_loop).fetch(job, out)
+        fetched = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert out.stat().st_size == size
+    assert stored < 6 * postgres.PROGRAM_CHUNK and fetched < 6 * postgres.PROGRAM_CHUNK, (stored, fetched)
+
+
+async def _no_loop(*args: object) -> None:  # ProgramFetch.fetch is called directly above
+    raise AssertionError("not used")
