@@ -118,7 +118,7 @@ def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
         return None
     from gateway.alarms.service import AlarmService
 
-    return AlarmService(tree, config.mappings, config.state_dir)
+    return AlarmService(tree, config.mappings, config.state_dir, config.gateway.alarm_history)
 
 
 class Gateway:

@@ -54,6 +54,11 @@ class GatewayConfig(Sectioned):
         " queue's), so that every shard of a fleet writes one trail; absent: a SQLite file in the state"
         " directory",
     )
+    alarm_history: str | None = Field(
+        default=None,
+        description="The alarm history: a PostgreSQL database (postgresql://user@host/db; it may be the"
+        " queue's), one for every shard of a fleet; absent: a SQLite file in the state directory",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
     inbox: InboxConfig = Field(
         default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
@@ -113,6 +118,11 @@ class GatewayConfig(Sectioned):
     @classmethod
     def _audit(cls, audit: str | None) -> str | None:
         return None if audit is None else check_queue_url(audit, "audit")
+
+    @field_validator("alarm_history")
+    @classmethod
+    def _alarm_history(cls, url: str | None) -> str | None:
+        return None if url is None else check_queue_url(url, "alarm_history")
 
     @field_validator("roles")
     @classmethod
