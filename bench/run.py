@@ -23,7 +23,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from bench.context import Context, Settings
-from bench.procs import load_average
+from bench.procs import ROOT, load_average
 from bench.report import Results, render
 from bench.scenarios import (
     baselines,
@@ -142,6 +142,18 @@ def _override(settings: Settings, args: argparse.Namespace) -> None:
         settings.dnc_gateways = [(label, path) for label, path in args.dnc_gateways]
 
 
+def compile_sources() -> str:
+    """Write the byte code of the gateway's and the simulator's modules, as installing a wheel does.
+
+    With PYTHONDONTWRITEBYTECODE set (these machines set it) an editable install never writes it, and
+    every process the bench starts compiled some 170 modules from source first: 0.2-0.4 s of the
+    gateway's start-up that an installed gateway does not spend. Modules already current are left."""
+    import compileall
+
+    ok = all(compileall.compile_dir(ROOT / folder, quiet=1, workers=0) for folder in ("gateway", "simulator"))
+    return "current" if ok else "some modules did not compile (their processes compile them at start)"
+
+
 async def main(args: argparse.Namespace) -> int:
     settings = Settings.quick_run() if args.quick else Settings.full()
     settings.profile = args.profile
@@ -155,6 +167,9 @@ async def main(args: argparse.Namespace) -> int:
         f"cnc-gateway benchmark ({'quick' if settings.quick else 'full'}); work directory {workdir}",
         flush=True,
     )
+    compiled = compile_sources()
+    print(f"byte code of gateway/ and simulator/: {compiled}", flush=True)
+    results.details["byte_code"] = compiled
     try:
         for name in args.only or list(SCENARIOS):
             print(f"\n== {name}", flush=True)

@@ -21,7 +21,7 @@ from collections.abc import Awaitable, Callable, Coroutine
 from contextlib import AsyncExitStack
 from typing import TYPE_CHECKING, Any, Self, TypeVar, overload
 
-from gateway.audit.store import audit_path
+from gateway.audit.tables import where_of
 from gateway.audit.trail import AuditTrail
 from gateway.auth.ratelimit import LoginLimiter
 from gateway.commands.runner import install_commands
@@ -118,7 +118,7 @@ def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
         return None
     from gateway.alarms.service import AlarmService
 
-    return AlarmService(tree, config.mappings, config.state_dir)
+    return AlarmService(tree, config.mappings, config.state_dir, config.gateway.alarm_history)
 
 
 class Gateway:
@@ -130,7 +130,7 @@ class Gateway:
         self.tree = VariableTree(config.definitions())
         configure_access(config, self.tree)
         retention = config.gateway.access.audit_retention
-        self.audit = AuditTrail(audit_path(config.state_dir), retention_days=retention)
+        self.audit = AuditTrail(where_of(config.gateway.audit, config.state_dir), retention_days=retention)
         self.tree.audit_sinks.append(self.audit.record)
         mappings = config.mappings
         install_commands(self.tree, mappings)  # the commands as Commands/ methods, before the sinks see them

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from gateway.alarms.config import AlarmsConfig
 from gateway.alarms.records import AlarmChange, AlarmRecord, Kind, Quality
 from gateway.alarms.sources import Reading, diff, source_for
-from gateway.alarms.store import AlarmStore
+from gateway.alarms.store import AlarmHistory
 from gateway.errors import AlarmStoreError, CallError, InvalidState, RequestError
 from gateway.model.audit import as_text
 from gateway.model.context import WriteContext
@@ -74,7 +74,7 @@ class AlarmManager:
         self,
         machine: Machine,
         config: AlarmsConfig,
-        store: AlarmStore,
+        store: AlarmHistory,
         db: DbCall,
         variables: Sequence[Any] = (),
     ) -> None:

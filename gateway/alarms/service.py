@@ -18,7 +18,7 @@ from typing import Any, Protocol, Self, TypeVar
 
 from gateway.alarms.config import AlarmsConfig
 from gateway.alarms.manager import AlarmManager, UnknownAlarm
-from gateway.alarms.store import AlarmStore, store_path
+from gateway.alarms.store import history_at
 from gateway.errors import AlarmStoreError, SinkError
 from gateway.model.context import WriteContext
 from gateway.model.tree import VariableTree
@@ -39,9 +39,15 @@ class AlarmsMapping(Protocol):
 
 
 class AlarmService:
-    def __init__(self, tree: VariableTree, mappings: Mapping[str, AlarmsMapping], state_dir: Path) -> None:
+    def __init__(
+        self,
+        tree: VariableTree,
+        mappings: Mapping[str, AlarmsMapping],
+        state_dir: Path,
+        database: str | None = None,
+    ) -> None:
         self.tree = tree
-        self.store = AlarmStore(store_path(state_dir))
+        self.store = history_at(database, state_dir)  # `database`: the gateway file's alarm_history
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="alarms-db")
         self.managers: dict[str, AlarmManager] = {
             name: AlarmManager(tree.machines[name], mapping.alarms, self.store, self.db, mapping.variables)

@@ -17,7 +17,7 @@ import sqlite3
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, Self
 
 from gateway.alarms.records import ActiveAlarm, AlarmRecord, Kind, iso, parse_iso
 from gateway.errors import AlarmStoreError
@@ -61,6 +61,50 @@ CREATE INDEX IF NOT EXISTS transitions_occurrence ON transitions (occurrence);
 
 def store_path(state_dir: Path) -> Path:
     return state_dir / FILE_NAME
+
+
+class AlarmHistory(Protocol):
+    """What the alarm managers and readers use: the SQLite file (AlarmStore) or PostgreSQL
+    (gateway/alarms/postgres.py), by what the gateway file's `alarm_history:` says."""
+
+    def open(self, *, create: bool = True) -> Self: ...
+
+    def close(self) -> None: ...
+
+    def apply(
+        self,
+        machine: str,
+        raised: Sequence[tuple[ActiveAlarm, int]],
+        cleared: Sequence[tuple[int, datetime, bool]],
+        ts: datetime,
+    ) -> list[int]: ...
+
+    def acknowledge(self, occurrence: int, ts: datetime, user: str, comment: str, retained: bool) -> bool: ...
+
+    def confirm(self, occurrence: int, ts: datetime, user: str, comment: str, retained: bool) -> bool: ...
+
+    def retained(self, machine: str) -> list[AlarmRecord]: ...
+
+    def history(
+        self,
+        machine: str | None = None,
+        since: datetime | None = None,
+        *,
+        active_only: bool = False,
+        limit: int = 1000,
+    ) -> list[AlarmRecord]: ...
+
+    def transitions(self, occurrence: int) -> list[dict[str, Any]]: ...
+
+
+def history_at(database: str | None, state_dir: Path) -> AlarmHistory:
+    """The gateway file's `alarm_history:` PostgreSQL database, else the SQLite file of the state
+    directory; not yet opened. psycopg is imported only for the first."""
+    if database is not None:
+        from gateway.alarms.postgres import PostgresAlarmStore
+
+        return PostgresAlarmStore(database)
+    return AlarmStore(store_path(state_dir))
 
 
 def _record(row: sqlite3.Row) -> AlarmRecord:

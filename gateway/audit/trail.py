@@ -1,4 +1,4 @@
-"""The audit trail: log every entry at once, store it in SQLite from a writer thread, in batches.
+"""The audit trail: log every entry at once, store it (SQLite or PostgreSQL) from a writer thread in batches.
 
 `record()` is called on the event loop for every write and method call. It
 logs one line (logger `gateway.audit`) and hands the entry to a bounded queue;
@@ -19,7 +19,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Self
 
-from gateway.audit.store import AuditStore
+from gateway.audit.tables import AuditTable, open_table
 from gateway.model.audit import AuditEntry
 
 log = logging.getLogger("gateway.audit")
@@ -41,9 +41,12 @@ _STOP = object()
 
 
 class AuditTrail:
-    """`async with AuditTrail(path) as trail: tree.audit_sinks.append(trail.record)`."""
+    """`async with AuditTrail(where) as trail: tree.audit_sinks.append(trail.record)`; `where` is the SQLite
+    file, or a PostgreSQL URL (gateway/audit/tables.py)."""
 
-    def __init__(self, path: Path, *, retention_days: int = 365, max_pending: int = MAX_PENDING) -> None:
+    def __init__(
+        self, path: Path | str, *, retention_days: int = 365, max_pending: int = MAX_PENDING
+    ) -> None:
         self.path = path
         self.retention_days = retention_days
         self.stored = 0
@@ -53,7 +56,7 @@ class AuditTrail:
         self._thread: threading.Thread | None = None
         self._ready: concurrent.futures.Future[None] = concurrent.futures.Future()
         self._drop_logged = 0
-        self._reader: AuditStore | None = None  # for query_audit, opened at its first use
+        self._reader: AuditTable | None = None  # for query_audit, opened at its first use
         self._reader_lock = threading.Lock()
 
     async def __aenter__(self) -> Self:
@@ -112,7 +115,7 @@ class AuditTrail:
         def read() -> list[AuditEntry]:
             with self._reader_lock:
                 if self._reader is None:
-                    self._reader = AuditStore(self.path, create=False)
+                    self._reader = open_table(self.path, create=False)
                 rows = self._reader.query(
                     machine=machine, user=user, origin=origin, kind=kind, since=since, limit=limit
                 )
@@ -124,7 +127,7 @@ class AuditTrail:
 
     def _run(self) -> None:
         try:
-            store = AuditStore(self.path)
+            store = open_table(self.path)
             pruned = store.prune(self.retention_days)
         except Exception as exc:  # noqa: BLE001 - any failure to open the trail is reported to __aenter__
             self._ready.set_exception(exc)

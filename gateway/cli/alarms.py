@@ -14,14 +14,13 @@ import argparse
 import json
 import sys
 from datetime import datetime
-from pathlib import Path
 from typing import Any, TextIO
 
 from gateway.alarms.records import AlarmRecord
-from gateway.alarms.store import AlarmStore, store_path
+from gateway.alarms.store import AlarmHistory, AlarmStore, history_at, store_path
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
-from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, load_config, resolve_state_dir
 from gateway.errors import AlarmStoreError
 
 
@@ -40,13 +39,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     q.set_defaults(handler=handle_list)
 
 
-def state_dir(args: argparse.Namespace) -> Path:
-    return resolve_state_dir(args, "alarms", store_path)
+def history(args: argparse.Namespace) -> AlarmHistory:
+    """The gateway file's `alarm_history:` database (-c), else the state directory's file."""
+    if args.state_dir is None:
+        config = load_config(args)
+        if config is not None:
+            return history_at(config.gateway.alarm_history, config.state_dir)
+    return AlarmStore(store_path(resolve_state_dir(args, "alarms", store_path)))
 
 
 def handle_list(args: argparse.Namespace) -> int:
-    path = store_path(state_dir(args))
-    store = AlarmStore(path)
+    store = history(args)
     try:
         store.open(create=False)
         records = store.history(args.machine, args.since, active_only=args.active, limit=args.limit)

@@ -1,7 +1,8 @@
 """`cnc-gateway audit list`: who wrote, called, acknowledged or confirmed what (the audit table).
 
-Reads `<state_dir>/audit.sqlite3` directly, so it works whether the gateway runs
-or not (entries reach the table within a moment of the write).
+Reads `<state_dir>/audit.sqlite3` directly, or the PostgreSQL database of the gateway file's `audit:`
+(-c), so it works whether the gateway runs or not (entries reach the table within a moment of the
+write).
 """
 
 from __future__ import annotations
@@ -11,10 +12,10 @@ import json
 import sys
 from pathlib import Path
 
-from gateway.audit.store import AuditStore, audit_path
+from gateway.audit.tables import open_table
 from gateway.cli.since import HELP as SINCE_HELP
 from gateway.cli.since import since_arg
-from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, audit_where
 from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
 from gateway.sqlite_file import iso
@@ -39,16 +40,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     q.set_defaults(handler=handle_list)
 
 
-def state_dir(args: argparse.Namespace) -> Path:
-    return resolve_state_dir(args, "audit", audit_path)
-
-
 def handle_list(args: argparse.Namespace) -> int:
-    path = audit_path(state_dir(args))
+    where = audit_where(args)
     try:
-        store = AuditStore(path, create=False)
+        store = open_table(where, create=False)
     except AuditStoreError as exc:
-        print(f"{exc}{'' if path.is_file() else ' (the gateway creates it when it starts)'}", file=sys.stderr)
+        missing = isinstance(where, Path) and not where.is_file()
+        print(f"{exc}{' (the gateway creates it when it starts)' if missing else ''}", file=sys.stderr)
         return 1
     try:
         rows = store.query(machine=args.machine, user=args.user, since=args.since, limit=args.limit)

@@ -35,9 +35,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gateway.audit.store import AuditStore, audit_path
+from gateway.audit.tables import describe, open_table
 from gateway.cli.check import report_config_error
-from gateway.cli.state_dir import add_state_dir_options, resolve_state_dir
+from gateway.cli.state_dir import add_state_dir_options, audit_where, resolve_state_dir
 from gateway.config.jobs import JobsConfig
 from gateway.config.loader import load
 from gateway.errors import AuditStoreError, ConfigError, DeliveryError
@@ -237,11 +237,12 @@ class Audit:
         self.machine = args.machine
         self.target = f"Programs.{method}"
         self.user = args.user or os_user()
-        self.path = audit_path(resolve_state_dir(args, "audit", audit_path))
+        self.path = audit_where(args)
         try:
-            self.store = AuditStore(self.path)
+            self.store = open_table(self.path)
         except (AuditStoreError, sqlite3.Error, OSError) as exc:
-            print(f"error: cannot open the audit trail {self.path} ({exc}); nothing changed", file=sys.stderr)
+            print(f"error: cannot open the audit trail {describe(self.path)} ({exc}); nothing changed",
+                  file=sys.stderr)  # fmt: skip
             raise SystemExit(2) from None
         self.time = datetime.now(UTC)
         self.started = time.monotonic()
@@ -264,7 +265,7 @@ class Audit:
         try:
             self.store.insert([entry])
         except (AuditStoreError, sqlite3.Error, OSError) as exc:
-            print(f"error: {entry.describe()}; not recorded in {self.path}: {exc}", file=sys.stderr)
+            print(f"error: {entry.describe()}; not recorded in {describe(self.path)}: {exc}", file=sys.stderr)
             raise SystemExit(1) from None
         finally:
             self.store.close()

@@ -65,3 +65,15 @@ def resolve_state_dir(
     chosen = max(found, key=last_written or (lambda d: store(d).stat().st_mtime))
     print(f"({label}: {store(chosen)}; -c FILE or --state-dir to choose)", file=sys.stderr)
     return chosen
+
+
+def audit_where(args: argparse.Namespace) -> Path | str:
+    """The audit table a command reads or writes: the gateway file's `audit:` database (-c), else the
+    SQLite file of the state directory `resolve_state_dir` finds."""
+    from gateway.audit.store import audit_path
+
+    if args.state_dir is None:
+        config = load_config(args)
+        if config is not None:
+            return config.gateway.audit or audit_path(config.state_dir)
+    return audit_path(resolve_state_dir(args, "audit", audit_path))

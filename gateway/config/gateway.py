@@ -48,6 +48,17 @@ class GatewayConfig(Sectioned):
         description="The job queue: a PostgreSQL database that shards share (postgresql://user@host/db;"
         " the password from PGPASSWORD or ~/.pgpass); absent: a SQLite file in the state directory",
     )
+    audit: str | None = Field(
+        default=None,
+        description="The audit trail's table: a PostgreSQL database (postgresql://user@host/db; it may be the"
+        " queue's), so that every shard of a fleet writes one trail; absent: a SQLite file in the state"
+        " directory",
+    )
+    alarm_history: str | None = Field(
+        default=None,
+        description="The alarm history: a PostgreSQL database (postgresql://user@host/db; it may be the"
+        " queue's), one for every shard of a fleet; absent: a SQLite file in the state directory",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
     inbox: InboxConfig = Field(
         default_factory=InboxConfig, description="The FTP inbox that nesting software drops programs into"
@@ -102,6 +113,16 @@ class GatewayConfig(Sectioned):
     @classmethod
     def _queue(cls, queue: str | None) -> str | None:
         return None if queue is None else check_queue_url(queue)
+
+    @field_validator("audit")
+    @classmethod
+    def _audit(cls, audit: str | None) -> str | None:
+        return None if audit is None else check_queue_url(audit, "audit")
+
+    @field_validator("alarm_history")
+    @classmethod
+    def _alarm_history(cls, url: str | None) -> str | None:
+        return None if url is None else check_queue_url(url, "alarm_history")
 
     @field_validator("roles")
     @classmethod

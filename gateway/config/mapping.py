@@ -24,6 +24,7 @@ from gateway.model.definitions import MachineDefinition, Range, VariableDefiniti
 from gateway.model.types import TypeSpec
 from gateway.settings.access import check_role_name
 from gateway.settings.base import Strict, TypeField
+from gateway.settings.compact import compact
 from gateway.settings.mtconnect import VariableMTConnect
 from gateway.settings.names import MACHINE_RE, RESERVED_SEGMENTS, SEGMENT_RE
 from gateway.settings.sections import Sectioned, located_errors, with_sections
@@ -132,6 +133,9 @@ class VariableSpec(Sectioned):
     @classmethod
     def _path(cls, path: str) -> str:
         return check_path(path)
+
+    def model_post_init(self, context: Any, /) -> None:
+        compact(self)  # a gateway holds one per variable, for as long as it runs
 
     @field_validator("source_type")
     @classmethod

@@ -64,17 +64,23 @@ class TypeSpec:
 
     @classmethod
     def parse(cls, text: str) -> TypeSpec:
+        """The type named `text`; one shared object per type (a mapping names the same few thousands of
+        times, and every variable keeps its own)."""
         name = text.strip()
         array = name.endswith("[]")
         if array:
             name = name[:-2].strip()
         try:
-            return cls(ALIASES[name], array)
+            key = (ALIASES[name], array)
         except KeyError:
             raise ValueError(
                 f"unknown data type {text!r}; expected one of {', '.join(sorted(ALIASES))}, "
                 "optionally followed by [] for an array"
             ) from None
+        held = _PARSED.get(key)
+        if held is None:
+            held = _PARSED[key] = cls(*key)
+        return held
 
     def __str__(self) -> str:
         return self.base.value + ("[]" if self.array else "")
@@ -168,6 +174,9 @@ def check_int_bounds(base: DataType, value: int) -> None:
     lo, hi = INT_BOUNDS[base]
     if not lo <= value <= hi:
         raise OutOfRange(f"{value} does not fit {base.value} ({lo}..{hi})")
+
+
+_PARSED: dict[tuple[DataType, bool], TypeSpec] = {}  # TypeSpec.parse's one object per type
 
 
 def parse_text(spec: TypeSpec, text: str) -> Any:

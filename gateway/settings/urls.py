@@ -35,15 +35,15 @@ def check_url(url: str) -> str:
     return url.rstrip("/")
 
 
-def check_queue_url(url: str) -> str:
-    """The gateway file's `queue:`: a PostgreSQL URL naming a database (libpq's form; the password from the
-    URL, or from PGPASSWORD / ~/.pgpass, which libpq reads itself)."""
+def check_queue_url(url: str, key: str = "queue") -> str:
+    """The gateway file's `queue:` (or `audit:`): a PostgreSQL URL naming a database (libpq's form; the
+    password from the URL, or from PGPASSWORD / ~/.pgpass, which libpq reads itself)."""
     parts = urlsplit(url)
     shown = _without_password(url)
     if parts.scheme not in ("postgresql", "postgres"):
         raise ValueError(
             f"{shown!r} must be a PostgreSQL URL, postgresql://user@host:5432/database"
-            " (leave queue out for the SQLite file in the state directory)"
+            f" (leave {key} out for the SQLite file in the state directory)"
         )
     try:
         parts.port  # noqa: B018 - a bad port raises here

@@ -18,6 +18,7 @@ leaves the comparison itself (value, status, timestamps) exactly as it was.
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 _MARK = "_cnc_gateway_keeps_reference"
@@ -43,9 +44,10 @@ class _KeptValues:
         return self.old_dvalue
 
 
-class _SlimMonitoredItem:
+class _SlimMonitoredItem(_KeptValues):
     """asyncua's MonitoredItemData with slots: the same fields, about a quarter of its memory
-    (a subscriber of 10,000 variables holds 10,000 of them, and as many values)."""
+    (a subscriber of 10,000 variables holds 10,000 of them, and as many values). It is its own
+    `mvalue` (the item's last two values), which asyncua keeps in an object of its own per item."""
 
     __slots__ = (
         "callback_handle",
@@ -60,15 +62,16 @@ class _SlimMonitoredItem:
     )
 
     def __init__(self) -> None:
+        super().__init__()
         self.client_handle: Any = None
         self.callback_handle: Any = None
         self.monitored_item_id: Any = None
         self.mode: Any = None
         self.read_value_id: Any = None
         self.filter: Any = None
-        self.mvalue = _KeptValues()
         self.where_clause_evaluator: Any = None
         self.queue_size: int = 0
+        self.mvalue: _KeptValues = self  # a slot, not a property: read on every change of the item
 
 
 def keep_written_values() -> None:
@@ -187,6 +190,122 @@ class SharedAttributeValue(SlimAttributeValue):
     """
 
     __slots__ = ()
+
+
+# The order in which asyncua's _add_nodeattributes adds the specified attributes (after NodeId, BrowseName
+# and NodeClass); UserWriteMask twice, as asyncua has it (the second, a UInt32, is the one kept).
+ATTRIBUTE_ORDER = (
+    "AccessLevel", "ArrayDimensions", "BrowseName", "ContainsNoLoops", "DataType", "Description",
+    "DisplayName", "EventNotifier", "Executable", "Historizing", "InverseName", "IsAbstract",
+    "MinimumSamplingInterval", "NodeClass", "NodeId", "Symmetric", "UserAccessLevel", "UserExecutable",
+    "UserWriteMask", "ValueRank", "WriteMask", "UserWriteMask", "DataTypeDefinition", "Value",
+)  # fmt: skip
+_RANKS: dict[int, int] = {}  # AttributeIds value -> position in a node's dict as asyncua fills it
+
+
+def _rank(key: Any) -> int:
+    if not _RANKS:
+        from asyncua import ua
+
+        for name in ("NodeId", "BrowseName", "NodeClass", *ATTRIBUTE_ORDER):
+            _RANKS.setdefault(int(getattr(ua.AttributeIds, name)), len(_RANKS))
+    return _RANKS.get(int(key), len(_RANKS))
+
+
+# asyncua's AttributeIds of the three name records (NodeId, BrowseName, DisplayName), and their types.
+_NODE_ID, _BROWSE_NAME, _DISPLAY_NAME = 1, 3, 4
+_NAME_TYPES = {_NODE_ID: 17, _BROWSE_NAME: 20, _DISPLAY_NAME: 21}  # VariantType NodeId, QualifiedName, ...
+
+
+class NodeAttributes(dict[Any, Any]):
+    """A node's attribute records: its own in the dict itself, its constant ones in a dict it shares
+    with every node of the same shape, and its three name records made when first looked up.
+
+    A variable of ours has fifteen attributes; a dict of fifteen records is about 630 bytes, and the
+    three name records 80 bytes apiece: over 10,000 variables, 8 MB for what is mostly the same ten
+    shared records in the same order, and names that only a client's Read of those attributes looks at.
+    Here the dict holds the Value record (and any other of the node's own), about 200 bytes; a name
+    record, once made, stays in the dict (so what asyncua then does to it, a write or a monitored item,
+    is kept); a shared record is handed out as it is (asyncua gives the node its own copy before it
+    changes one, `slim_attribute_values`). Everything asyncua and the sink do to `node.attributes`
+    works as on a dict: `[]`, `in`, `get`, assignment, iteration and `items()` over every attribute.
+    """
+
+    __slots__ = ("_browse", "_display", "_nodeid", "_shared")
+
+    def __init__(
+        self, own: dict[Any, Any], shared: dict[Any, Any], nodeid: Any, browse: Any, display: Any
+    ) -> None:
+        super().__init__(own)
+        self._shared = shared
+        self._nodeid = nodeid
+        self._browse = browse
+        self._display = display  # None: the node's DisplayName record is its own, in the dict
+
+    def _name(self, key: Any) -> Any:
+        held = self._nodeid if key == _NODE_ID else self._browse if key == _BROWSE_NAME else None
+        if key == _DISPLAY_NAME:
+            held = self._display
+        return held
+
+    def __missing__(self, key: Any) -> Any:
+        held = self._name(key)
+        if held is not None:
+            record = NameAttributeValue(held, _name_type(key))
+            self[key] = record
+            return record
+        return self._shared[key]
+
+    def __contains__(self, key: object) -> bool:
+        return dict.__contains__(self, key) or key in self._shared or self._name(key) is not None
+
+    def get(self, key: Any, default: Any = None) -> Any:
+        try:
+            return self[key]
+        except KeyError:
+            return default
+
+    def _merged(self) -> dict[Any, Any]:
+        """Every attribute's record, as asyncua's own dict would hold them (name records made afresh)."""
+        merged = dict(self._shared)
+        for key in (_NODE_ID, _BROWSE_NAME, _DISPLAY_NAME):
+            held = self._name(key)
+            if held is not None:
+                merged[key] = NameAttributeValue(held, _name_type(key))
+        merged.update(dict.items(self))
+        return dict(sorted(merged.items(), key=lambda pair: _rank(pair[0])))
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(self._merged())
+
+    def __len__(self) -> int:
+        return len(self._merged())
+
+    def keys(self) -> Any:
+        return self._merged().keys()
+
+    def values(self) -> Any:
+        return self._merged().values()
+
+    def items(self) -> Any:
+        return self._merged().items()
+
+    def __eq__(self, other: object) -> bool:
+        return self._merged() == (other._merged() if isinstance(other, NodeAttributes) else other)
+
+    __hash__ = None
+
+    def __reduce__(self) -> Any:
+        return (dict, (list(self._merged().items()),))
+
+    def __repr__(self) -> str:
+        return repr(self._merged())
+
+
+def _name_type(key: Any) -> Any:
+    from asyncua import ua
+
+    return ua.VariantType(_NAME_TYPES[int(key)])
 
 
 def _own(space: Any, nodeid: Any, attr: Any) -> None:

@@ -38,40 +38,40 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import NodeData
 
-from gateway.shims.asyncua_server import NameAttributeValue, SharedAttributeValue
+from gateway.shims.asyncua_server import ATTRIBUTE_ORDER, NodeAttributes, SharedAttributeValue
 from gateway.shims.ua import new_data_value, new_node_id, new_variant
 from gateway.sinks.opcua.asyncua_tuning import SHAREABLE
 
-# asyncua's _add_nodeattributes: (attribute name, VariantType, is_array), in its order.
-_ATTRIBUTES: tuple[tuple[str, ua.VariantType | None, bool], ...] = (
-    ("AccessLevel", ua.VariantType.Byte, False),
-    ("ArrayDimensions", ua.VariantType.UInt32, True),
-    ("BrowseName", ua.VariantType.QualifiedName, False),
-    ("ContainsNoLoops", ua.VariantType.Boolean, False),
-    ("DataType", ua.VariantType.NodeId, False),
-    ("Description", ua.VariantType.LocalizedText, False),
-    ("DisplayName", ua.VariantType.LocalizedText, False),
-    ("EventNotifier", ua.VariantType.Byte, False),
-    ("Executable", ua.VariantType.Boolean, False),
-    ("Historizing", ua.VariantType.Boolean, False),
-    ("InverseName", ua.VariantType.LocalizedText, False),
-    ("IsAbstract", ua.VariantType.Boolean, False),
-    ("MinimumSamplingInterval", ua.VariantType.Double, False),
-    ("NodeClass", ua.VariantType.Int32, False),
-    ("NodeId", ua.VariantType.NodeId, False),
-    ("Symmetric", ua.VariantType.Boolean, False),
-    ("UserAccessLevel", ua.VariantType.Byte, False),
-    ("UserExecutable", ua.VariantType.Boolean, False),
-    ("UserWriteMask", ua.VariantType.Byte, False),
-    ("ValueRank", ua.VariantType.Int32, False),
-    ("WriteMask", ua.VariantType.UInt32, False),
-    ("UserWriteMask", ua.VariantType.UInt32, False),
-    ("DataTypeDefinition", ua.VariantType.ExtensionObject, False),
-    ("Value", None, False),
-)
+# The types of asyncua's _add_nodeattributes: attribute name -> (VariantType, is_array); the order in
+# which asyncua adds them is the shim's (ATTRIBUTE_ORDER, after NodeId, BrowseName and NodeClass).
+_TYPES: dict[str, tuple[ua.VariantType | None, bool]] = {
+    "AccessLevel": (ua.VariantType.Byte, False),
+    "ArrayDimensions": (ua.VariantType.UInt32, True),
+    "BrowseName": (ua.VariantType.QualifiedName, False),
+    "ContainsNoLoops": (ua.VariantType.Boolean, False),
+    "DataType": (ua.VariantType.NodeId, False),
+    "Description": (ua.VariantType.LocalizedText, False),
+    "DisplayName": (ua.VariantType.LocalizedText, False),
+    "EventNotifier": (ua.VariantType.Byte, False),
+    "Executable": (ua.VariantType.Boolean, False),
+    "Historizing": (ua.VariantType.Boolean, False),
+    "InverseName": (ua.VariantType.LocalizedText, False),
+    "IsAbstract": (ua.VariantType.Boolean, False),
+    "MinimumSamplingInterval": (ua.VariantType.Double, False),
+    "NodeClass": (ua.VariantType.Int32, False),
+    "NodeId": (ua.VariantType.NodeId, False),
+    "Symmetric": (ua.VariantType.Boolean, False),
+    "UserAccessLevel": (ua.VariantType.Byte, False),
+    "UserExecutable": (ua.VariantType.Boolean, False),
+    "UserWriteMask": (ua.VariantType.UInt32, False),
+    "ValueRank": (ua.VariantType.Int32, False),
+    "WriteMask": (ua.VariantType.UInt32, False),
+    "DataTypeDefinition": (ua.VariantType.ExtensionObject, False),
+    "Value": (None, False),
+}
 _PLAN = tuple(
-    (name, vtype, is_array, getattr(ua.NodeAttributesMask, name), getattr(ua.AttributeIds, name))
-    for name, vtype, is_array in _ATTRIBUTES
+    (name, *_TYPES[name], getattr(ua.NodeAttributesMask, name), getattr(ua.AttributeIds, name))
+    for name in ATTRIBUTE_ORDER
 )
 _HAS_PROPERTY = new_node_id(ua.ObjectIds.HasProperty)
 _GOOD = ua.StatusCode()
@@ -86,6 +86,7 @@ class NodeWriter:
         self._user = iserver.isession.user
         self._attribute_value = _attribute_value()
         self._records: dict[tuple[Any, ...], SharedAttributeValue] = {}
+        self._shapes: dict[tuple[tuple[Any, int], ...], dict[Any, Any]] = {}  # NodeAttributes' shared parts
         self._back: dict[tuple[ua.NodeId, ua.NodeId], ua.ReferenceDescription | None] = {}
         self._typedefs: dict[ua.NodeId, ua.ReferenceDescription] = {}
 
@@ -139,24 +140,23 @@ class NodeWriter:
         self, node: NodeData, item: ua.AddNodesItem, stamp: datetime | None, server_stamp: datetime | None
     ) -> None:
         """asyncua's _add_node_attributes: NodeId, BrowseName, NodeClass, then every specified one."""
-        attributes: dict[Any, Any] = node.attributes  # asyncua's records, or our slimmer ones
         value_of = self._attribute_value
-        # Our nodes' names: records that build their DataValue when read (check=False: the standard
-        # namespace, whose records are pickled into its cache as asyncua's builder made them).
+        # Our nodes (check=True): the node's own records in a NodeAttributes, its constant ones in a dict
+        # shared by every node of the same shape, its names as records made when read. The standard
+        # namespace's (check=False) are asyncua's dict of records, pickled into its cache as asyncua's
+        # builder made them.
         named = stamp is not None
-        if named:
-            attributes[ua.AttributeIds.NodeId] = NameAttributeValue(node.nodeid, ua.VariantType.NodeId)
-            attributes[ua.AttributeIds.BrowseName] = NameAttributeValue(
-                item.BrowseName, ua.VariantType.QualifiedName
-            )
-        else:
-            attributes[ua.AttributeIds.NodeId] = value_of(
+        own: dict[Any, Any] = {} if named else node.attributes
+        shared: dict[Any, Any] = {} if named else node.attributes
+        display = None
+        if not named:
+            own[ua.AttributeIds.NodeId] = value_of(
                 new_data_value(new_variant(node.nodeid, ua.VariantType.NodeId))
             )
-            attributes[ua.AttributeIds.BrowseName] = value_of(
+            own[ua.AttributeIds.BrowseName] = value_of(
                 new_data_value(new_variant(item.BrowseName, ua.VariantType.QualifiedName))
             )
-        attributes[ua.AttributeIds.NodeClass] = self._shared(
+        shared[ua.AttributeIds.NodeClass] = self._shared(
             ua.AttributeIds.NodeClass, item.NodeClass, ua.VariantType.Int32, False
         )
         given = item.NodeAttributes
@@ -174,14 +174,21 @@ class NodeWriter:
                     ServerTimestamp=server_stamp,
                 )
             elif attribute in SHAREABLE:
-                attributes[attribute] = self._shared(attribute, value, vtype, is_array)
+                record = self._shared(attribute, value, vtype, is_array)
+                (shared if type(record) is SharedAttributeValue else own)[attribute] = record
                 continue
             elif named and name == "DisplayName" and isinstance(value, ua.LocalizedText):
-                attributes[attribute] = NameAttributeValue(value, vtype)
+                display = value
                 continue
             else:
                 dv = new_data_value(new_variant(value, vtype, is_array=is_array))
-            attributes[attribute] = value_of(dv)
+            own[attribute] = value_of(dv)
+        if named:
+            shape = tuple((attribute, id(record)) for attribute, record in shared.items())
+            held = self._shapes.get(shape)
+            if held is None:
+                held = self._shapes[shape] = shared
+            node.attributes = NodeAttributes(own, held, node.nodeid, item.BrowseName, display)
 
     def _shared(
         self, attribute: ua.AttributeIds, value: Any, vtype: ua.VariantType | None, is_array: bool

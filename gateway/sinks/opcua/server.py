@@ -638,6 +638,7 @@ class OpcUaSink:
                 self._vars[node] = var
                 self._by_id[nodeid] = var
         self._owned |= plan.owned
+        plan.owned.clear()  # held here from now on: one set of 10,000 node ids, not two
 
     async def _place(self, node: VariableNode) -> _Variable | None:
         """A variable that appeared after start-up (a new internal variable, a new machine)."""

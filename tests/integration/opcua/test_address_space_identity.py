@@ -259,3 +259,33 @@ async def test_a_node_asyncua_refuses_is_refused_the_same_way(pair: Pair) -> Non
         direct = sink._writer.add_nodes([item, orphan]) if sink._writer is not None else results
         for got in (results, direct):
             assert [r.StatusCode.name for r in got] == ["BadNodeIdExists", "BadParentNodeIdInvalid"]
+
+
+async def test_a_change_to_one_nodes_shared_or_name_record_stays_with_that_node(pair: Pair) -> None:
+    """The bulk-built nodes share their constant records and make their name records when first read
+    (shims/asyncua_server.py NodeAttributes); what asyncua then writes to one node is that node's alone,
+    and a name record monitored or written keeps its callback and its value."""
+    aspace = pair.new.server.iserver.aspace
+    laser = pair.tree.machines["laser"]
+    one = pair.new.node_id(laser.nodes["Axes/Y/Position"])
+    other = pair.new.node_id(laser.nodes["Axes/X/Position"])
+    for attribute, value in (
+        (ua.AttributeIds.AccessLevel, ua.Variant(3, ua.VariantType.Byte)),
+        (
+            ua.AttributeIds.DisplayName,
+            ua.Variant(ua.LocalizedText("Y, renamed"), ua.VariantType.LocalizedText),
+        ),
+    ):
+        before = aspace.read_attribute_value(other, attribute).Value
+        seen: list[Any] = []
+
+        async def callback(handle: int, dv: ua.DataValue, seen: list[Any] = seen) -> None:
+            seen.append(dv.Value.Value)
+
+        status, handle = aspace.add_datachange_callback(one, attribute, callback)
+        assert status.is_good()
+        assert (await aspace.write_attribute_value(one, attribute, ua.DataValue(value))).is_good()
+        assert aspace.read_attribute_value(one, attribute).Value == value
+        assert aspace.read_attribute_value(other, attribute).Value == before
+        assert seen == [value.Value]
+        aspace.delete_datachange_callback(handle)

@@ -198,16 +198,23 @@ async def test_a_controller_that_drops_clears_nothing_and_reconnecting_reconcile
     assert all(r.quality is Quality.GOOD for r in rig.manager.retained())
 
 
-async def test_a_restart_picks_up_the_retained_occurrences_with_their_acknowledgement(tmp_path: Path) -> None:
+@pytest.mark.parametrize("database", ["sqlite", "postgresql"])
+async def test_a_restart_picks_up_the_retained_occurrences_with_their_acknowledgement(
+    tmp_path: Path, database: str, request: pytest.FixtureRequest
+) -> None:
+    """Also with the history in PostgreSQL, where the second service stands for the shard that serves the
+    machine next (another state directory, the same database)."""
+    url = request.getfixturevalue("postgres_url") if database == "postgresql" else None
+    first_dir, next_dir = (tmp_path / "one", tmp_path / "two") if url else (tmp_path, tmp_path)
     tree = MappedTree([mapping()])
-    async with AlarmService(tree, tree.mappings, tmp_path) as service:
+    async with AlarmService(tree, tree.mappings, first_dir, url) as service:
         rig = Rig(tree, service)
         rig.controller((1001, "Soft limit", 3))
         await rig.look()
         [record] = rig.manager.retained()
         await rig.manager.acknowledge(record.occurrence, OPERATOR, "seen")
     tree = MappedTree([mapping()])
-    async with AlarmService(tree, tree.mappings, tmp_path) as service:
+    async with AlarmService(tree, tree.mappings, next_dir, url) as service:
         [again] = service.managers["m"].retained()
         assert again.occurrence == record.occurrence and again.acked_by == "olga"
         assert again.quality is Quality.UNCERTAIN  # until the controller's list is read again

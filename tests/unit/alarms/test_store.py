@@ -2,25 +2,34 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
 
 from gateway.alarms.records import ActiveAlarm
-from gateway.alarms.store import AlarmStore, AlarmStoreError
+from gateway.alarms.store import AlarmHistory, AlarmStore, AlarmStoreError, history_at
 
 T0 = datetime(2026, 5, 6, 7, 0, 0, tzinfo=UTC)
 
 
+@pytest.fixture(params=["sqlite", "postgresql"])
+def make(request: pytest.FixtureRequest, tmp_path: Path) -> Callable[[], AlarmHistory]:
+    """The same history, opened afresh at each call: the SQLite file, or a fresh PostgreSQL database
+    (`alarm_history:`, gateway/alarms/postgres.py) on the server the tests use (tests/postgres.py)."""
+    url = request.getfixturevalue("postgres_url") if request.param == "postgresql" else None
+    return lambda: history_at(url, tmp_path)
+
+
 @pytest.fixture
-def store(tmp_path: Path) -> AlarmStore:
-    s = AlarmStore(tmp_path / "alarms.sqlite3").open()
+def store(make: Callable[[], AlarmHistory]) -> Iterator[AlarmHistory]:
+    s = make().open()
     yield s
     s.close()
 
 
-def test_raise_clear_and_the_transitions_are_recorded(store: AlarmStore) -> None:
+def test_raise_clear_and_the_transitions_are_recorded(store: AlarmHistory) -> None:
     [first, second] = store.apply(
         "m",
         [
@@ -39,20 +48,21 @@ def test_raise_clear_and_the_transitions_are_recorded(store: AlarmStore) -> None
     assert [t["kind"] for t in store.transitions(first)] == ["raised", "cleared"]
 
 
-def test_acknowledgement_survives_reopening_and_is_recorded_once(tmp_path: Path) -> None:
-    path = tmp_path / "alarms.sqlite3"
-    with AlarmStore(path) as store:
+def test_acknowledgement_survives_reopening_and_is_recorded_once(make: Callable[[], AlarmHistory]) -> None:
+    with make().open() as store:
         [occ] = store.apply("m", [(ActiveAlarm("1001", "Soft limit", 3), 700)], [], T0)
         assert store.acknowledge(occ, T0 + timedelta(seconds=1), "olga", "seen it", True)
         assert not store.acknowledge(occ, T0 + timedelta(seconds=2), "ivan", "me too", True)
-    with AlarmStore(path) as store:
+    with make().open() as store:
         [again] = store.retained("m")
         assert again.acked and again.acked_by == "olga" and again.ack_comment == "seen it"
         assert again.acked_at == T0 + timedelta(seconds=1)
         assert [t["user"] for t in store.transitions(occ)] == ["", "olga"]
 
 
-def test_an_occurrence_no_longer_retained_is_not_reloaded_but_stays_in_the_history(store: AlarmStore) -> None:
+def test_an_occurrence_no_longer_retained_is_not_reloaded_but_stays_in_the_history(
+    store: AlarmHistory,
+) -> None:
     [occ] = store.apply("m", [(ActiveAlarm("1001", "Soft limit", 3), 700)], [], T0)
     store.acknowledge(occ, T0, "olga", "", True)
     store.apply("m", [], [(occ, T0 + timedelta(seconds=3), False)], T0 + timedelta(seconds=3))
@@ -61,7 +71,7 @@ def test_an_occurrence_no_longer_retained_is_not_reloaded_but_stays_in_the_histo
     assert past.occurrence == occ and not past.active and past.acked
 
 
-def test_history_by_machine_since_and_active(store: AlarmStore) -> None:
+def test_history_by_machine_since_and_active(store: AlarmHistory) -> None:
     [old] = store.apply("m", [(ActiveAlarm("1", "old"), 100)], [], T0)
     store.apply("m", [], [(old, T0 + timedelta(minutes=1), True)], T0 + timedelta(minutes=1))
     [still] = store.apply("m", [(ActiveAlarm("2", "still active"), 100)], [], T0 + timedelta(minutes=2))

@@ -11,6 +11,7 @@ from asyncua.server import address_space
 from gateway.shims.asyncua_server import (
     NO_CALLBACKS,
     NameAttributeValue,
+    NodeAttributes,
     SlimAttributeValue,
     forget_standard_namespace_code,
     slim_attribute_values,
@@ -89,3 +90,39 @@ async def test_name_records_build_what_asyncua_keeps_and_keep_what_is_written() 
     assert (await space.write_attribute_value(nodeid, ua.AttributeIds.DisplayName, renamed)).is_good()
     assert space.read_attribute_value(nodeid, ua.AttributeIds.DisplayName) == renamed
     assert seen == [ua.LocalizedText("B")]
+
+
+async def test_node_attributes_answer_as_the_dict_asyncua_would_have_kept() -> None:
+    """Own records in the dict, constant ones shared, name records made when first looked up and kept."""
+    nodeid = ua.NodeId("m/x", 2)
+    browse, display = ua.QualifiedName("x", 2), ua.LocalizedText("x")
+    access = SlimAttributeValue(ua.DataValue(ua.Variant(1, ua.VariantType.Byte)))
+    value = SlimAttributeValue(ua.DataValue(ua.Variant(2.5)))
+    node_class = SlimAttributeValue(ua.DataValue(ua.Variant(2, ua.VariantType.Int32)))
+    shared = {ua.AttributeIds.NodeClass: node_class, ua.AttributeIds.AccessLevel: access}
+    attributes = NodeAttributes({ua.AttributeIds.Value: value}, shared, nodeid, browse, display)
+    plain = {
+        ua.AttributeIds.NodeId: nodeid,
+        ua.AttributeIds.BrowseName: browse,
+        ua.AttributeIds.NodeClass: 2,
+        ua.AttributeIds.AccessLevel: 1,
+        ua.AttributeIds.DisplayName: display,
+        ua.AttributeIds.Value: 2.5,
+    }
+    assert list(attributes) == list(plain)  # asyncua's order: NodeId, BrowseName, NodeClass, then by name
+    assert len(attributes) == len(plain)
+    assert {k: v.value.Value.Value for k, v in attributes.items()} == plain
+    for key, held in plain.items():
+        assert key in attributes
+        assert attributes[key].value.Value.Value == held
+        assert attributes.get(key).value.Value.Value == held
+    assert ua.AttributeIds.Executable not in attributes
+    assert attributes.get(ua.AttributeIds.Executable) is None
+    with pytest.raises(KeyError):
+        attributes[ua.AttributeIds.Executable]
+    assert attributes[ua.AttributeIds.NodeClass] is node_class  # handed out as it is, not copied
+    name = attributes[ua.AttributeIds.DisplayName]
+    assert type(name) is NameAttributeValue and attributes[ua.AttributeIds.DisplayName] is name  # kept
+    name.value = ua.DataValue(ua.Variant(ua.LocalizedText("y")))
+    assert attributes[ua.AttributeIds.DisplayName].value.Value.Value == ua.LocalizedText("y")
+    assert shared == {ua.AttributeIds.NodeClass: node_class, ua.AttributeIds.AccessLevel: access}
