@@ -35,6 +35,17 @@ def _gc_state() -> Iterator[None]:
         yield
 
 
+@pytest.fixture(autouse=True)
+def _hang_report(request: pytest.FixtureRequest) -> Iterator[None]:
+    """A test still running shortly before its timeout prints its event loop's tasks (tests/hang_report.py)."""
+    from tests.hang_report import watch
+
+    marker = request.node.get_closest_marker("timeout")
+    timeout = float(marker.args[0]) if marker and marker.args else float(request.config.getini("timeout") or 0)
+    with watch(timeout):
+        yield
+
+
 @pytest.fixture
 def root() -> Path:
     return ROOT
