@@ -37,11 +37,13 @@ def _gc_state() -> Iterator[None]:
 
 @pytest.fixture(autouse=True)
 def _hang_report(request: pytest.FixtureRequest) -> Iterator[None]:
-    """A test still running shortly before its timeout prints its event loop's tasks (tests/hang_report.py)."""
+    """A test still running shortly before its timeout prints its loop's tasks (tests/hang_report.py)."""
     from tests.hang_report import watch
 
     marker = request.node.get_closest_marker("timeout")
-    timeout = float(marker.args[0]) if marker and marker.args else float(request.config.getini("timeout") or 0)
+    timeout = (
+        float(marker.args[0]) if marker and marker.args else float(request.config.getini("timeout") or 0)
+    )
     with watch(timeout):
         yield
 
