@@ -236,9 +236,19 @@ async def test_jobs_submitted_listed_shown_and_operated(api: WebRig) -> None:
 async def test_metrics_health_readiness_and_openapi(api: WebRig) -> None:
     session = await api.session(None)
     await wait_until(lambda: api.web.changes.get(MACHINE, 0) > 0, message="changes counted")
-    async with session.get("/metrics") as r:
-        text = await r.text()
-    assert r.status == 200 and r.headers["Content-Type"].startswith("text/plain")
+    # Under load a source can drop and come back (its watchdog): the page is read again, within a deadline,
+    # until it is read at a moment the machine is connected; it must say so then.
+    connected = f'cnc_gateway_machine_connected{{machine="{MACHINE}"}} 1.0'
+    text = ""
+
+    async def scrape() -> bool:
+        nonlocal text
+        async with session.get("/metrics") as r:
+            assert r.status == 200 and r.headers["Content-Type"].startswith("text/plain")
+            text = await r.text()
+        return connected in text
+
+    await wait_until(scrape, timeout=20, interval=0.2, message="/metrics to say the machine is connected")
     for line in (
         f'cnc_gateway_machine_connected{{machine="{MACHINE}"}} 1.0',
         f'cnc_gateway_machine_variables{{machine="{MACHINE}",quality="good"}}',
