@@ -216,6 +216,9 @@ async def test_an_accepted_write_reaches_the_controller_and_a_retained_request_i
     rec = subscriber(recorders, mosquitto.port)
     # A request left retained on the broker would be carried out again on every reconnect: refused.
     rec.publish(SET, b"60", retain=True)
+    # Retained on the broker before the gateway subscribes (the recorder, subscribed to cnc/#, gets it back
+    # once the broker has it): a gateway that subscribed first would get it live, not as a retained request.
+    await wait_until(lambda: rec.on(SET), message="the retained request on the broker")
     async with running(tree, mqtt_config(mosquitto.port), tmp_path) as sink:
         await wait_until(lambda: rec.on(SET + "/result"), message="the answer to the retained request")
         doc = rec.last_json(SET + "/result")
