@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import random
 import socket
 import time
 from collections.abc import Awaitable, Callable
@@ -50,8 +51,23 @@ def wait_until_sync(
         time.sleep(interval)
 
 
+# Below Linux's ephemeral range (32768-60999): a port the kernel picks for bind(0) is one it may also give
+# any outgoing connection as its local port before the test's server binds it (seen in CI: an OPC UA sink's
+# port "already in use" between free_port() and the bind). Ports from here are never handed out that way.
+_PORTS = range(20000, 32768)
+_next = [random.randrange(len(_PORTS))]  # a random start, so two runs side by side rarely meet
+
+
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A TCP port on 127.0.0.1 that nothing listens on right now; ports are handed out in turn, so this run
+    hands the same one out again only after all the others (two servers of one test never share one)."""
+    for _ in range(len(_PORTS)):
+        port = _PORTS[_next[0] % len(_PORTS)]
+        _next[0] += 1
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        return port
+    raise RuntimeError(f"no free TCP port in {_PORTS.start}-{_PORTS.stop - 1}")

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
@@ -24,6 +24,7 @@ from gateway.config.loader import Config, load_mapping
 from gateway.config.mapping import MachineMapping
 from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from simulator.runner import Simulator
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]

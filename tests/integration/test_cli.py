@@ -12,10 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.config.loader import load_mapping
 from simulator.runner import Simulator
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]

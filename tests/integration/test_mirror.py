@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 import yaml
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
@@ -23,6 +23,7 @@ from gateway.config.loader import Config, load_mapping
 from gateway.settings.access import AccessConfig
 from gateway.sinks.opcua.config import OpcUaServerConfig
 from simulator.runner import Simulator
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]

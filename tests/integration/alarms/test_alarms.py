@@ -9,13 +9,14 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.cli.main import main as cli
 from simulator.machine import MachineState
 from simulator.runner import Simulator
 from tests.integration.laser_rig import MACHINE, Events, LaserRig, laser_rig, text
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 SOFT_LIMIT = "Soft limit X+ exceeded at line 7"

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from asyncua import Client
-
 from tests.integration.copydata.conftest import (
     Mosquitto,
     Recorder,
@@ -13,6 +11,7 @@ from tests.integration.copydata.conftest import (
     subscriber,
     targets,
 )
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 X_TOPIC = "cnc/laser-sim/axes/x/position"

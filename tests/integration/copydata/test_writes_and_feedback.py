@@ -8,7 +8,6 @@ import logging
 import struct
 
 import pytest
-from asyncua import Client
 
 from tests.integration.copydata.conftest import (
     Mosquitto,
@@ -20,6 +19,7 @@ from tests.integration.copydata.conftest import (
     subscriber,
     targets,
 )
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 FEEDBACK_TOPIC = "cnc/laser-sim/copydata/feedback"

@@ -7,7 +7,7 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
-from asyncua import Client, ua
+from asyncua import ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from gateway.config.gateway import GatewayConfig
@@ -20,6 +20,7 @@ from gateway.sinks.opcua.config import OpcUaServerConfig
 from gateway.sinks.opcua.server import OpcUaSink
 from tests.integration.dnc.rig import Mode, drip_program, face, simulator
 from tests.integration.dnc.test_jobs import serial_mapping
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 

@@ -23,10 +23,11 @@ import uuid
 from typing import Any
 
 import paho.mqtt.client as paho
-from asyncua import Client, ua
+from asyncua import ua
 from paho.mqtt.enums import CallbackAPIVersion
 
 from gateway.codecs.copydata import FrameDecoder
+from tests.opcua_client import Client
 
 SMALL_BUFFER = 4096  # bytes of kernel receive buffer: the stall shows at once
 

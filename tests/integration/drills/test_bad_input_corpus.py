@@ -22,7 +22,6 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from asyncua import Client
 
 from gateway.jobs.queue.store import JobState
 from tests.integration.drills import corpus_runners as runners
@@ -30,6 +29,7 @@ from tests.integration.drills.conftest import Records, Report
 from tests.integration.drills.corpus_rig import MACHINE, CorpusRig, corpus_rig
 from tests.integration.jobs.conftest import GOOD, in_thread
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 OVERRIDE_ID = 6  # Feed/Override's COPYDATA id in mappings/laser-sim.yaml

@@ -25,12 +25,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, Node, ua
+from asyncua import Node, ua
 
 from tests.integration.drills import processes
 from tests.integration.drills.conftest import Report, count
 from tests.integration.drills.memory import MIB, floor_growth, mib
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 RESTARTS = count("controller_restarts")

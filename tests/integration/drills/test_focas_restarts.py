@@ -18,7 +18,6 @@ from typing import Any
 
 import pytest
 import yaml
-from asyncua import Client
 
 from tests.integration.drills import processes
 from tests.integration.drills.conftest import Report, count
@@ -33,6 +32,7 @@ from tests.integration.drills.test_controller_restarts import (
     settled_rss,
 )
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 RESTARTS = count("controller_restarts")

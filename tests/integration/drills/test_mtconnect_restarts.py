@@ -24,11 +24,12 @@ from typing import Any
 
 import pytest
 import yaml
-from asyncua import Client, Node, ua
+from asyncua import Node, ua
 
 from tests.integration.drills import processes
 from tests.integration.drills.conftest import Report, count
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 RESTARTS = count("mtconnect_restarts")

@@ -32,7 +32,6 @@ from typing import Any
 import aiohttp
 import pytest
 import yaml
-from asyncua import Client
 from yarl import URL
 
 from gateway.auth.passwords import hash_password
@@ -52,6 +51,7 @@ from tests.integration.drills.slow_http import (
 )
 from tests.integration.jobs.conftest import PASSWORD, PASSWORD_HASH, USER, in_thread
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 SLOW = count("slow_connections")  # per HTTP face

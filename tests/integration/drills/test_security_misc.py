@@ -42,13 +42,13 @@ from typing import Any
 import psutil
 import pytest
 import yaml
-from asyncua import Client
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from tests.integration.drills import processes
 from tests.integration.drills.conftest import SCALE, Report, count
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from asyncua import Client, ua
+from asyncua import ua
 
 from tests.integration.drills import processes
 from tests.integration.drills.conftest import Report, count
@@ -43,6 +43,7 @@ from tests.integration.drills.consumers import (
 )
 from tests.integration.drills.memory import MIB, floor_growth, mib
 from tests.integration.mqtt.conftest import Mosquitto
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 noise = pytest.importorskip("simulator.noise", reason="needs the simulator's noise mode (simulator/noise.py)")

@@ -12,7 +12,6 @@ from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
-from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.cli.demo import DEMO_INBOX_PASSWORD, DEMO_INBOX_USER, demo_inbox, demo_jobs, find_mapping
@@ -23,6 +22,7 @@ from gateway.model.events import Event
 from gateway.sinks.opcua.config import OpcUaServerConfig
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import MOSQUITTO, Mosquitto, mqtt_config, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 PART = b"%\nO2001 (DEMO PART)\nG21 G90\nG0 X20 Y20\nG1 X60 F6000\nG1 Y40\nG1 X20\nG1 Y20\nM30\n%\n"

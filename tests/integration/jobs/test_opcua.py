@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from asyncua import Client, Node, ua
+from asyncua import Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from gateway.config.gateway import GatewayConfig
@@ -20,6 +20,7 @@ from gateway.model.tree import VariableTree
 from gateway.sinks.opcua.config import OpcUaServerConfig
 from gateway.sinks.opcua.server import OpcUaSink
 from tests.integration.jobs.conftest import GOOD, Store, mapping_text
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 

@@ -10,7 +10,7 @@ import uuid
 from pathlib import Path
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
@@ -18,6 +18,7 @@ from gateway.config.loader import Config, load_mapping
 from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]

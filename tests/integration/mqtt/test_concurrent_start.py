@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any, Self
 
 import pytest
-from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.config.loader import load_mapping
@@ -23,6 +22,7 @@ from gateway.errors import SinkError
 from gateway.model.sample import utcnow
 from gateway.model.tree import Machine, VariableNode
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, gateway_config, mqtt_config, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 VARIABLES = 40

@@ -18,7 +18,6 @@ from typing import Any
 
 import aiohttp
 import yaml
-from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
@@ -32,6 +31,7 @@ from simulator.alarms import soft_limit
 from simulator.runner import Simulator
 from tests.integration.laser_rig import laser_mapping
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, mqtt_config, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 

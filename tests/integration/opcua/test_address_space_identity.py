@@ -23,7 +23,7 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.config.loader import load_mapping
 from gateway.model.context import WriteContext
@@ -33,6 +33,7 @@ from gateway.model.types import TypeSpec
 from gateway.shims.asyncua_ns0 import LazyNodes, cache_file
 from gateway.sinks.opcua.config import OpcUaServerConfig
 from gateway.sinks.opcua.server import OpcUaSink
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

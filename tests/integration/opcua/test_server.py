@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
-from asyncua import Client, Node, ua
+from asyncua import Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from gateway.config.loader import load_mapping
@@ -27,6 +27,7 @@ from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.opcua.config import OpcUaServerConfig
 from gateway.sinks.opcua.server import OpcUaSink
 from gateway.sinks.opcua.values import unece_unit_id
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

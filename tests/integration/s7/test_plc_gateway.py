@@ -11,7 +11,6 @@ import uuid
 from pathlib import Path
 
 import pytest
-from asyncua import Client
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
@@ -19,6 +18,7 @@ from gateway.config.loader import Config, load_mapping
 from gateway.sinks.mqtt.config import MachineMqtt, MqttConfig
 from simulator.runner import Simulator
 from tests.integration.mqtt.conftest import Mosquitto, Recorder, subscriber
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]

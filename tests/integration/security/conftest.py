@@ -9,14 +9,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from asyncua import Client
-
 from gateway.app import Gateway
 from gateway.auth.passwords import hash_password
 from gateway.config.gateway import GatewayConfig
 from gateway.config.loader import Config, load_mapping
 from gateway.config.mapping import MachineMapping
 from simulator.runner import Simulator
+from tests.opcua_client import Client
 from tests.waiting import free_port
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.app import Gateway
 from gateway.audit.store import AuditStore, audit_path
@@ -23,6 +23,7 @@ from gateway.config.loader import Config, load
 from gateway.settings.access import AccessConfig
 from simulator.machine import MachineState
 from simulator.runner import Simulator
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]

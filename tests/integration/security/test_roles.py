@@ -11,10 +11,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.audit.store import AuditStore, audit_path
 from tests.integration.security.conftest import MACHINE, USERS, Rig, secure_gateway
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 WRITE = ua.AccessLevel.CurrentWrite.mask

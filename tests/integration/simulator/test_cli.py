@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from asyncua import Client
 
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 

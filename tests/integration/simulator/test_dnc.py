@@ -16,7 +16,7 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.codecs.dnc import (
     LineSettings,
@@ -31,6 +31,7 @@ from simulator.dnc import DeviceServer, DncOptions, DncSpec, Mode
 from simulator.machine import MachineState
 from simulator.runner import Simulator
 from tests.integration.simulator.dnc_sender import receive, send
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 SPEED = 4.0

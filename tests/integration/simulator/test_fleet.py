@@ -12,12 +12,13 @@ import asyncio
 import signal
 from pathlib import Path
 
-from asyncua import Client, ua
+from asyncua import ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from gateway.config.loader import load, load_mapping
 from simulator.fleet import SimulatorFleet, machine_name
 from tests.integration.simulator.test_cli import command
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 

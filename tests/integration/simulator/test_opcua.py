@@ -8,10 +8,11 @@ from typing import Any
 
 import aioftp
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from simulator.runner import Simulator
+from tests.opcua_client import Client
 from tests.waiting import free_port, wait_until
 
 G = "ns=2;s=::AsGlobalPV:"

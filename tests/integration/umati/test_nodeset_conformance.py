@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.app import Gateway
 from gateway.config.gateway import GatewayConfig
@@ -35,6 +35,7 @@ from tests.integration.umati.reference import (
     NodeSets,
     Reference,
 )
+from tests.opcua_client import Client
 from tests.waiting import free_port
 
 MACHINE_TOOL_TYPE = (MACHINE_TOOL, "i=13")

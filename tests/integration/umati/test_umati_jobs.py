@@ -10,10 +10,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from asyncua import Client
 
 from gateway.cli.demo import DEMO_INBOX_PASSWORD, DEMO_INBOX_USER
 from tests.integration.jobs.test_demo_flow import PART, broker, demo
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 __all__ = ["broker", "demo"]  # the fixtures this module borrows

@@ -12,11 +12,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 
 from gateway.sinks.opcua.umati.install import MACHINE_TOOL
 from tests.integration.alarms.test_alarms import SOFT_LIMIT, raise_soft_limit
 from tests.integration.laser_rig import MACHINE, laser_rig
+from tests.opcua_client import Client
 from tests.waiting import wait_until
 
 UMATI = f"ns=2;s=umati:{MACHINE}"

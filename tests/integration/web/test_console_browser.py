@@ -12,12 +12,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from playwright.async_api import Page, expect
 
 from tests.integration.security.test_endpoints import CLIENT_URI, client_certificate
 from tests.integration.web.conftest import MACHINE, USERS, WebRig
+from tests.opcua_client import Client
 
 PART = "%\nO2002 (WEB PART)\nG21 G90\nG0 X20 Y20\nG1 X40 F6000\nG1 Y30\nM30\n%\n"
 SCREENSHOTS = os.environ.get("CNC_SCREENSHOTS")  # a folder: also save the README's screenshots there
