@@ -27,7 +27,7 @@ from gateway.auth.ratelimit import LoginLimiter
 from gateway.commands.runner import install_commands
 from gateway.config.loader import Config
 from gateway.model.tree import VariableTree
-from gateway.shims.heap import settled_heap
+from gateway.shims.heap import HeapHold
 from gateway.sinks.base import Sink, SinkContext
 from gateway.sinks.registry import SINKS
 from gateway.sources.base import Source
@@ -38,6 +38,12 @@ if TYPE_CHECKING:  # imported where they are built, only when the configuration 
     from gateway.jobs.service import JobService
 
 log = logging.getLogger("gateway")
+
+# The heap is settled (gateway/shims/heap.py: one full collection, then frozen) once every machine has
+# been tried and their first values have had this long to flow out, or this long after start-up at the
+# latest: the pass (about 0.2 s with 10,000 variables) then falls after the start-up burst, not in it.
+SETTLE_AFTER_MACHINES = 1.0
+SETTLE_AT_LATEST = 15.0
 
 S = TypeVar("S", bound=Sink)
 
@@ -124,8 +130,11 @@ def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
 class Gateway:
     """Owns every component; `async with Gateway(config) as gw: await gw.run()`."""
 
-    def __init__(self, config: Config) -> None:
+    def __init__(self, config: Config, *, collector: bool | None = None) -> None:
+        """`collector`: whether Python's cyclic collector runs once start-up is over (None: as on entry;
+        `cnc-gateway run` pauses it while it loads the configuration, and passes True)."""
         self.config = config
+        self._collector = collector
         # The tree gets the model's definitions; components that read the rest of a mapping get the mappings.
         self.tree = VariableTree(config.definitions())
         configure_access(config, self.tree)
@@ -147,6 +156,7 @@ class Gateway:
         self.sinks: list[Sink] = build_sinks(self)
         self.ready = asyncio.Event()
         self._stack = AsyncExitStack()
+        self._heap: HeapHold | None = None  # from __aenter__ until start-up is over
         # The one TaskGroup of every component's task, from __aenter__ (the sources', then each sink's as it
         # is up) to __aexit__; run() adds the job service's, the alarms' and its own extras.
         self._group: asyncio.TaskGroup | None = None
@@ -185,31 +195,50 @@ class Gateway:
 
     async def __aenter__(self) -> Self:
         self.config.state_dir.mkdir(parents=True, exist_ok=True)
+        self._heap = HeapHold(self._collector)  # no collector passes until start-up is over (_settle_heap)
         try:
-            with settled_heap():
-                await self._stack.enter_async_context(self.audit)  # first in, last out: it sees every write
-                if self.alarms is not None:  # before the sinks: OPC UA offers the alarms open from the start
-                    await self._stack.enter_async_context(self.alarms)
-                for source in self.sources:  # cheap: the machine's writer, its invalid addresses
-                    await self._stack.enter_async_context(source)
-                self._group = asyncio.TaskGroup()
-                await self._group.__aenter__()
-                # The controllers' sessions are opened while the sinks start: a sink reads the tree's samples
-                # after it has subscribed to the hub, so a value a source brings meanwhile reaches it.
-                for source in self.sources:
-                    self._start(source.run(), f"source:{source.machine.name}")
-                for sink in self.sinks:
-                    await self._stack.enter_async_context(sink)
-                    self._start(sink.run(), f"sink:{sink.name}")
-                if self.jobs is not None:
-                    await self._stack.enter_async_context(self.jobs)
+            await self._stack.enter_async_context(self.audit)  # first in, last out: it sees every write
+            if self.alarms is not None:  # before the sinks: OPC UA offers the alarms open from the start
+                await self._stack.enter_async_context(self.alarms)
+            for source in self.sources:  # cheap: the machine's writer, its invalid addresses
+                await self._stack.enter_async_context(source)
+            self._group = asyncio.TaskGroup()
+            await self._group.__aenter__()
+            # The controllers' sessions are opened while the sinks start: a sink reads the tree's samples
+            # after it has subscribed to the hub, so a value a source brings meanwhile reaches it.
+            for source in self.sources:
+                self._start(source.run(), f"source:{source.machine.name}")
+            for sink in self.sinks:
+                await self._stack.enter_async_context(sink)
+                self._start(sink.run(), f"sink:{sink.name}")
+            if self.jobs is not None:
+                await self._stack.enter_async_context(self.jobs)
+            self._start(self._settle_heap(), "heap:settle")
         except BaseException:
             try:
                 await self._stop_tasks()  # a task's own failure, if any, is raised from here (as a group)
             finally:
                 await self._stack.aclose()
+                self._heap.release()
             raise
         return self
+
+    async def _settle_heap(self) -> None:
+        """Settle the heap once the start-up burst is over: every machine tried (connected, or failed with
+        its error) and its first values out, or SETTLE_AT_LATEST after start-up, whichever comes first."""
+        loop = asyncio.get_running_loop()
+        latest = loop.time() + SETTLE_AT_LATEST
+        machines = list(self.tree.machines.values())
+
+        def all_tried() -> bool:
+            return all(m.status.is_connected or m.status.last_error for m in machines)
+
+        # Polled: a machine's status has no event of its own, and a tenth of a second is fine enough here.
+        while loop.time() < latest and not all_tried():  # noqa: ASYNC110
+            await asyncio.sleep(0.1)
+        await asyncio.sleep(max(0.0, min(SETTLE_AFTER_MACHINES, latest - loop.time())))
+        if self._heap is not None:
+            self._heap.settle()
 
     def _start(self, coro: Coroutine[object, object, None], name: str) -> None:
         assert self._group is not None, "enter the gateway first"
@@ -232,6 +261,8 @@ class Gateway:
             finally:
                 await self._stack.aclose()
         finally:
+            if self._heap is not None:
+                self._heap.release()  # stopped before it settled: the collector as it was
             gc.unfreeze()  # what this gateway built becomes collectable again (tests run many in one process)
 
     async def run(self, *extra: tuple[str, Callable[[], Coroutine[object, object, None]]]) -> None:

@@ -37,7 +37,7 @@ def handle(args: argparse.Namespace) -> int:
     # No cyclic GC passes from here until the gateway has started: loading the mappings and building
     # the tree and the address space make millions of objects and little garbage, and each pass scans
     # them all (a fifth of the configuration's load time). The gateway collects once, freezes what
-    # start-up built (app.settled_heap), and then the collector runs again.
+    # start-up built (app.Gateway._settle_heap), and then the collector runs again.
     enabled = gc.isenabled()
     gc.disable()
     try:
@@ -69,9 +69,8 @@ async def serve(config: Config, *, resume_gc: bool = False) -> int:
 
 
 async def _serve(config: Config, resume_gc: bool = False) -> None:
-    async with Gateway(config) as gw:
-        if resume_gc:  # start-up is over (handle paused the collector)
-            gc.enable()
+    # handle paused the collector: the gateway turns it on again once its start-up is over
+    async with Gateway(config, collector=True if resume_gc else None) as gw:
         for sink in gw.sinks:
             endpoint = getattr(sink, "endpoint", None)
             if endpoint:

@@ -7,7 +7,7 @@ import weakref
 
 import pytest
 
-from gateway.shims.heap import YOUNG_THRESHOLD, settled_heap
+from gateway.shims.heap import YOUNG_THRESHOLD, HeapHold, settled_heap
 from tests.gc_state import gc_state_kept
 
 
@@ -67,3 +67,29 @@ def test_what_settled_heap_leaves_is_undone_after_the_test() -> None:
     assert gc.get_threshold() == (700, 10, 10)
     assert gc.get_freeze_count() == 0
     assert gc.isenabled()
+
+
+def test_a_hold_settled_later_turns_the_collector_on_when_asked() -> None:
+    gc.disable()  # as `cnc-gateway run` pauses it while loading the configuration
+    gc.unfreeze()
+    hold = HeapHold(enable=True)
+    kept = [Node() for _ in range(10)]
+    assert not gc.isenabled()
+    hold.settle()
+    assert gc.isenabled()
+    assert gc.get_freeze_count() >= len(kept)
+    frozen = gc.get_freeze_count()
+    hold.settle()  # once only
+    hold.release()  # after settling: nothing to undo
+    assert gc.get_freeze_count() == frozen
+    assert gc.isenabled()
+
+
+def test_a_hold_released_unsettled_freezes_nothing() -> None:
+    gc.enable()
+    gc.unfreeze()
+    hold = HeapHold()
+    assert not gc.isenabled()
+    hold.release()
+    assert gc.isenabled()
+    assert gc.get_freeze_count() == 0
