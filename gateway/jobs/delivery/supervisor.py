@@ -9,9 +9,11 @@ from another process are published and acted upon.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
+from gateway.errors import JobStoreError
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.worker import DeliveryWorker
 from gateway.jobs.queue.base import JobStore
@@ -21,6 +23,7 @@ from gateway.jobs.threads import JobThreads
 from gateway.transports.base import Deliveries, Delivery
 
 T = TypeVar("T")
+log = logging.getLogger("gateway.jobs")
 WATCH_INTERVAL = 1.0  # s between looks for changes made by other processes (the CLI)
 ENDED_SWEEP = 200  # ended jobs past a machine's retained limit whose records are cleared at start-up
 
@@ -84,20 +87,41 @@ class DeliverySupervisor:
         return result
 
     async def _watch(self) -> None:
-        version = await self.threads.queue(self.queue.data_version)
+        """Publish what changed, and wake the workers on changes from elsewhere, every WATCH_INTERVAL.
+
+        A queue whose database is away (PostgreSQL restarted, the network cut) is looked at again at the
+        same pace, said once when it goes and once when it is back: the watcher outlives the outage, and
+        with it the job service (a failing task would end the gateway's TaskGroup)."""
+        version: int | None = None
+        away: str | None = None
         while True:
-            # asyncio.timeout, not wait_for: Python 3.11's wait_for can swallow a cancellation that
-            # arrives as the event fires, and this loop would then never end.
+            if version is not None:
+                # asyncio.timeout, not wait_for: Python 3.11's wait_for can swallow a cancellation that
+                # arrives as the event fires, and this loop would then never end.
+                try:
+                    async with asyncio.timeout(WATCH_INTERVAL):
+                        await self._changed.wait()
+                except TimeoutError:
+                    pass
+                self._changed.clear()
             try:
-                async with asyncio.timeout(WATCH_INTERVAL):
-                    await self._changed.wait()
-            except TimeoutError:
-                pass
-            self._changed.clear()
-            current = await self.threads.queue(self.queue.data_version)
-            external = current != version
+                current = await self.threads.queue(self.queue.data_version)
+                if version is not None:
+                    await self._sync()
+            except JobStoreError as exc:
+                if away is None:
+                    log.warning(
+                        "jobs: the job queue cannot be read (%s); again every %g s", exc, WATCH_INTERVAL
+                    )
+                away = str(exc)
+                self._changed.clear()
+                await asyncio.sleep(WATCH_INTERVAL)
+                continue
+            external = version is not None and (current != version or away is not None)
             version = current
-            await self._sync()
+            if away is not None:
+                log.warning("jobs: the job queue can be read again")
+                away = None
             if external:
                 for worker in self.workers.values():
                     worker.wake()

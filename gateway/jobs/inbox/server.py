@@ -39,7 +39,7 @@ from aioftp.server import AbstractUserManager
 from gateway.auth.lockout import locked_out, login_failed
 from gateway.auth.ratelimit import LoginLimiter
 from gateway.config.jobs import InboxConfig
-from gateway.errors import PathRefused
+from gateway.errors import JobStoreError, PathRefused
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.browse import BrowseCommands, Session, login_required, refusals, session_of
 from gateway.jobs.inbox.paths import InboxPath, resolve
@@ -87,6 +87,7 @@ class UploadReply:
     ok: bool
     message: str
     job_id: str | None = None
+    transient: bool = False  # not kept, for a reason that should pass (451: send it again later)
 
 
 Submit = Callable[[Upload], Awaitable[UploadReply]]
@@ -454,7 +455,7 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
             connection.response("552", f"{target.name} is larger than {int(self.config.max_file_size)} bytes")
             return True
         reply = await self._commit(connection, target, staging, size, digest, check)
-        connection.response("250" if reply.ok else "550", reply.message)
+        connection.response("250" if reply.ok else _refusal(reply), reply.message)
         return True
 
     @connection_conditions(LOGIN_REQUIRED, PASSIVE_SERVER_STARTED)
@@ -528,7 +529,7 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
             await asyncio.sleep(COMMIT_GRACE)
             handed_over = True
             reply = await self._commit(connection, place, target, size, digest, check)
-            connection.response("226" if reply.ok else "550", reply.message)
+            connection.response("226" if reply.ok else _refusal(reply), reply.message)
             return True
         except _TooLarge:
             connection.response("552", f"{place.name} is larger than {int(self.config.max_file_size)} bytes")
@@ -632,10 +633,22 @@ class InboxServer(BrowseCommands, PeerCheckedServer):
             return UploadReply(reply.ok, " ".join(reply.message.split()), reply.job_id)  # one FTP reply line
         except asyncio.CancelledError:
             raise
+        except JobStoreError as exc:  # the queue's database is away: nothing was kept, the sender may retry
+            log.warning("inbox: %s not taken: %s", place.virtual, exc)
+            staged.unlink(missing_ok=True)  # noqa: ASYNC240 - one unlink, on a failure that is logged
+            # The reason stays in the log: the database's address is not the sender's business.
+            return UploadReply(
+                False, "the job queue is unavailable: the upload was not kept; send it again", transient=True
+            )
         except Exception:
             log.exception("inbox: the job service failed on %s", place.virtual)
             staged.unlink(missing_ok=True)  # noqa: ASYNC240 - one unlink, on a failure that is logged
             return UploadReply(False, "internal error: the upload was not kept")
+
+
+def _refusal(reply: UploadReply) -> str:
+    """451 (local error, try again) for what should pass, as a queue whose database is away; else 550."""
+    return "451" if reply.transient else "550"
 
 
 class _TooLarge(Exception):
