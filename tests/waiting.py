@@ -55,15 +55,18 @@ def wait_until_sync(
 # any outgoing connection as its local port before the test's server binds it (seen in CI: an OPC UA sink's
 # port "already in use" between free_port() and the bind). Ports from here are never handed out that way.
 _PORTS = range(20000, 32768)
+# Ports are handed out in turn, this far apart: a test may use the few ports after one it was given (the
+# fleet's shards take base + K - 1), and the next port handed out is not among them.
+STRIDE = 8
 _next = [random.randrange(len(_PORTS))]  # a random start, so two runs side by side rarely meet
 
 
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now; ports are handed out in turn, so this run
-    hands the same one out again only after all the others (two servers of one test never share one)."""
-    for _ in range(len(_PORTS)):
+    """A TCP port on 127.0.0.1 that nothing listens on right now; this run hands the same one out again
+    only after some 1,600 others (two servers of one test never share one)."""
+    for _ in range(len(_PORTS) // STRIDE):
         port = _PORTS[_next[0] % len(_PORTS)]
-        _next[0] += 1
+        _next[0] += STRIDE
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
             try:
                 s.bind(("127.0.0.1", port))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import gc
 import logging
+import os
 from pathlib import Path
 
 from gateway.app import Gateway, run_until_signalled
@@ -78,4 +79,6 @@ async def _serve(config: Config, resume_gc: bool = False) -> None:
         log.info(
             "mirroring %s", ", ".join(f"{m.machine} ({len(m.variables)} variables)" for m in config.machines)
         )
-        await gw.run()
+        from gateway.shards.parent import orphan_watch  # a shard of `cnc-gateway fleet` stops with it
+
+        await gw.run(*orphan_watch(os.environ))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import signal
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Self
 
 from gateway.reconnect import Backoff, BackoffShape
+from gateway.shards.parent import SUPERVISOR_ENV
 
 log = logging.getLogger("gateway.fleet")
 
@@ -113,8 +115,9 @@ class FleetSupervisor:
         spec = state.spec
         while True:
             try:
+                environ = {**self.base_environ, **spec.environ, SUPERVISOR_ENV: str(os.getpid())}
                 proc = await asyncio.create_subprocess_exec(
-                    *spec.command, env={**self.base_environ, **spec.environ}, stdin=asyncio.subprocess.DEVNULL
+                    *spec.command, env=environ, stdin=asyncio.subprocess.DEVNULL
                 )
             except OSError as exc:
                 log.error("fleet: %s cannot start: %s", spec.label, exc.strerror or exc)

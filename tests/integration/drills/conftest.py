@@ -38,6 +38,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "slow_connections": (1000, 1000),  # per HTTP face, held open against the web console and MTConnect
     "paused_holders": (3, 30),  # lease holders stopped (SIGSTOP) past their lease, then continued
     "database_outages": (3, 30),  # the job queue's PostgreSQL cut off and back under a running job service
+    "shard_kills": (3, 30),  # a shard of `cnc-gateway fleet` SIGKILLed while another's inbox takes its jobs
 }
 
 

@@ -126,3 +126,71 @@ async def test_check_shows_each_shards_machines_and_refuses_a_bad_fleet_file(tmp
     out, err = await bad.communicate()
     assert bad.returncode == 2
     assert re.search(r"bad\.yaml:3.*ports.*99999 is not a port", (out + err).decode()), (out + err).decode()
+
+
+def running(pid: int) -> bool:
+    """Alive and not a zombie (an orphan's zombie stays until whatever adopted it reaps it)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+async def test_shards_stop_when_their_supervisor_is_killed(tmp_path: Path) -> None:
+    """SIGKILL leaves the supervisor no chance to stop its shards: they notice and stop on their own, so
+    that a supervisor started again does not find the old shards holding the ports and the machines."""
+    http, opcua, inbox = free_port(), free_port(), free_port()
+    async with SimulatorFleet(2, store_root=tmp_path / "stores", tick=0.1) as sims:
+        names = [p.name for p in sims.write_mappings(tmp_path)]
+        (tmp_path / "gateway.yaml").write_text(
+            f"machines: {names}\n"
+            "shard: ${CNC_SHARD}\n"
+            "state_dir: ${CNC_STATE_DIR}\n"
+            "opcua: {endpoint: 'opc.tcp://127.0.0.1:${OPCUA_PORT}/cnc-gateway', security: [None]}\n"
+            "http: {host: 127.0.0.1, port: '${HTTP_PORT}'}\n"
+            "inbox: {host: 127.0.0.1, port: '${INBOX_PORT}'}\n"
+        )
+        (tmp_path / "fleet.yaml").write_text(
+            "gateway: gateway.yaml\nshards: 2\n"
+            f"ports: {{HTTP_PORT: {http}, OPCUA_PORT: {opcua}, INBOX_PORT: {inbox}}}\n"
+            "state_dir: state\n"
+        )
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "gateway.cli.main", "fleet", str(tmp_path / "fleet.yaml"),
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        out: list[str] = []
+        err: list[str] = []
+
+        async def read(stream: asyncio.StreamReader | None, into: list[str]) -> None:
+            assert stream is not None
+            while line := await stream.readline():
+                into.append(line.decode())
+
+        readers = [asyncio.create_task(read(proc.stdout, out)), asyncio.create_task(read(proc.stderr, err))]
+        pids: dict[int, int] = {}
+        try:
+            await wait_until(lambda: any("every shard started" in line for line in out), timeout=60,
+                             message="every shard up")  # fmt: skip
+            pids = {int(k): int(p) for k, p in re.findall(r"shard (\d)/2\s+pid (\d+)", "".join(out))}
+            assert set(pids) == {1, 2}
+            proc.kill()
+            await proc.wait()
+            await wait_until(lambda: not any(running(p) for p in pids.values()), timeout=30,
+                             message="both shards to stop after their supervisor was killed")  # fmt: skip
+            # They stopped cleanly, each saying why: the pipes close once both have ended.
+            await asyncio.wait_for(asyncio.gather(*readers), timeout=10)
+        finally:
+            for pid in pids.values():
+                if running(pid):
+                    os.kill(pid, signal.SIGKILL)
+            if proc.returncode is None:
+                proc.kill()
+                await proc.wait()
+            for reader in readers:
+                reader.cancel()
+            await asyncio.gather(*readers, return_exceptions=True)
+    log = "".join(err)
+    assert log.count(f"supervisor (pid {proc.pid}) is gone: stopping") == 2, log[-3000:]
+    assert "Traceback" not in log, log[-3000:]
