@@ -85,6 +85,7 @@ class Results:
     targets_26: list[Target] = field(default_factory=list)  # issue 26's: the Modbus TCP and S7 drivers
     targets_27: list[Target] = field(default_factory=list)  # issue 27's: the umati view at scale
     targets_28: list[Target] = field(default_factory=list)  # issue 28's: QoS 1, the readers, start-up
+    targets_29: list[Target] = field(default_factory=list)  # issue 29's: shards
     details: dict[str, Any] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)
     load: dict[str, Any] = field(default_factory=dict)
@@ -134,6 +135,7 @@ class Results:
             "targets_26": [t.as_dict() for t in self.targets_26],
             "targets_27": [t.as_dict() for t in self.targets_27],
             "targets_28": [t.as_dict() for t in self.targets_28],
+            "targets_29": [t.as_dict() for t in self.targets_29],
             "details": self.details,
             "errors": self.errors,
         }
@@ -208,6 +210,8 @@ def render(results: Results) -> str:
         out += ["", "Targets (issue 27)", _targets(results.targets_27)]
     if results.targets_28:
         out += ["", "Targets (issue 28)", _targets(results.targets_28)]
+    if results.targets_29:
+        out += ["", "Targets (issue 29)", _targets(results.targets_29)]
     if results.errors:
         out += ["", "Errors:"] + [f"  - {e}" for e in results.errors]
     return "\n".join(out)

@@ -28,6 +28,7 @@ from bench.report import Results, render
 from bench.scenarios import (
     baselines,
     dnc,
+    fleet,
     focas,
     jobs,
     mirror,
@@ -62,6 +63,7 @@ SCENARIOS: dict[str, Callable[[Context], Awaitable[None]]] = {
     "umati": umati.run,
     "queue": queue.run,
     "qos1": qos1.run,
+    "fleet": fleet.run,
 }
 
 

@@ -1,0 +1,211 @@
+"""Fleet: 200 machines × 50 variables served by 1, 2 and 4 shards of `cnc-gateway fleet` (issue 29).
+
+One noise simulator process serves all 10,000 variables (a folder per machine, as `scale` does);
+the gateway file lists 200 mapping files and says `shard: ${CNC_SHARD}`; `cnc-gateway fleet`
+starts the shards as the user would. For each shard count, with a broker of its own (no retained
+values left from the run before):
+
+- start-up: from starting `cnc-gateway fleet` until an MQTT subscriber (retained topics, connected
+  before) has every variable Good;
+- throughput: the simulator flat out; the changes the shards take into their trees per second, summed
+  over their `/metrics` (`cnc_gateway_machine_changes_total`), and each shard's CPU and RSS;
+- restart: the last shard SIGKILLed; the time until its machines are connected again on its
+  `/metrics` (static shards: the supervisor starts it again; no other shard takes them over).
+
+The 1-shard run is the baseline of the others, from the same run. On a 2-core machine the simulator,
+the broker and the subscriber share the cores with the shards: the ratios say what sharding buys there.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import signal
+import sys
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import psutil
+import yaml
+
+from bench.context import Context
+from bench.procs import ROOT, Agent, Mosquitto, child_env, free_port
+from simulator.noise import NoiseSpec, noise_mapping, split_machines
+
+SECTION = "Fleet: 200 machines × 50 variables over shards of `cnc-gateway fleet` (issue 29)"
+MACHINES, PER_MACHINE = 200, 50
+SHARDS = (1, 2, 4)
+START_LIMIT = 180.0  # s: a start-up slower than this is a failure of the run, not a figure
+
+
+def _metrics(port: int) -> str:
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=2) as answer:
+            return str(answer.read().decode())
+    except OSError:
+        return ""
+
+
+CHANGES = re.compile(r"^cnc_gateway_machine_changes_total\{[^}]*\} (\S+)$", re.MULTILINE)
+CONNECTED = re.compile(r"^cnc_gateway_machine_connected\{[^}]*\} 1\.0$", re.MULTILINE)
+
+
+def _changes(text: str) -> float:
+    return sum(float(v) for v in CHANGES.findall(text))
+
+
+def _connected(text: str) -> int:
+    return len(CONNECTED.findall(text))
+
+
+def _write_fleet(folder: Path, mappings: dict[str, str], shards: int, mqtt_port: int) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, text in mappings.items():
+        (folder / f"{name}.yaml").write_text(text, encoding="utf-8")
+    gateway = {
+        "machines": [f"{name}.yaml" for name in mappings],
+        "shard": "${CNC_SHARD}",
+        "state_dir": "${CNC_STATE_DIR}",
+        "log_level": "warning",
+        "opcua": {"endpoint": "opc.tcp://127.0.0.1:${OPCUA_PORT}/cnc-gateway", "security": ["None"]},
+        "http": {"host": "127.0.0.1", "port": "${HTTP_PORT}"},
+        "mqtt": {"port": mqtt_port, "client_id": "bench-fleet-${OPCUA_PORT}"},  # one per shard
+    }
+    (folder / "gateway.yaml").write_text(yaml.safe_dump(gateway, sort_keys=False), encoding="utf-8")
+    fleet = {
+        "gateway": "gateway.yaml",
+        "shards": shards,
+        "ports": {"OPCUA_PORT": free_port(), "HTTP_PORT": free_port()},
+        "state_dir": "state",
+        "restart": {"initial": 0.2, "max": 1},
+    }
+    path = folder / "fleet.yaml"
+    path.write_text(yaml.safe_dump(fleet, sort_keys=False), encoding="utf-8")
+    return path
+
+
+async def _one(ctx: Context, sim: Agent, mappings: dict[str, str], shards: int) -> dict[str, Any]:
+    total = MACHINES * PER_MACHINE
+    out: dict[str, Any] = {"shards": shards}
+    async with Mosquitto(ctx.workdir) as broker:
+        fleet_file = _write_fleet(ctx.workdir / f"fleet-{shards}", mappings, shards, broker.port)
+        http = int(yaml.safe_load(fleet_file.read_text())["ports"]["HTTP_PORT"])
+        sub = await Agent.start(
+            f"fleet-{shards}-mqtt-sub",
+            "bench.agents.mqtt_sub",
+            ["--port", str(broker.port), "--topic", "cnc/+/noise/#", "--expect", str(total)],
+            ctx.workdir,
+        )
+        log = (ctx.workdir / f"fleet-{shards}.log").open("ab")
+        await sim.ask("rate", rate=0)
+        started = time.time()
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "gateway.cli.main", "fleet", str(fleet_file),
+            stdout=log, stderr=log, env=child_env(), cwd=str(ROOT),
+        )  # fmt: skip
+        try:
+            deadline = time.monotonic() + START_LIMIT
+            while True:
+                snap = await sub.ask("snap")
+                if snap["all_good_at"] is not None:
+                    break
+                if proc.returncode is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"{shards} shard(s): only {snap['good']} of {total} Good")
+                await asyncio.sleep(0.1)
+            out["startup"] = snap["all_good_at"] - started
+            ctx.log(f"  {shards} shard(s): all {total:,} Good at MQTT after {out['startup']:.2f} s")
+            ports = [http + k for k in range(shards)]
+            workers = sorted(psutil.Process(proc.pid).children(), key=lambda p: p.create_time())
+            await sim.ask("rate", rate="max")
+            await asyncio.sleep(ctx.settings.warmup)
+            c0 = [w.cpu_times() for w in workers]
+            m0, t0 = sum(_changes(_metrics(p)) for p in ports), time.monotonic()
+            s0 = await sim.ask("snap")
+            await asyncio.sleep(ctx.settings.window)
+            m1, t1 = sum(_changes(_metrics(p)) for p in ports), time.monotonic()
+            s1 = await sim.ask("snap")
+            c1 = [w.cpu_times() for w in workers]
+            await sim.ask("rate", rate=0)
+            out["changes"] = (m1 - m0) / (t1 - t0)
+            out["offered"] = (s1["written"] - s0["written"]) / (s1["mono"] - s0["mono"])
+            out["cpu"] = [
+                100.0 * ((b.user + b.system) - (a.user + a.system)) / (t1 - t0)
+                for a, b in zip(c0, c1, strict=True)
+            ]
+            out["rss"] = [w.memory_info().rss for w in workers]
+            ctx.log(
+                f"  {shards} shard(s), simulator flat out ({out['offered']:,.0f}/s written): "
+                f"{out['changes']:,.0f} changes/s into the trees; CPU per shard "
+                + ", ".join(f"{c:.0f} %" for c in out["cpu"])
+                + "; RSS per shard "
+                + ", ".join(f"{r / 1e6:.0f} MB" for r in out["rss"])
+            )
+            if shards > 1:
+                last = ports[-1]
+                expected = _connected(_metrics(last))
+                victim = workers[-1]
+                killed = time.monotonic()
+                victim.send_signal(signal.SIGKILL)
+                # Polled, as an operator's dashboard would: /metrics is all a shard says about its machines.
+                while _connected(_metrics(last)) > 0 and time.monotonic() - killed < 5:  # noqa: ASYNC110
+                    await asyncio.sleep(0.02)
+                while _connected(_metrics(last)) < expected:
+                    if time.monotonic() - killed > START_LIMIT:
+                        raise RuntimeError(f"{shards} shards: the killed shard's machines never came back")
+                    await asyncio.sleep(0.05)
+                out["restart"] = time.monotonic() - killed
+                ctx.log(f"  shard {shards}/{shards} SIGKILLed: its {expected} machines connected again "
+                        f"after {out['restart']:.2f} s (started again by the supervisor)")  # fmt: skip
+        finally:
+            if proc.returncode is None:
+                proc.send_signal(signal.SIGTERM)
+                try:
+                    async with asyncio.timeout(30):
+                        await proc.wait()
+                except TimeoutError:
+                    proc.kill()
+                    await proc.wait()
+            await sub.stop()
+    return out
+
+
+async def run(ctx: Context) -> None:
+    total = MACHINES * PER_MACHINE
+    ctx.log(f"fleet: {MACHINES} machines × {PER_MACHINE} variables = {total:,}, shards {SHARDS}")
+    spec = NoiseSpec(total)
+    sim = await Agent.start("fleet-sim", "bench.agents.simulator", ["--variables", str(total)], ctx.workdir)
+    runs: dict[int, dict[str, Any]] = {}
+    try:
+        mappings = {
+            f"m{k:03d}": noise_mapping(
+                spec, sim.ready["endpoint"], machine=f"m{k:03d}", first=first, count=count,
+                publishing_interval=100, queue_size=1,
+            )
+            for k, (first, count) in enumerate(split_machines(spec, MACHINES))
+        }  # fmt: skip
+        for shards in SHARDS:
+            runs[shards] = await _one(ctx, sim, mappings, shards)
+    finally:
+        await sim.stop()
+    ctx.results.details["fleet"] = {"machines": MACHINES, "per_machine": PER_MACHINE, "runs": runs}
+    one = runs.get(1, {})
+    for shards, data in runs.items():
+        ctx.results.add(
+            f"fleet.startup.{shards}", SECTION, f"{shards} shard(s): start → every variable Good (MQTT)",
+            data.get("startup"), "s",
+            baseline=one.get("startup") if shards > 1 else None, baseline_label="1 shard",
+        )  # fmt: skip
+        ctx.results.add(
+            f"fleet.changes.{shards}", SECTION, f"{shards} shard(s): changes/s into the trees, flat out",
+            data.get("changes"), "changes/s",
+            baseline=one.get("changes") if shards > 1 else None, baseline_label="1 shard",
+            note=f"offered {data.get('offered', 0):,.0f}/s; CPU per shard "
+            + ", ".join(f"{c:.0f} %" for c in data.get("cpu", [])),
+        )  # fmt: skip
+        if "restart" in data:
+            ctx.results.add(
+                f"fleet.restart.{shards}", SECTION, f"{shards} shards: a killed shard's machines back",
+                data["restart"], "s", note="static shards: the supervisor starts it again",
+            )  # fmt: skip
