@@ -29,7 +29,7 @@ from tests import ftp_attacks as attacks
 from tests.ftp_attacks import Race
 from tests.integration.drills.corpus_rig import MACHINE, CorpusRig
 from tests.integration.drills.processes import BIN, ROOT, clean_env
-from tests.integration.jobs.conftest import PASSWORD, USER, in_thread, program
+from tests.integration.jobs.conftest import PASSWORD, USER, in_thread, inbox_stor, program
 from tests.integration.mqtt.conftest import Recorder
 from tests.unit.config.test_corpus import CASES as MAPPING_CASES
 from tests.unit.config.test_corpus import expectations
@@ -104,16 +104,7 @@ def gcode_cases() -> list[tuple[Path, list[str], dict[str, Any], str]]:
 
 
 def stor(port: int, machine: str, name: str, data: bytes) -> str:
-    ftp = ftplib.FTP()
-    ftp.connect("127.0.0.1", port, timeout=30)
-    try:
-        ftp.login(USER, PASSWORD)
-        ftp.cwd(f"/{machine}")
-        return ftp.storbinary(f"STOR {name}", io.BytesIO(data))
-    except ftplib.Error as exc:
-        return str(exc)
-    finally:
-        ftp.close()
+    return inbox_stor(port, machine, name, data, timeout=30)
 
 
 async def run_gcode(rig: CorpusRig) -> list[Outcome]:

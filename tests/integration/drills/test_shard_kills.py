@@ -14,14 +14,10 @@ before it is back (lease-served machines, docs/scaling.md).
 from __future__ import annotations
 
 import asyncio
-import ftplib
-import io
 import os
 import random
-import re
 import signal
 import socket
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -30,8 +26,9 @@ import pytest
 from gateway.jobs.queue.postgres import PostgresJobQueue
 from gateway.jobs.queue.records import JobState
 from simulator.fleet import SimulatorFleet
+from tests.fleet_rig import Fleet, write_fleet
 from tests.integration.drills.conftest import Report, count
-from tests.integration.jobs.conftest import PASSWORD, PASSWORD_HASH, USER, Renames, in_thread, program
+from tests.integration.jobs.conftest import PASSWORD_HASH, USER, Renames, in_thread, inbox_stor, program
 from tests.waiting import free_port, wait_until
 
 S = JobState
@@ -45,17 +42,6 @@ def listening(port: int) -> bool:
     return True
 
 
-def stor(port: int, machine: str, name: str, data: bytes) -> str:
-    ftp = ftplib.FTP()
-    ftp.connect("127.0.0.1", port, timeout=20)
-    try:
-        ftp.login(USER, PASSWORD)
-        ftp.cwd(f"/{machine}")
-        return ftp.storbinary(f"STOR {name}", io.BytesIO(data))
-    finally:
-        ftp.close()
-
-
 @pytest.mark.timeout(1800)
 async def test_jobs_are_delivered_once_while_a_shard_is_killed_again_and_again(
     tmp_path: Path, postgres_url: str, renames: Renames, drill_report: Report
@@ -67,49 +53,23 @@ async def test_jobs_are_delivered_once_while_a_shard_is_killed_again_and_again(
     sent: dict[str, bytes] = {}  # program name -> bytes, every one the inbox accepted
     async with SimulatorFleet(2, store_root=tmp_path / "stores", tick=0.1) as sims:
         names = [p.name for p in sims.write_mappings(tmp_path)]
-        (tmp_path / "gateway.yaml").write_text(
-            f"machines: {names}\n"
-            "shard: ${CNC_SHARD}\n"
-            "state_dir: ${CNC_STATE_DIR}\n"
-            f"queue: {postgres_url}\n"
-            "opcua: {endpoint: 'opc.tcp://127.0.0.1:${OPCUA_PORT}/cnc-gateway', security: [None]}\n"
-            "http: {host: 127.0.0.1, port: '${HTTP_PORT}'}\n"
-            "inbox:\n"
-            "  host: 127.0.0.1\n"
-            "  port: '${INBOX_PORT}'\n"
-            f"  accounts: [{{user: {USER}, password_hash: '{PASSWORD_HASH}'}}]\n"
-        )
-        (tmp_path / "fleet.yaml").write_text(
-            "gateway: gateway.yaml\nshards: 2\n"
-            f"ports: {{HTTP_PORT: {http}, OPCUA_PORT: {opcua}, INBOX_PORT: {inbox}}}\n"
-            "state_dir: state\nrestart: {initial: 0.2, max: 1}\n"
-        )
-        proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "gateway.cli.main", "fleet", str(tmp_path / "fleet.yaml"),
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        ports = {"HTTP_PORT": http, "OPCUA_PORT": opcua, "INBOX_PORT": inbox}
+        accounts = f"[{{user: {USER}, password_hash: '{PASSWORD_HASH}'}}]"
+        fleet_file = write_fleet(
+            tmp_path, names, ports,
+            inbox=f"{{host: 127.0.0.1, port: '${{INBOX_PORT}}', accounts: {accounts}}}",
+            gateway=f"queue: {postgres_url}\n",
         )  # fmt: skip
-        out: list[str] = []
-        err: list[str] = []
-
-        async def read(stream: asyncio.StreamReader | None, into: list[str]) -> None:
-            assert stream is not None
-            while line := await stream.readline():
-                into.append(line.decode())
-
-        def starts() -> list[int]:
-            return [int(p) for p in re.findall(r"shard 2/2 started \(pid (\d+)\)", "".join(err))]
 
         async def upload(machine: str, name: str) -> None:
             data = program(name, lines=rng.randrange(3, 400))
-            reply = await in_thread(stor, inbox, machine, name, data)
+            reply = await in_thread(inbox_stor, inbox, machine, name, data)
             assert reply.startswith("226 J") and f"queued for {machine}" in reply, reply
             sent[name] = data
 
-        readers = [asyncio.create_task(read(proc.stdout, out)), asyncio.create_task(read(proc.stderr, err))]
         mid_delivery = 0
-        try:
-            await wait_until(lambda: any("every shard started" in line for line in out), timeout=60,
-                             message="every shard up")  # fmt: skip
+        async with Fleet(fleet_file) as fleet:
+            await wait_until(lambda: fleet.said("every shard started"), timeout=60, message="every shard up")
             await wait_until(lambda: listening(inbox), timeout=60, message="shard 1's inbox")
             for k in range(kills):
                 await upload("laser-002", f"k{k}-before.nc")
@@ -117,11 +77,10 @@ async def test_jobs_are_delivered_once_while_a_shard_is_killed_again_and_again(
                 with PostgresJobQueue(postgres_url) as queue:
                     sending = any(j.state is S.SENDING for j in queue.list(limit=1000))
                 mid_delivery += sending
-                pid = starts()[-1]
-                os.kill(pid, signal.SIGKILL)
+                os.kill(fleet.starts(2)[-1], signal.SIGKILL)
                 await upload("laser-002", f"k{k}-while-down.nc")  # shard 1 takes it for the dead shard
                 await upload("laser-001", f"k{k}-other.nc")  # shard 1's own machine goes on
-                await wait_until(lambda: len(starts()) > k + 1, timeout=30,  # noqa: B023 - read at once
+                await wait_until(lambda: len(fleet.starts(2)) > k + 1, timeout=30,  # noqa: B023 - read at once
                                  message=f"kill {k + 1}: shard 2 started again")  # fmt: skip
 
             def all_delivered() -> bool:
@@ -130,13 +89,8 @@ async def test_jobs_are_delivered_once_while_a_shard_is_killed_again_and_again(
                 return len(jobs) == len(sent) and all(j.state is S.DELIVERED for j in jobs)
 
             await wait_until(all_delivered, timeout=120, interval=0.5, message="every job DELIVERED")
-            proc.send_signal(signal.SIGTERM)
-            assert await asyncio.wait_for(proc.wait(), 30) == 0
-        finally:
-            if proc.returncode is None:
-                proc.kill()
-                await proc.wait()
-            await asyncio.wait_for(asyncio.gather(*readers, return_exceptions=True), timeout=30)
+            fleet.proc.send_signal(signal.SIGTERM)
+            assert await asyncio.wait_for(fleet.proc.wait(), 30) == 0
         stores = tmp_path / "stores"
         landed = {p.name: p.read_bytes() for p in stores.glob("*/DATA/Programs/*.nc")}
     completed = Counter(renames.targets)
@@ -155,5 +109,5 @@ async def test_jobs_are_delivered_once_while_a_shard_is_killed_again_and_again(
     assert twice == [], f"seed {seed}: programs uploaded twice: {twice}"
     assert wrong == [], f"seed {seed}: programs missing or changed on the stores: {wrong}"
     assert set(completed) >= set(sent), f"seed {seed}: uploads completed {completed}"
-    log = "".join(err)
+    log = "".join(fleet.err)
     assert "Traceback" not in log, log[-3000:]

@@ -149,18 +149,35 @@ class Harness:
 
     async def stor(self, machine: str, name: str, data: bytes, **login: str) -> str:
         """Plain STOR with ftplib (in a thread); the gateway's final reply, or the error's text."""
+        return await in_thread(lambda: inbox_stor(self.port, machine, name, data, **login))
 
-        def run() -> str:
-            ftp = self.ftp(**login)
-            try:
-                ftp.cwd(f"/{machine}")
-                return ftp.storbinary(f"STOR {name}", io.BytesIO(data))
-            except ftplib.Error as exc:
-                return str(exc)
-            finally:
-                ftp.close()
 
-        return await in_thread(run)
+def inbox_stor(
+    port: int,
+    machine: str,
+    name: str,
+    data: bytes,
+    *,
+    user: str = USER,
+    password: str = PASSWORD,
+    timeout: float = 20,
+) -> str:
+    """STOR into /<machine>/ of the inbox at `port`: the final reply, or the refusal's text (blocking: call
+    it in a thread). A refused login raises (ftplib.error_perm)."""
+    ftp = ftplib.FTP()
+    ftp.connect("127.0.0.1", port, timeout=timeout)
+    try:
+        ftp.login(user, password)
+    except BaseException:
+        ftp.close()
+        raise
+    try:
+        ftp.cwd(f"/{machine}")
+        return ftp.storbinary(f"STOR {name}", io.BytesIO(data))
+    except ftplib.Error as exc:
+        return str(exc)
+    finally:
+        ftp.close()
 
 
 Build = Callable[..., Any]

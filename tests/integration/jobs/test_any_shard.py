@@ -10,9 +10,7 @@ another shard's machine and says why.
 from __future__ import annotations
 
 import asyncio
-import ftplib
 import hashlib
-import io
 import logging
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager
@@ -27,7 +25,7 @@ from gateway.jobs.queue.base import JobStore
 from gateway.jobs.queue.records import Job, JobState
 from gateway.jobs.service import JobService
 from simulator.fleet import SimulatorFleet
-from tests.integration.jobs.conftest import PASSWORD, PASSWORD_HASH, USER, Renames, in_thread, program
+from tests.integration.jobs.conftest import PASSWORD_HASH, USER, Renames, in_thread, inbox_stor, program
 from tests.trees import MappedTree
 from tests.waiting import wait_until
 
@@ -87,20 +85,7 @@ async def shard(folder: Path, k: int, queue: str | None) -> AsyncIterator[Shard]
 
 async def stor(port: int, machine: str, name: str, data: bytes) -> str:
     """STOR into /<machine>/ of the inbox at `port`: the final reply, or the refusal's text."""
-
-    def run() -> str:
-        ftp = ftplib.FTP()
-        ftp.connect("127.0.0.1", port, timeout=20)
-        try:
-            ftp.login(USER, PASSWORD)
-            ftp.cwd(f"/{machine}")
-            return ftp.storbinary(f"STOR {name}", io.BytesIO(data))
-        except ftplib.Error as exc:
-            return str(exc)
-        finally:
-            ftp.close()
-
-    return await in_thread(run)
+    return await in_thread(inbox_stor, port, machine, name, data)
 
 
 async def wait_state(queue: JobStore, seq: int, *states: JobState, timeout: float = 20.0) -> Job:

@@ -16,6 +16,7 @@ import urllib.request
 from pathlib import Path
 
 from simulator.fleet import SimulatorFleet
+from tests.fleet_rig import Fleet, write_fleet
 from tests.waiting import free_port, wait_until
 
 
@@ -39,65 +40,33 @@ def alive(pid: int) -> bool:
 
 async def test_shards_serve_their_machines_come_back_after_a_kill_and_stop_together(tmp_path: Path) -> None:
     http, opcua, inbox = free_port(), free_port(), free_port()
-    for port in (http + 1, opcua + 1, inbox + 1):  # each shard's port is the base + K - 1
-        assert port != 0
     async with SimulatorFleet(4, store_root=tmp_path / "stores", tick=0.1) as sims:
         names = [p.name for p in sims.write_mappings(tmp_path)]
-        (tmp_path / "gateway.yaml").write_text(
-            f"machines: {names}\n"
-            "shard: ${CNC_SHARD}\n"
-            "state_dir: ${CNC_STATE_DIR}\n"
-            "opcua: {endpoint: 'opc.tcp://127.0.0.1:${OPCUA_PORT}/cnc-gateway', security: [None]}\n"
-            "http: {host: 127.0.0.1, port: '${HTTP_PORT}'}\n"
-            "inbox: {host: 127.0.0.1, port: '${INBOX_PORT}'}\n"
-        )
-        (tmp_path / "fleet.yaml").write_text(
-            "gateway: gateway.yaml\nshards: 2\n"
-            f"ports: {{HTTP_PORT: {http}, OPCUA_PORT: {opcua}, INBOX_PORT: {inbox}}}\n"
-            "state_dir: state\nrestart: {initial: 0.2, max: 1}\n"
-        )
-        proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "gateway.cli.main", "fleet", str(tmp_path / "fleet.yaml"),
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-        )  # fmt: skip
-        out: list[str] = []
-        err: list[str] = []
-
-        async def read(stream: asyncio.StreamReader | None, into: list[str]) -> None:
-            assert stream is not None
-            while line := await stream.readline():
-                into.append(line.decode())
-
-        readers = [asyncio.create_task(read(proc.stdout, out)), asyncio.create_task(read(proc.stderr, err))]
-        try:
+        ports = {"HTTP_PORT": http, "OPCUA_PORT": opcua, "INBOX_PORT": inbox}
+        async with Fleet(write_fleet(tmp_path, names, ports)) as fleet:
             await wait_until(lambda: connected(http) == {"laser-001", "laser-003"}, timeout=60,
                              message="shard 1/2 serving laser-001 and laser-003")  # fmt: skip
             await wait_until(lambda: connected(http + 1) == {"laser-002", "laser-004"}, timeout=60,
                              message="shard 2/2 serving laser-002 and laser-004")  # fmt: skip
-            await wait_until(lambda: any("every shard started" in line for line in out), timeout=10,
-                             message="the status table")  # fmt: skip
-            table = "".join(out)
-            pids = {int(k): int(p) for k, p in re.findall(r"shard (\d)/2\s+pid (\d+)", table)}
+            await wait_until(
+                lambda: fleet.said("every shard started"), timeout=10, message="the status table"
+            )
+            pids = fleet.pids()
             assert set(pids) == {1, 2}
             os.kill(pids[2], signal.SIGKILL)
-            await wait_until(lambda: any("shard 2/2 ended (killed by SIGKILL)" in line for line in err),
+            await wait_until(lambda: fleet.said("shard 2/2 ended (killed by SIGKILL)"),
                              timeout=10, message="the supervisor to see the kill")  # fmt: skip
-            await wait_until(lambda: any("shard 2/2 started" in line for line in err[-20:]) and
+            await wait_until(lambda: len(fleet.starts(2)) == 2 and
                              connected(http + 1) == {"laser-002", "laser-004"}, timeout=60,
                              message="shard 2/2 started again and serving")  # fmt: skip
             assert connected(http) == {"laser-001", "laser-003"}  # the other shard went on
-            restarted = [int(p) for p in re.findall(r"shard 2/2 started \(pid (\d+)\)", "".join(err))][-1]
-            proc.send_signal(signal.SIGTERM)
-            assert await asyncio.wait_for(proc.wait(), 30) == 0
-        finally:
-            if proc.returncode is None:
-                proc.kill()
-                await proc.wait()
-            await asyncio.gather(*readers)
-    log = "".join(err)
+            restarted = fleet.starts(2)[-1]
+            fleet.proc.send_signal(signal.SIGTERM)
+            assert await asyncio.wait_for(fleet.proc.wait(), 30) == 0
+    log = "".join(fleet.err)
     assert "Traceback" not in log, log[-3000:]
     assert not alive(pids[1]) and not alive(restarted)
-    assert "fleet: stopped" in "".join(out)
+    assert "fleet: stopped" in "".join(fleet.out)
 
 
 async def test_check_shows_each_shards_machines_and_refuses_a_bad_fleet_file(tmp_path: Path) -> None:
@@ -140,57 +109,25 @@ def running(pid: int) -> bool:
 async def test_shards_stop_when_their_supervisor_is_killed(tmp_path: Path) -> None:
     """SIGKILL leaves the supervisor no chance to stop its shards: they notice and stop on their own, so
     that a supervisor started again does not find the old shards holding the ports and the machines."""
-    http, opcua, inbox = free_port(), free_port(), free_port()
+    ports = {"HTTP_PORT": free_port(), "OPCUA_PORT": free_port(), "INBOX_PORT": free_port()}
+    pids: dict[int, int] = {}
     async with SimulatorFleet(2, store_root=tmp_path / "stores", tick=0.1) as sims:
         names = [p.name for p in sims.write_mappings(tmp_path)]
-        (tmp_path / "gateway.yaml").write_text(
-            f"machines: {names}\n"
-            "shard: ${CNC_SHARD}\n"
-            "state_dir: ${CNC_STATE_DIR}\n"
-            "opcua: {endpoint: 'opc.tcp://127.0.0.1:${OPCUA_PORT}/cnc-gateway', security: [None]}\n"
-            "http: {host: 127.0.0.1, port: '${HTTP_PORT}'}\n"
-            "inbox: {host: 127.0.0.1, port: '${INBOX_PORT}'}\n"
-        )
-        (tmp_path / "fleet.yaml").write_text(
-            "gateway: gateway.yaml\nshards: 2\n"
-            f"ports: {{HTTP_PORT: {http}, OPCUA_PORT: {opcua}, INBOX_PORT: {inbox}}}\n"
-            "state_dir: state\n"
-        )
-        proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "gateway.cli.main", "fleet", str(tmp_path / "fleet.yaml"),
-            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-        )  # fmt: skip
-        out: list[str] = []
-        err: list[str] = []
-
-        async def read(stream: asyncio.StreamReader | None, into: list[str]) -> None:
-            assert stream is not None
-            while line := await stream.readline():
-                into.append(line.decode())
-
-        readers = [asyncio.create_task(read(proc.stdout, out)), asyncio.create_task(read(proc.stderr, err))]
-        pids: dict[int, int] = {}
-        try:
-            await wait_until(lambda: any("every shard started" in line for line in out), timeout=60,
-                             message="every shard up")  # fmt: skip
-            pids = {int(k): int(p) for k, p in re.findall(r"shard (\d)/2\s+pid (\d+)", "".join(out))}
-            assert set(pids) == {1, 2}
-            proc.kill()
-            await proc.wait()
-            await wait_until(lambda: not any(running(p) for p in pids.values()), timeout=30,
-                             message="both shards to stop after their supervisor was killed")  # fmt: skip
-            # They stopped cleanly, each saying why: the pipes close once both have ended.
-            await asyncio.wait_for(asyncio.gather(*readers), timeout=10)
-        finally:
-            for pid in pids.values():
-                if running(pid):
-                    os.kill(pid, signal.SIGKILL)
-            if proc.returncode is None:
-                proc.kill()
-                await proc.wait()
-            for reader in readers:
-                reader.cancel()
-            await asyncio.gather(*readers, return_exceptions=True)
-    log = "".join(err)
-    assert log.count(f"supervisor (pid {proc.pid}) is gone: stopping") == 2, log[-3000:]
+        async with Fleet(write_fleet(tmp_path, names, ports, restart=None)) as fleet:
+            try:
+                await wait_until(
+                    lambda: fleet.said("every shard started"), timeout=60, message="every shard up"
+                )
+                pids = fleet.pids()
+                assert set(pids) == {1, 2}
+                fleet.proc.kill()
+                await fleet.proc.wait()
+                await wait_until(lambda: not any(running(p) for p in pids.values()), timeout=30,
+                                 message="both shards to stop after their supervisor was killed")  # fmt: skip
+            finally:
+                for pid in pids.values():
+                    if running(pid):
+                        os.kill(pid, signal.SIGKILL)
+    log = "".join(fleet.err)
+    assert log.count(f"supervisor (pid {fleet.proc.pid}) is gone: stopping") == 2, log[-3000:]
     assert "Traceback" not in log, log[-3000:]
