@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from datetime import UTC, datetime
 from typing import Any, Self
 
+from gateway.alarms.history_filter import history_query
 from gateway.alarms.records import ActiveAlarm, AlarmRecord, Kind
 from gateway.errors import AlarmStoreError
 from gateway.postgres import Database, Row
@@ -195,21 +196,15 @@ class PostgresAlarmStore:
         limit: int = 1000,
     ) -> list[AlarmRecord]:
         """Occurrences newest first: those raised since `since`, and those still active then."""
-        where: list[str] = []
-        params: list[Any] = []
-        if machine is not None:
-            where.append("machine = %s")
-            params.append(machine)
-        if since is not None:
-            where.append("(raised_at >= %s OR cleared_at IS NULL OR cleared_at >= %s)")
-            params += [_utc(since), _utc(since)]
-        if active_only:
-            where.append("cleared_at IS NULL")
-        sql = "SELECT * FROM alarm_occurrences"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY raised_at DESC, occurrence DESC LIMIT %s"
-        params.append(limit)
+        sql, params = history_query(
+            "alarm_occurrences",
+            "%s",
+            _utc,
+            machine=machine,
+            since=since,
+            active_only=active_only,
+            limit=limit,
+        )
         with self.db.transaction() as tx:
             rows = tx.all(sql, params)
         return [_record(r) for r in rows]

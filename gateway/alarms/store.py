@@ -19,6 +19,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Protocol, Self
 
+from gateway.alarms.history_filter import history_query
 from gateway.alarms.records import ActiveAlarm, AlarmRecord, Kind, iso, parse_iso
 from gateway.errors import AlarmStoreError
 from gateway.sqlite_file import SqliteFile
@@ -229,21 +230,9 @@ class AlarmStore(SqliteFile):
         limit: int = 1000,
     ) -> list[AlarmRecord]:
         """Occurrences newest first: those raised since `since`, and those still active then."""
-        where: list[str] = []
-        params: list[Any] = []
-        if machine is not None:
-            where.append("machine = ?")
-            params.append(machine)
-        if since is not None:
-            where.append("(raised_at >= ? OR cleared_at IS NULL OR cleared_at >= ?)")
-            params += [iso(since), iso(since)]
-        if active_only:
-            where.append("cleared_at IS NULL")
-        sql = "SELECT * FROM occurrences"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY raised_at DESC, occurrence DESC LIMIT ?"
-        params.append(limit)
+        sql, params = history_query(
+            "occurrences", "?", iso, machine=machine, since=since, active_only=active_only, limit=limit
+        )
         with self._lock:
             rows = self.db.execute(sql, params).fetchall()
         return [_record(r) for r in rows]

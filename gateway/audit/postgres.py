@@ -15,8 +15,8 @@ import os
 import socket
 from collections.abc import Iterable
 from datetime import UTC, datetime, timedelta
-from typing import Any
 
+from gateway.audit.filter import audit_query
 from gateway.audit.store import AuditRow
 from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
@@ -122,20 +122,17 @@ class PostgresAuditStore:
         kind: str | None = None,
     ) -> list[AuditRow]:
         """Newest first, as AuditStore.query."""
-        where: list[str] = []
-        params: list[Any] = []
-        for column, value in (("machine", machine), ('"user"', user), ("origin", origin), ("kind", kind)):
-            if value is not None:
-                where.append(f"{column} = %s")
-                params.append(value)
-        if since is not None:
-            where.append("ts >= %s")
-            params.append(since)
-        sql = f"SELECT id, {COLUMNS} FROM audit"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY ts DESC, id DESC LIMIT %s"
-        params.append(max(1, limit))
+        sql, params = audit_query(
+            COLUMNS,
+            "%s",
+            lambda t: t,
+            machine=machine,
+            user=user,
+            origin=origin,
+            kind=kind,
+            since=since,
+            limit=limit,
+        )
         with self.db.transaction() as tx:
             rows = tx.all(sql, params)
         return [

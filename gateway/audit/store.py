@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
+from gateway.audit.filter import audit_query
 from gateway.errors import AuditStoreError
 from gateway.model.audit import AuditEntry
 from gateway.sqlite_file import SqliteFile, iso, parse_iso
@@ -114,28 +115,9 @@ class AuditStore(SqliteFile):
         kind: str | None = None,
     ) -> list[AuditRow]:
         """Newest first."""
-        where: list[str] = []
-        params: list[str | int] = []
-        if machine is not None:
-            where.append("machine = ?")
-            params.append(machine)
-        if user is not None:
-            where.append("user = ?")
-            params.append(user)
-        if origin is not None:
-            where.append("origin = ?")
-            params.append(origin)
-        if kind is not None:
-            where.append("kind = ?")
-            params.append(kind)
-        if since is not None:
-            where.append("ts >= ?")
-            params.append(iso(since))
-        sql = f"SELECT id, {COLUMNS} FROM audit"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY ts DESC, id DESC LIMIT ?"
-        params.append(max(1, limit))
+        sql, params = audit_query(
+            COLUMNS, "?", iso, machine=machine, user=user, origin=origin, kind=kind, since=since, limit=limit
+        )
         out = []
         with self._lock:
             rows = self.db.execute(sql, params).fetchall()
