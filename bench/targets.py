@@ -672,10 +672,15 @@ def _startup_28(ctx: Context) -> list[Target]:
     ]  # fmt: skip
 
 
+MACHINES_29 = 200  # bench/scenarios/fleet.py's
+
+
 def judge_29(ctx: Context) -> list[Target]:
-    """Issue 29's rows that the fleet scenario measures: 2 shards against 1, and the 200-machine start-up over
-    4 shards. Failover by lease is not built yet: the restart of a static shard is a figure, not its row."""
-    runs: dict[int, dict[str, Any]] = ctx.results.details.get("fleet", {}).get("runs", {})
+    """Issue 29's rows that the fleet scenario measures: 2 shards against 1, the 200-machine start-up over
+    4 shards, and the failover by lease (kill → every machine of the dead shard served by the other)."""
+    fleet = ctx.results.details.get("fleet", {})
+    runs: dict[int, dict[str, Any]] = fleet.get("runs", {})
+    lease: dict[str, Any] = fleet.get("lease", {})
     if not runs:
         return []
     one, two, four = runs.get(1, {}), runs.get(2, {}), runs.get(4, {})
@@ -693,5 +698,12 @@ def judge_29(ctx: Context) -> list[Target]:
             value=four.get("startup"),
             source=f"1 shard {one.get('startup') or 0:.1f} s, 2 shards {two.get('startup') or 0:.1f} s "
             "(same run, same simulator)",
+        ),
+        Target(
+            "Failover: kill → every machine of the dead shard Good elsewhere, beyond the lease time",
+            5, 1, "s", higher_is_better=False,
+            value=None if lease.get("failover") is None else lease["failover"] - lease["lease_time"],
+            source=f"{lease.get('failover') or 0:.2f} s with a {lease.get('lease_time') or 0:g}-s lease, "
+            f"{MACHINES_29 // 2} machines taken over by the other of 2 shards",
         ),
     ]  # fmt: skip

@@ -36,6 +36,7 @@ from gateway.sources.registry import create_source
 if TYPE_CHECKING:  # imported where they are built, only when the configuration asks for them
     from gateway.alarms.service import AlarmService
     from gateway.jobs.service import JobService
+    from gateway.shards.holder import LeaseHolder
 
 log = logging.getLogger("gateway")
 
@@ -109,13 +110,40 @@ def build_sinks(gateway: Gateway) -> list[Sink]:
     return [sink for sink in built if sink is not None]
 
 
-def build_jobs(config: Config, tree: VariableTree, logins: LoginLimiter | None = None) -> JobService | None:
+def build_jobs(
+    config: Config,
+    tree: VariableTree,
+    logins: LoginLimiter | None = None,
+    lease: LeaseHolder | None = None,
+) -> JobService | None:
     """The FTP job queue, when some machine has a `jobs:` section (None otherwise)."""
     if not any(m.jobs is not None for m in config.machines):
         return None
     from gateway.jobs.service import JobService
 
-    return JobService(config, tree, logins=logins)
+    return JobService(config, tree, logins=logins, lease=lease)
+
+
+def build_leases(config: Config) -> LeaseHolder | None:
+    """`shard: lease`: this process's leases on the fleet's machines, in the queue's database."""
+    gw = config.gateway
+    if not gw.leased or gw.queue is None:
+        return None
+    from gateway.shards.holder import LeaseHolder, holder_name
+
+    machines = [m.machine for m in config.machines]
+    return LeaseHolder(gw.queue, holder_name(), machines, lease_time=gw.lease_time)
+
+
+def build_sources(config: Config, tree: VariableTree, leases: LeaseHolder | None) -> list[Source]:
+    """Each machine's source; with leases, each run only while this process holds its machine."""
+    mappings = config.mappings
+    sources = [create_source(m, mappings[n]) for n, m in tree.machines.items()]
+    if leases is None:
+        return sources
+    from gateway.sources.leased import LeasedSource
+
+    return [LeasedSource(source, leases) for source in sources]
 
 
 def build_alarms(config: Config, tree: VariableTree) -> AlarmService | None:
@@ -147,10 +175,11 @@ class Gateway:
         # One failed-login lockout for every door that checks passwords (OPC UA, web, FTP inbox): guesses
         # on one door count against the others from the same address.
         self.logins = config.gateway.login_limiter()
+        self.leases = build_leases(config)  # shard: lease (None: this process serves every machine it loads)
         # Before the sinks are built: the job service adds Jobs/ variables and methods (Programs, and a
         # serial machine's Commands/Drip*, which the MQTT sink's command requests list when built).
-        self.jobs = build_jobs(config, self.tree, self.logins)
-        self.sources: list[Source] = [create_source(m, mappings[n]) for n, m in self.tree.machines.items()]
+        self.jobs = build_jobs(config, self.tree, self.logins, self.leases)
+        self.sources: list[Source] = build_sources(config, self.tree, self.leases)
         # After the job service (the console submits through it), with the drivers built: each sink's
         # __init__ adds the variables it reports on, which the sinks built after it see.
         self.sinks: list[Sink] = build_sinks(self)
@@ -200,12 +229,16 @@ class Gateway:
             await self._stack.enter_async_context(self.audit)  # first in, last out: it sees every write
             if self.alarms is not None:  # before the sinks: OPC UA offers the alarms open from the start
                 await self._stack.enter_async_context(self.alarms)
+            if self.leases is not None:  # a first share taken; released last but one, after the sources
+                await self._stack.enter_async_context(self.leases)
             for source in self.sources:  # cheap: the machine's writer, its invalid addresses
                 await self._stack.enter_async_context(source)
             self._group = asyncio.TaskGroup()
             await self._group.__aenter__()
             # The controllers' sessions are opened while the sinks start: a sink reads the tree's samples
             # after it has subscribed to the hub, so a value a source brings meanwhile reaches it.
+            if self.leases is not None:
+                self._start(self.leases.run(), "leases")
             for source in self.sources:
                 self._start(source.run(), f"source:{source.machine.name}")
             for sink in self.sinks:

@@ -75,6 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--fleet-mappings", type=Path, default=None, metavar="DIR",
         help="with --machines: write a gateway mapping file per machine into DIR at start",
     )  # fmt: skip
+    p.add_argument(
+        "--fleet-address", default=None, metavar="HOST",
+        help="with --fleet-mappings: the host the gateway reaches the simulator at, in the mapping files"
+        " (default: the --host it listens on; a compose service's name when that is 0.0.0.0)",
+    )  # fmt: skip
     p.add_argument("--opcua-user", default=None, help="require this OPC UA user (default: anonymous access)")
     p.add_argument("--opcua-password", default=None, help="password of --opcua-user")
     noise = p.add_argument_group("noise mode (benchmark load)")
@@ -265,7 +270,7 @@ async def serve_fleet(args: argparse.Namespace) -> int:
         async with fleet:
             if args.fleet_mappings is not None:
                 try:
-                    fleet.write_mappings(args.fleet_mappings)
+                    fleet.write_mappings(args.fleet_mappings, args.fleet_address)
                 except OSError as exc:
                     log.error(
                         "cannot write the mappings into %s: %s", args.fleet_mappings, exc.strerror or exc

@@ -25,12 +25,13 @@ def write_fleet(
     inbox: str = INBOX,
     gateway: str = "",
     restart: str | None = "{initial: 0.2, max: 1}",
+    shard: str = "${CNC_SHARD}",
 ) -> Path:
     """gateway.yaml (OPC UA, console and `inbox` on the shard's ports; `gateway` adds lines) and fleet.yaml,
     whose path is returned."""
     (folder / "gateway.yaml").write_text(
         f"machines: {machines}\n"
-        "shard: ${CNC_SHARD}\n"
+        f"shard: {shard}\n"
         "state_dir: ${CNC_STATE_DIR}\n"
         "opcua: {endpoint: 'opc.tcp://127.0.0.1:${OPCUA_PORT}/cnc-gateway', security: [None]}\n"
         "http: {host: 127.0.0.1, port: '${HTTP_PORT}'}\n"

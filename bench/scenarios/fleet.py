@@ -10,7 +10,10 @@ values left from the run before):
 - throughput: the simulator flat out; the changes the shards take into their trees per second, summed
   over their `/metrics` (`cnc_gateway_machine_changes_total`), and each shard's CPU and RSS;
 - restart: the last shard SIGKILLed; the time until its machines are connected again on its
-  `/metrics` (static shards: the supervisor starts it again; no other shard takes them over).
+  `/metrics` (static shards: the supervisor starts it again; no other shard takes them over);
+- failover: 2 shards with `shard: lease` (LEASE_TIME, leases in a scratch PostgreSQL database), shared
+  out 100 and 100; shard 2 SIGKILLed (its supervisor waits a minute before starting it again); the time
+  until shard 1's `/metrics` has all 200 machines connected.
 
 The 1-shard run is the baseline of the others, from the same run. On a 2-core machine the simulator,
 the broker and the subscriber share the cores with the shards: the ratios say what sharding buys there.
@@ -32,12 +35,14 @@ import yaml
 
 from bench.context import Context
 from bench.procs import ROOT, Agent, Mosquitto, child_env, free_port
+from bench.scenarios.queue import database  # a scratch PostgreSQL database, dropped afterwards
 from simulator.noise import NoiseSpec, noise_mapping, split_machines
 
 SECTION = "Fleet: 200 machines × 50 variables over shards of `cnc-gateway fleet` (issue 29)"
 MACHINES, PER_MACHINE = 200, 50
 SHARDS = (1, 2, 4)
 START_LIMIT = 180.0  # s: a start-up slower than this is a failure of the run, not a figure
+LEASE_TIME = 5.0  # s: the failover run's lease
 
 
 def _metrics(port: int) -> str:
@@ -52,6 +57,14 @@ CHANGES = re.compile(r"^cnc_gateway_machine_changes_total\{[^}]*\} (\S+)$", re.M
 CONNECTED = re.compile(r"^cnc_gateway_machine_connected\{[^}]*\} 1\.0$", re.MULTILINE)
 
 
+def _shard_process(supervisor: int, k: int) -> psutil.Process:
+    """Shard K's process among the supervisor's children (by the environment the supervisor gave it)."""
+    for child in psutil.Process(supervisor).children():
+        if child.environ().get("CNC_SHARD_INDEX") == str(k):
+            return child
+    raise RuntimeError(f"no shard {k} among the fleet's processes")
+
+
 def _changes(text: str) -> float:
     return sum(float(v) for v in CHANGES.findall(text))
 
@@ -60,11 +73,14 @@ def _connected(text: str) -> int:
     return len(CONNECTED.findall(text))
 
 
-def _write_fleet(folder: Path, mappings: dict[str, str], shards: int, mqtt_port: int) -> Path:
+def _write_fleet(
+    folder: Path, mappings: dict[str, str], shards: int, mqtt_port: int, lease: str | None = None
+) -> Path:
+    """The gateway and fleet files; `lease`: a PostgreSQL URL, for `shard: lease` on it."""
     folder.mkdir(parents=True, exist_ok=True)
     for name, text in mappings.items():
         (folder / f"{name}.yaml").write_text(text, encoding="utf-8")
-    gateway = {
+    gateway: dict[str, Any] = {
         "machines": [f"{name}.yaml" for name in mappings],
         "shard": "${CNC_SHARD}",
         "state_dir": "${CNC_STATE_DIR}",
@@ -73,13 +89,15 @@ def _write_fleet(folder: Path, mappings: dict[str, str], shards: int, mqtt_port:
         "http": {"host": "127.0.0.1", "port": "${HTTP_PORT}"},
         "mqtt": {"port": mqtt_port, "client_id": "bench-fleet-${OPCUA_PORT}"},  # one per shard
     }
+    if lease is not None:
+        gateway.update(shard="lease", queue=lease, lease_time=LEASE_TIME)
     (folder / "gateway.yaml").write_text(yaml.safe_dump(gateway, sort_keys=False), encoding="utf-8")
     fleet = {
         "gateway": "gateway.yaml",
         "shards": shards,
         "ports": {"OPCUA_PORT": free_port(), "HTTP_PORT": free_port()},
         "state_dir": "state",
-        "restart": {"initial": 0.2, "max": 1},
+        "restart": {"initial": 60, "max": 60} if lease else {"initial": 0.2, "max": 1},
     }
     path = folder / "fleet.yaml"
     path.write_text(yaml.safe_dump(fleet, sort_keys=False), encoding="utf-8")
@@ -145,7 +163,7 @@ async def _one(ctx: Context, sim: Agent, mappings: dict[str, str], shards: int) 
             if shards > 1:
                 last = ports[-1]
                 expected = _connected(_metrics(last))
-                victim = workers[-1]
+                victim = _shard_process(proc.pid, shards)
                 killed = time.monotonic()
                 victim.send_signal(signal.SIGKILL)
                 # Polled, as an operator's dashboard would: /metrics is all a shard says about its machines.
@@ -171,6 +189,47 @@ async def _one(ctx: Context, sim: Agent, mappings: dict[str, str], shards: int) 
     return out
 
 
+async def _failover(ctx: Context, mappings: dict[str, str]) -> dict[str, Any]:
+    """Two lease-served shards; the second SIGKILLed; until the first has every machine connected."""
+    out: dict[str, Any] = {"lease_time": LEASE_TIME}
+    with database() as url:
+        async with Mosquitto(ctx.workdir) as broker:
+            fleet_file = _write_fleet(ctx.workdir / "fleet-lease", mappings, 2, broker.port, lease=url)
+            http = int(yaml.safe_load(fleet_file.read_text())["ports"]["HTTP_PORT"])
+            log = (ctx.workdir / "fleet-lease.log").open("ab")
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "gateway.cli.main", "fleet", str(fleet_file),
+                stdout=log, stderr=log, env=child_env(), cwd=str(ROOT),
+            )  # fmt: skip
+            try:
+                deadline = time.monotonic() + START_LIMIT
+                half = MACHINES // 2
+                while (_connected(_metrics(http)), _connected(_metrics(http + 1))) != (half, half):
+                    if proc.returncode is not None or time.monotonic() > deadline:
+                        raise RuntimeError("lease: the two shards never shared the machines out")
+                    await asyncio.sleep(0.1)
+                victim = _shard_process(proc.pid, 2)
+                killed = time.monotonic()
+                victim.send_signal(signal.SIGKILL)
+                while _connected(_metrics(http)) < MACHINES:
+                    if time.monotonic() - killed > START_LIMIT:
+                        raise RuntimeError("lease: shard 1 never took shard 2's machines over")
+                    await asyncio.sleep(0.05)
+                out["failover"] = time.monotonic() - killed
+                ctx.log(f"  lease {LEASE_TIME:g} s: shard 2/2 SIGKILLed; shard 1 serves all {MACHINES} "
+                        f"machines after {out['failover']:.2f} s")  # fmt: skip
+            finally:
+                if proc.returncode is None:
+                    proc.send_signal(signal.SIGTERM)
+                    try:
+                        async with asyncio.timeout(30):
+                            await proc.wait()
+                    except TimeoutError:
+                        proc.kill()
+                        await proc.wait()
+    return out
+
+
 async def run(ctx: Context) -> None:
     total = MACHINES * PER_MACHINE
     ctx.log(f"fleet: {MACHINES} machines × {PER_MACHINE} variables = {total:,}, shards {SHARDS}")
@@ -187,9 +246,16 @@ async def run(ctx: Context) -> None:
         }  # fmt: skip
         for shards in SHARDS:
             runs[shards] = await _one(ctx, sim, mappings, shards)
+        lease = await _failover(ctx, mappings)
     finally:
         await sim.stop()
-    ctx.results.details["fleet"] = {"machines": MACHINES, "per_machine": PER_MACHINE, "runs": runs}
+    ctx.results.details["fleet"] = {
+        "machines": MACHINES, "per_machine": PER_MACHINE, "runs": runs, "lease": lease,
+    }  # fmt: skip
+    ctx.results.add(
+        "fleet.failover.2", SECTION, f"2 lease shards: kill → all {MACHINES} machines served by the other",
+        lease["failover"], "s", note=f"lease_time {LEASE_TIME:g} s",
+    )  # fmt: skip
     one = runs.get(1, {})
     for shards, data in runs.items():
         ctx.results.add(

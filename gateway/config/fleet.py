@@ -63,6 +63,7 @@ def shard_specs(fleet: FleetFile, fleet_path: Path, gateway: Path) -> list[Shard
     for k in range(1, fleet.shards + 1):
         environ = {name: str(port + k - 1) for name, port in fleet.ports.items()}
         environ["CNC_SHARD"] = f"{k}/{fleet.shards}"
+        environ["CNC_SHARD_INDEX"] = str(k)  # for names: `edge_node_id: gw-${CNC_SHARD_INDEX}`
         environ["CNC_STATE_DIR"] = str((base / fleet.state_dir / f"shard-{k}").resolve())
         command = [sys.executable, "-m", "gateway.cli.main", "run", str(gateway)]
         out.append(ShardSpec(k, fleet.shards, command, environ))

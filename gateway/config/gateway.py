@@ -21,7 +21,7 @@ from gateway.settings.access import (
 )
 from gateway.settings.sections import Sectioned, with_sections
 from gateway.settings.urls import check_queue_url
-from gateway.shards.static import KOfN, parse_k_of_n
+from gateway.shards.static import LEASE, KOfN, parse_k_of_n
 from gateway.sinks import registry as sinks
 from gateway.sinks.mqtt.config import MqttConfig
 from gateway.sinks.mtconnect.config import AgentConfig
@@ -41,7 +41,15 @@ class GatewayConfig(Sectioned):
     shard: str | list[str] | None = Field(
         default=None,
         description="Serve only some machines of the fleet: K/N (2/4: every fourth machine in name order,"
-        " from the second) or their names; absent: all of them",
+        " from the second) or their names; `lease`: the machines this process holds a lease on in the"
+        " queue's PostgreSQL database, taken over from a shard that stops renewing; absent: all of them",
+    )
+    lease_time: float = Field(
+        default=10.0,
+        ge=1.0,
+        le=600.0,
+        description="With shard: lease, seconds a lease lasts unrenewed: a dead shard's machines are served"
+        " elsewhere after it and one renewal (a third of it)",
     )
     queue: str | None = Field(
         default=None,
@@ -95,6 +103,8 @@ class GatewayConfig(Sectioned):
     @field_validator("shard")
     @classmethod
     def _shard(cls, shard: str | list[str] | None) -> str | list[str] | None:
+        if shard == LEASE:
+            return shard
         if isinstance(shard, str):
             parse_k_of_n(shard)
         elif isinstance(shard, list):
@@ -105,8 +115,15 @@ class GatewayConfig(Sectioned):
                 raise ValueError(f"names {', '.join(repeated)} more than once")
         return shard
 
+    @property
+    def leased(self) -> bool:
+        """`shard: lease`: every machine is loaded, and served while this process holds its lease."""
+        return self.shard == LEASE
+
     def shard_of(self) -> KOfN | list[str] | None:
-        """The `shard:` this process serves, parsed (None: the whole fleet)."""
+        """The static `shard:` this process serves, parsed (None: the whole fleet, or by lease)."""
+        if self.shard == LEASE:
+            return None
         return parse_k_of_n(self.shard) if isinstance(self.shard, str) else self.shard
 
     @field_validator("queue")

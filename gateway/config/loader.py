@@ -440,7 +440,18 @@ def load(paths: Sequence[Path], environ: Mapping[str, str] | None = None) -> Con
     if issues:
         raise ConfigError(issues)
     elsewhere: dict[str, JobsConfig] = {}
-    if gateway.shard is not None and gateway_located is not None and gateway_file is not None:
+    if gateway.leased and gateway.queue is None and gateway_located is not None and gateway_file is not None:
+        raise ConfigError(
+            [
+                ConfigIssue(
+                    str(gateway_file),
+                    gateway_located.line(("shard",)),
+                    "shard",
+                    "shard: lease needs queue: postgresql://…: the leases are kept in the queue's database",
+                )
+            ]
+        )
+    if gateway.shard_of() is not None and gateway_located is not None and gateway_file is not None:
         fleet = machines
         machines = _shard_machines(gateway, machines, gateway_located, gateway_file)
         mapping_files = [seen[m.machine] for m in machines]

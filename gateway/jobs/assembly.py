@@ -18,7 +18,7 @@ from gateway.jobs.backups import BackupShelf
 from gateway.jobs.delivery.autostart import AutoStarter
 from gateway.jobs.delivery.fetch import ProgramFetch
 from gateway.jobs.delivery.supervisor import DeliverySupervisor
-from gateway.jobs.delivery.worker import DeliveryWorker
+from gateway.jobs.delivery.worker import DeliveryWorker, LeaseView
 from gateway.jobs.intake import Intake
 from gateway.jobs.programs import program_methods
 from gateway.jobs.queue_port import QueuePort
@@ -52,6 +52,7 @@ def assemble_machines(
     supervisor: DeliverySupervisor,
     intake: Intake,
     port: QueuePort,
+    lease: LeaseView | None = None,
 ) -> dict[str, BackupShelf]:
     """Builds every machine's delivery into `supervisor` and adds its methods to the tree; returns each
     machine's backup shelf (Programs.Backup)."""
@@ -90,6 +91,7 @@ def assemble_machines(
             intake=intake,
             backups=backups_dir,
             fetch=fetch,
+            lease=lease,
         )
         for name, jobs in machines.items()
     }
@@ -105,6 +107,7 @@ def build_machine(
     intake: Intake,
     backups: Path,
     fetch: ProgramFetch | None = None,
+    lease: LeaseView | None = None,
 ) -> BackupShelf:
     """One machine's worker (with its transport and auto-start) and its `Programs` methods."""
     machine = tree.machines[name]
@@ -122,6 +125,7 @@ def build_machine(
         delivery.transport,
         autostart=autostart,
         fetch=fetch,
+        lease=lease,
     )
     supervisor.add(name, worker, autostart)
     shelf = BackupShelf(backups / name, jobs.backups)

@@ -61,9 +61,14 @@ class Intake:
         supervisor: DeliverySupervisor,
         state_dir: Path,
         reply_within: float,
+        by_lease: bool = False,
     ) -> None:
+        """`by_lease` (`shard: lease`): whichever shard holds a machine when its job's turn comes delivers it,
+        so the spool keeps no copy of a queued program: every delivery reads it from the queue's database
+        (a copy kept here would stay behind whenever another shard delivered the job)."""
         self.machines = machines
         self.serves = frozenset(machines if serves is None else serves)
+        self.by_lease = by_lease
         self.queue = queue
         self.spool = spool
         self.threads = threads
@@ -254,7 +259,7 @@ class Intake:
             self.spool.discard(job)
             log.info("%s: %s skipped: %s", job.machine, job.id, job.reason)
             return UploadReply(True, f"{job.id} skipped: {job.reason}", job.id)
-        if job.machine not in self.serves:  # another shard delivers it, from the queue's copy
+        if self.by_lease or job.machine not in self.serves:  # delivered from the queue's copy
             await self.threads.work(self.spool.discard, job)
         self.supervisor.wake(job.machine)
         seconds = (job.estimate or {}).get("seconds")

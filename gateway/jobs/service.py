@@ -41,6 +41,7 @@ from gateway.config.loader import Config
 from gateway.errors import ConfigError, JobError, SinkError
 from gateway.jobs.assembly import assemble_machines
 from gateway.jobs.delivery.supervisor import DeliverySupervisor
+from gateway.jobs.delivery.worker import LeaseView
 from gateway.jobs.inbox.accounts import Accounts
 from gateway.jobs.inbox.inbox import Inbox, tls_context
 from gateway.jobs.intake import Intake
@@ -68,7 +69,9 @@ class JobService:
         *,
         environ: Mapping[str, str] | None = None,
         logins: LoginLimiter | None = None,
+        lease: LeaseView | None = None,
     ) -> None:
+        """`lease`: with `shard: lease`, each machine's jobs are delivered only while it is held here."""
         self.config = config
         self.tree = tree
         self.environ = environ
@@ -99,6 +102,7 @@ class JobService:
             supervisor=self.delivery,
             state_dir=state,
             reply_within=config.gateway.inbox.reply_within,
+            by_lease=lease is not None,
         )
         self.port = QueuePort(
             self.queue,
@@ -117,6 +121,7 @@ class JobService:
             supervisor=self.delivery,
             intake=self.intake,
             port=self.port,
+            lease=lease,
         )
         # What other parts of the gateway (the demo, Programs.Put's callers) call.
         self.submit_bytes = self.intake.submit_bytes

@@ -31,10 +31,16 @@ class StatusOwner(Protocol[N]):
     def set_internal(self, node: N, value: Any) -> None: ...
 
 
+# The status of a standby machine's values (another shard serves it): OPC UA shows them Bad with it; the MQTT
+# and Sparkplug faces never publish a sample that carries it, even one queued before the machine was served.
+STANDBY_STATUS = "BadOutOfService"
+
+
 class MachineStatus(Generic[N]):
     CONNECTED = "connected"
     CONNECTING = "connecting"
     DISCONNECTED = "disconnected"
+    STANDBY = "standby"  # another shard of the fleet serves the machine (shard: lease)
 
     def __init__(self, machine: StatusOwner[N], endpoint: str) -> None:
         self.machine = machine
@@ -43,7 +49,10 @@ class MachineStatus(Generic[N]):
             "Status/Connected", "Boolean", "True while the controller connection is up", False
         )
         self.state_node = add(
-            "Status/State", "String", "connected, connecting or disconnected", self.DISCONNECTED
+            "Status/State",
+            "String",
+            "connected, connecting, disconnected, or standby (another shard serves it)",
+            self.DISCONNECTED,
         )
         self.last_error_node = add(
             "Status/LastError", "String", "The most recent connection or driver error", ""
@@ -92,6 +101,13 @@ class MachineStatus(Generic[N]):
         m.set_internal(self.last_error_node, reason)
         m.set_internal(self.connected_node, False)
         m.set_internal(self.state_node, self.DISCONNECTED)
+
+    def standby(self, reason: str) -> None:
+        """Not served by this process: another shard of the fleet holds the machine's lease."""
+        m = self.machine
+        m.set_internal(self.last_error_node, reason)
+        m.set_internal(self.connected_node, False)
+        m.set_internal(self.state_node, self.STANDBY)
 
     def error(self, reason: str) -> None:
         """A problem that does not drop the connection (a bad node, a refused write)."""

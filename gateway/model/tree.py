@@ -194,6 +194,20 @@ class Machine:
         return f"<Machine {self.name}>"
 
     @property
+    def served(self) -> bool:
+        """False while another shard serves the machine (`shard: lease`, gateway/sources/leased.py): the
+        MQTT and Sparkplug faces then publish nothing of it (`VariableTree.standby`), so its standby values
+        never overwrite the serving shard's; OPC UA shows it, Bad, with its ServiceLevel low."""
+        return self.name not in self.tree.standby
+
+    @served.setter
+    def served(self, served: bool) -> None:
+        if served:
+            self.tree.standby.discard(self.name)
+        else:
+            self.tree.standby.add(self.name)
+
+    @property
     def mapped(self) -> Iterator[VariableNode]:
         return (n for n in self.nodes.values() if not n.internal)
 
@@ -473,6 +487,8 @@ class VariableTree:
         self.machines: dict[str, Machine] = {}
         self.write_hooks: list[WriteHook] = []
         self.access = AccessPolicy()
+        # Machines another shard serves (Machine.served): one set, read on the MQTT faces' hot paths.
+        self.standby: set[str] = set()
         # Every write and call ends up here (gateway/audit/trail.py logs and stores them); never blocks.
         self.audit_sinks: list[Callable[[AuditEntry], None]] = []
         for definition in machines:

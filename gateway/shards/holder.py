@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import socket
 import time
 from collections.abc import Callable, Collection
 from concurrent.futures import ThreadPoolExecutor
@@ -33,6 +35,14 @@ from gateway.shards.leases import LeaseTable
 log = logging.getLogger("gateway.shards")
 
 T = TypeVar("T")
+
+
+def holder_name() -> str:
+    """This process among a fleet's members: its shard under `cnc-gateway fleet`, its host and pid (unique:
+    a shard started again is a new member, which takes its machines when the old one's leases run out)."""
+    shard = os.environ.get("CNC_SHARD", "").strip()
+    where = f"{socket.gethostname()}:{os.getpid()}"
+    return f"shard {shard} ({where})" if shard else where
 
 
 class LeaseHolder:
@@ -56,6 +66,9 @@ class LeaseHolder:
         self._fences: dict[str, Fence] = {}
         self._pool: ThreadPoolExecutor | None = None
         self.changed = asyncio.Event()  # set after a step that took, lost or released a machine
+        self._watchers: dict[str, list[Callable[[bool], None]]] = {}
+        self._told: dict[str, bool] = {}  # what each machine's watchers were last told
+        self.reachable = True  # False while the lease table cannot be reached (the last step failed)
 
     async def _call(self, fn: Callable[[], T]) -> T:
         assert self._pool is not None, "the lease holder is not entered"
@@ -66,6 +79,7 @@ class LeaseHolder:
         try:
             await self._call(self.table.open)
             await self.step()
+            self._tell()
         except BaseException:
             self._pool.shutdown(wait=False)
             self._pool = None
@@ -74,6 +88,7 @@ class LeaseHolder:
 
     async def __aexit__(self, *exc_info: object) -> None:
         self._fences.clear()
+        self._tell()  # the watchers stop serving before the leases are released
         try:
             await self._call(self.keeper.stop)
         except LeaseError as exc:
@@ -105,13 +120,45 @@ class LeaseHolder:
         return done
 
     async def run(self) -> None:
-        """Renew, rebalance and take over, every third of the lease time, until cancelled."""
+        """Renew, rebalance and take over, every third of the lease time, until cancelled; the watchers
+        hear of every machine taken or lost, also of one whose lease ran out by this process's clock
+        while the table could not be reached (they are woken at that moment, not at the next round)."""
+        loop = asyncio.get_running_loop()
+        due = loop.time() + self.lease_time / 3
         while True:
-            await asyncio.sleep(self.lease_time / 3)
-            try:
-                await self.step()
-            except LeaseError as exc:  # the database is away: the leases run out, fence() says None
-                log.warning("%s: cannot reach the lease table: %s", self.holder, exc)
+            await asyncio.sleep(max(0.0, min(due, loop.time() + self._until_doubt()) - loop.time()))
+            if loop.time() >= due:
+                due = loop.time() + self.lease_time / 3
+                try:
+                    await self.step()
+                    if not self.reachable:
+                        log.warning("%s: the lease table is reachable again", self.holder)
+                    self.reachable = True
+                except LeaseError as exc:  # the database is away: the leases run out, fence() says None
+                    if self.reachable:
+                        log.warning("%s: cannot reach the lease table: %s", self.holder, exc)
+                    self.reachable = False
+            self._tell()
+
+    def _until_doubt(self) -> float:
+        """Seconds until fence() stops trusting the oldest renewal of a held machine (lease_time if none)."""
+        trusted = self.lease_time - self.margin
+        now = self.clock()
+        ends = [renewed + trusted - now for m, renewed in self._renewed.items() if m in self._fences]
+        return max(0.0, min(ends, default=self.lease_time)) + 0.01
+
+    def watch(self, machine: str, told: Callable[[bool], None]) -> None:
+        """Call `told(True)` when this process may act on `machine` (fence() gives a token), `told(False)`
+        when it may no longer; first after entering, then as it changes."""
+        self._watchers.setdefault(machine, []).append(told)
+
+    def _tell(self) -> None:
+        for machine, watchers in self._watchers.items():
+            held = self.fence(machine) is not None
+            if self._told.get(machine) != held:
+                self._told[machine] = held
+                for told in watchers:
+                    told(held)
 
     def fence(self, machine: str) -> Fence | None:
         """The token to act on `machine` with, or None: not held, or held on a renewal too old to trust."""

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 _K_OF_N = re.compile(r"^\s*(\d+)\s*/\s*(\d+)\s*$")
 MAX_SHARDS = 1024
+LEASE = "lease"  # `shard: lease`: not static; the machines this process holds leases on (holder.py)
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,7 +34,8 @@ def parse_k_of_n(text: str) -> KOfN:
     m = _K_OF_N.match(text)
     if m is None:
         raise ValueError(
-            f"{text!r} is no shard: write K/N (2/4: the second of four shards) or list the machines by name"
+            f"{text!r} is no shard: write K/N (2/4: the second of four shards), list the machines by name,"
+            " or write lease (the machines this process holds leases on)"
         )
     k, n = int(m.group(1)), int(m.group(2))
     if not 1 <= n <= MAX_SHARDS:

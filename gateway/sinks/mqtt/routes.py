@@ -14,6 +14,7 @@ from collections.abc import Iterable, Mapping
 
 from gateway.codecs.mqtt_publish import first_byte, qos1_first_byte, topic_field, topic_head
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.shards.identity import shard_index
 from gateway.sinks.mqtt.config import (
     MachineMqtt,
     MqttConfig,
@@ -134,7 +135,7 @@ class Routes:
         self.by_node: dict[VariableNode, Route] = {}
         self.by_topic: dict[str, Route] = {}
         self.unrouted: set[VariableNode] = set()
-        self.status_topic = gateway_status_topic(cfg.prefix)
+        self.status_topic = gateway_status_topic(cfg.prefix, shard_index())
         self.machine_status: dict[str, str] = {
             name: machine_status_topic(cfg.prefix, name) for name in tree.machines
         }

@@ -44,6 +44,7 @@ from gateway.errors import BrokerError, SinkError
 from gateway.model.events import EventSubscription
 from gateway.model.hub import Change, Subscription
 from gateway.model.sample import utcnow
+from gateway.model.status import STANDBY_STATUS
 from gateway.model.tree import Machine, VariableNode, VariableTree
 from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt.commands import CommandRequests
@@ -421,6 +422,7 @@ class MqttSink(BrokerLink):
         backlog = self.backlog
         client = self._client
         packets: list[bytes] | None = [] if self._online and client is not None and client.connected else None
+        standby = self.tree.standby  # machines another shard serves (shard: lease): nothing of them here
         count = 0
         for node, sample in batch:
             route = by_node.get(node)
@@ -428,6 +430,8 @@ class MqttSink(BrokerLink):
                 route = self._late(node)
                 if route is None:
                     continue
+            if (standby and route.machine in standby) or sample.status == STANDBY_STATUS:
+                continue  # another shard serves the machine (or did when this sample was made)
             payload = encode_raw(sample.value) if route.raw else encode_json(sample, route.suffix)
             field = route.field
             if packets is not None and field and (not route.retain or not backlog):
@@ -648,7 +652,10 @@ class MqttSink(BrokerLink):
         if not self._dirty:
             return
         dirty, self._dirty = self._dirty, set()
+        standby = self.tree.standby
         for name in dirty:
+            if name in standby:  # another shard serves it and publishes its status
+                continue
             topic = self.routes.machine_status.get(name)
             nodes = self._status_nodes.get(name)
             if topic is None or not nodes:

@@ -52,8 +52,9 @@ def event_topic(prefix: str, machine: str | None, channel: str) -> str:
     return f"{machine_root(prefix, machine)}/{levels}" if machine else f"{prefix}/{levels}"
 
 
-def gateway_status_topic(prefix: str) -> str:
-    return f"{prefix}/{STATUS}"
+def gateway_status_topic(prefix: str, shard: int | None = None) -> str:
+    """`<prefix>/status`; shard K of a fleet: `<prefix>/status/shard-K` (each shard its own, its will too)."""
+    return f"{prefix}/{STATUS}" + (f"/shard-{shard}" if shard is not None else "")
 
 
 def machine_status_topic(prefix: str, machine: str) -> str:

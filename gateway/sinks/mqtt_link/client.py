@@ -72,6 +72,7 @@ from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway.codecs.mqtt_publish import FAILURE, read_puback
 from gateway.errors import BrokerError, BrokerRefused, SinkError
+from gateway.shards.identity import shard_index
 from gateway.sinks.mqtt_link.broker import MqttTls
 
 # paho's Properties() has no annotations, which mypy --strict will not call; this is its signature.
@@ -250,8 +251,11 @@ def tls_context(tls: MqttTls, base_dir: Path) -> ssl.SSLContext:
 
 
 def default_client_id() -> str:
+    """`cnc-gateway-<host>`, and `-shard-K` for shard K of a fleet: the shards of one host must not take
+    each other's connection, and a restarted shard resumes its own persistent session."""
     host = "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in socket.gethostname())
-    return f"cnc-gateway-{host}"[:64]
+    shard = shard_index()
+    return (f"cnc-gateway-{host}" + (f"-shard-{shard}" if shard is not None else ""))[-64:]
 
 
 class MqttClient:

@@ -11,6 +11,18 @@ from gateway.sinks.base import Sink, SinkContext, SinkSpec
 from gateway.sinks.opcua.config import OpcUaServerConfig
 
 
+def redundant_set(servers: list[str]) -> Any:
+    """With `shard: lease`: the servers `opcua.redundant_servers` lists; else under `cnc-gateway fleet`
+    (CNC_SHARD = K/N) the N shards' servers of this host; a shard started by hand lists only itself."""
+    from gateway.shards.identity import fleet_size, shard_index
+    from gateway.sinks.opcua.redundancy import RedundantSet, application_uri
+
+    if servers:
+        return RedundantSet(tuple(servers))
+    shards = fleet_size()
+    return RedundantSet.of_fleet(shards) if shards else RedundantSet((application_uri(shard_index()),))
+
+
 def _create(context: SinkContext) -> Sink:
     from gateway.sinks.opcua.security import TrustList
     from gateway.sinks.opcua.server import OpcUaSink
@@ -44,6 +56,7 @@ def _create(context: SinkContext) -> Sink:
         context.state_dir,
         users=gateway.user_directory(context.logins),
         extensions=[e for e in built if e is not None],
+        redundant=redundant_set(config.redundant_servers) if gateway.leased else None,
     )
     context.offered.trust = TrustList(sink.pki)  # the console's Certificates page manages its folders
     return sink

@@ -30,6 +30,12 @@ class OpcUaServerConfig(Sectioned):
         description="standard (default): None plus every signed and encrypted endpoint; "
         "secure: without None; open: None only",
     )
+    redundant_servers: list[str] = Field(
+        default_factory=list,
+        description="With shard: lease, the application URIs of every server of the fleet, for their"
+        " ServerUriArray (each shard's is urn:<host>:cnc-gateway:shard-K); empty: the shards of this host"
+        " under cnc-gateway fleet",
+    )
 
     @field_validator("endpoint")
     @classmethod

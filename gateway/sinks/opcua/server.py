@@ -46,6 +46,7 @@ from gateway.model.hub import Change, Subscription
 from gateway.model.methods import Method
 from gateway.model.sample import Sample, utcnow
 from gateway.model.tree import Machine, VariableNode, VariableTree
+from gateway.shards.identity import shard_index
 from gateway.shims.asyncua_nodesets import import_nodesets
 from gateway.shims.asyncua_ns0 import default_cache_dir, loaded_node_ids, use_cache
 from gateway.shims.asyncua_server import (
@@ -70,6 +71,8 @@ from gateway.sinks.opcua.identity import (
 )
 from gateway.sinks.opcua.methods import call_result, plan_methods
 from gateway.sinks.opcua.port import MethodCallback, ServerExtension, Shown
+from gateway.sinks.opcua.redundancy import RedundantSet, application_uri, keep_level
+from gateway.sinks.opcua.redundancy import install as install_redundancy
 from gateway.sinks.opcua.security import ClientCertificates, Pki, secure_server
 from gateway.sinks.opcua.values import ValueKind, ValueMismatch, value_kind
 from gateway.sinks.opcua.writes import write_node
@@ -288,8 +291,11 @@ class OpcUaSink:
         state_dir: Path,
         users: UserDirectory | None = None,
         extensions: Sequence[ServerExtension] = (),
+        redundant: RedundantSet | None = None,
     ) -> None:
+        """`redundant`: with `shard: lease`, the fleet's servers as a non-transparent redundant set."""
         self.tree = tree
+        self.redundant = redundant
         self.config = config
         self.state_dir = state_dir  # pki/ (own certificate, trusted/, rejected/) lives here
         self.pki = Pki(state_dir / "pki")
@@ -297,7 +303,7 @@ class OpcUaSink:
         self.extensions = tuple(extensions)  # alarm conditions …: installed with the address space
         self.endpoint: str = config.endpoint
         self.namespace_index: int = -1
-        self.application_uri = f"urn:{socket.gethostname()}:cnc-gateway"
+        self.application_uri = application_uri(shard_index())  # each shard of a fleet its own
         self.user_name: Callable[[Any], str | None] = session_user_name
         self.user_role: Callable[[Any], str | None] = session_user_role
         self.certificates: ClientCertificates | None = None
@@ -516,6 +522,8 @@ class OpcUaSink:
         # The standard namespace (what is in memory of it): what this frees, our own nodes reuse.
         self._shared.share(loaded_node_ids(server.iserver.aspace._nodes))
         await server.set_application_uri(self.application_uri)
+        if self.redundant is not None:
+            await install_redundancy(server, self.redundant)
         await server.set_build_info(
             server.product_uri, server.manufacturer_name, self.config.name, __version__, "0", utcnow()
         )
@@ -595,6 +603,14 @@ class OpcUaSink:
         sub = self._sub
         if sub is None:
             raise RuntimeError("enter the OPC UA sink before running it")
+        if self.redundant is None or self._server is None:
+            await self._mirror(sub)
+            return
+        async with asyncio.TaskGroup() as group:
+            group.create_task(keep_level(self._server, self.tree), name="sink:opcua:service-level")
+            await self._mirror(sub)
+
+    async def _mirror(self, sub: Subscription[VariableNode]) -> None:
         while True:
             batch = await sub.next_batch()
             await self._push(batch)

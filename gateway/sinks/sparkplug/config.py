@@ -20,6 +20,7 @@ from gateway.codecs.sparkplug.errors import SparkplugError
 from gateway.codecs.sparkplug.limits import MAX_PAYLOAD
 from gateway.codecs.sparkplug.topics import check_id
 from gateway.settings.base import Strict
+from gateway.shards.identity import shard_index
 from gateway.sinks.mqtt_link.broker import MAX_PACKET_SIZE, MIB, BrokerConnection, MqttReconnect, SharedBroker
 
 SUFFIX = "-sparkplug"  # appended to the mqtt: section's client id
@@ -82,8 +83,9 @@ class SparkplugConfig(Strict):
         default="cnc", description="Sparkplug group id: spBv1.0/<group_id>/…; a plant, a hall, a line"
     )
     edge_node_id: str = Field(
-        default="cnc-gateway",
-        description="This gateway's edge node id; unique in its group (each gateway of a fleet its own)",
+        default_factory=lambda: "cnc-gateway" + (f"-shard-{k}" if (k := shard_index()) is not None else ""),
+        description="This gateway's edge node id; unique in its group. Default: cnc-gateway, and for shard K"
+        " of `cnc-gateway fleet` cnc-gateway-shard-K (each shard one edge node of the group)",
     )
     primary_host_id: str | None = Field(
         default=None,

@@ -67,6 +67,7 @@ from gateway.codecs.sparkplug import (
 from gateway.codecs.sparkplug.aliases import Aliases
 from gateway.errors import BrokerError
 from gateway.model.hub import Change, Subscription
+from gateway.model.status import STANDBY_STATUS
 from gateway.model.tree import VariableNode, VariableTree
 from gateway.sinks.base import SinkHealth
 from gateway.sinks.mqtt_link.buffer import Message
@@ -511,6 +512,10 @@ class SparkplugSink(BrokerLink):
         self._fence()
 
     def _dbirth(self, device: Device) -> None:
+        if device.name in self.tree.standby:  # another shard's edge node serves it: not born here
+            device.birth_due = False
+            device.alive = False
+            return
         ts = now_ms()
         payload = self._encode_birth(
             lambda ms: encode_dbirth(ms, seq=self.seq, timestamp=ts), device.birth_metrics()
@@ -589,7 +594,7 @@ class SparkplugSink(BrokerLink):
                 self._connection_change(
                     device, sample.value is True and sample.good, millis(sample.source_ts)
                 )
-            if device.alive if born else device.online:
+            if (device.alive if born else device.online) and sample.status != STANDBY_STATUS:
                 device.pending.append((metric, sample))
 
     def _appeared(self, node: VariableNode) -> None:

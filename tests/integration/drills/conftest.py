@@ -39,6 +39,7 @@ COUNTS: dict[str, tuple[int, int]] = {
     "paused_holders": (3, 30),  # lease holders stopped (SIGSTOP) past their lease, then continued
     "database_outages": (3, 30),  # the job queue's PostgreSQL cut off and back under a running job service
     "shard_kills": (3, 30),  # a shard of `cnc-gateway fleet` SIGKILLed while another's inbox takes its jobs
+    "lease_takeovers": (3, 30),  # a lease-served shard SIGKILLed: another takes its machines over
 }
 
 

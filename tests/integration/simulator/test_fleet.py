@@ -49,6 +49,11 @@ async def test_each_machine_runs_in_its_own_folder_and_the_mappings_fit_them(tmp
             gateway.write_text(f"machines: {names}\nshard: {k}/2\n")
             shards.append(sorted(m.machine for m in load([gateway], environ={}).machines))
         assert shards == [["laser-001", "laser-003"], ["laser-002"]]
+        # Reached by another name (a compose service): the mappings say it, the ports stay the same.
+        elsewhere = load_mapping(fleet.write_mappings(tmp_path / "compose", "simulator")[1], environ={})
+        assert elsewhere.driver.endpoint == f"opc.tcp://simulator:{fleet.machines[1].opcua_port}"
+        assert elsewhere.jobs is not None and elsewhere.jobs.controller.host == "simulator"
+        assert elsewhere.jobs.controller.port == fleet.machines[1].ftp_port
 
 
 async def test_the_command_serves_a_fleet_writes_its_mappings_and_stops_on_a_signal(tmp_path: Path) -> None:
