@@ -11,7 +11,7 @@ from pathlib import Path
 from gateway.app import Gateway, run_until_signalled
 from gateway.cli.check import report_config_error
 from gateway.config.loader import Config, load
-from gateway.errors import ConfigError, SinkError
+from gateway.errors import ConfigError, SinkError, StoreError
 from gateway.logconfig import configure
 from gateway.shims.loop import ENV, LOOPS, loop_factory, loop_name, run
 
@@ -63,7 +63,7 @@ def handle(args: argparse.Namespace) -> int:
 async def serve(config: Config, *, resume_gc: bool = False) -> int:
     try:
         await run_until_signalled(_serve(config, resume_gc))
-    except SinkError as exc:
+    except (SinkError, StoreError) as exc:  # a port taken, a database (queue, leases, audit) out of reach
         log.error("cannot start: %s", exc)
         return 1
     return 0

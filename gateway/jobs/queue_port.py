@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from gateway.errors import InvalidArgument, InvalidState, JobError, NotFound, PathRefused
+from gateway.errors import InvalidArgument, InvalidState, JobError, JobStoreError, NotFound, PathRefused
 from gateway.jobs.delivery.supervisor import DeliverySupervisor
 from gateway.jobs.inbox.inbox import STAGING, Upload, UploadReply
 from gateway.jobs.inbox.paths import check_file_name
@@ -166,6 +166,8 @@ class QueuePort:
         return job.as_dict()
 
     async def job_counts(self) -> dict[str, dict[str, int]]:
+        """Jobs per machine and state (/metrics); none while the queue's database cannot be read, so that a
+        scrape during a database restart still has every other figure."""
         if not self.opened:
             return {}
 
@@ -175,7 +177,10 @@ class QueuePort:
                 for name in self.machines
             }
 
-        return await self.threads.queue(read)
+        try:
+            return await self.threads.queue(read)
+        except JobStoreError:  # the delivery side says once that the queue is away, and when it is back
+            return {}
 
 
 def _seq(job_id: str) -> int:

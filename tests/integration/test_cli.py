@@ -113,6 +113,26 @@ def test_run_refuses_a_broken_mapping_without_starting(tmp_path: Path) -> None:
     assert "6 errors; nothing was started." in proc.stderr
 
 
+def test_run_says_in_one_line_that_the_lease_database_is_out_of_reach(tmp_path: Path) -> None:
+    closed = free_port()  # nothing listens there
+    (tmp_path / "gateway.yaml").write_text(
+        f"machines: [{ROOT / 'mappings/laser-sim.yaml'}]\nshard: lease\n"
+        f"queue: postgresql://gateway@127.0.0.1:{closed}/cnc\nstate_dir: state\nhttp: null\n"
+        f"opcua: {{endpoint: 'opc.tcp://127.0.0.1:{free_port()}/cnc-gateway', security: [None]}}\n"
+        f"inbox: {{port: {free_port()}}}\n"
+    )
+    proc = subprocess.run(
+        [str(BIN / "cnc-gateway"), "run", str(tmp_path / "gateway.yaml")],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert (
+        f"cannot start: cannot reach the lease table at postgresql://gateway@127.0.0.1:{closed}/cnc"
+        in proc.stderr
+    )
+    assert "Traceback" not in proc.stderr
+
+
 async def test_check_prints_the_tree_with_type_unit_and_access_the_commands_and_copydata_targets() -> None:
     proc = subprocess.run(
         [str(BIN / "cnc-gateway"), "check", str(ROOT / "mappings/laser-sim.yaml")],

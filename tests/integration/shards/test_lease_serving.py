@@ -5,6 +5,8 @@ client, as a SCADA with redundant connections reads (OPC UA Part 4, 6.6.2): each
 redundancy, lists both servers' application URIs in ServerUriArray, and carries a ServiceLevel; each shows
 both machines, a machine Good with its folder's ServiceLevel 255 on the shard that holds its lease, Bad
 (BadOutOfService) with 1 on the other. A shard killed: the survivor serves both, at ServiceLevel 255.
+And the database: a cut shorter than the lease does not interrupt serving; a longer one stops it, until
+the database is back.
 """
 
 from __future__ import annotations
@@ -12,15 +14,21 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import re
 import signal
 import socket
+import time
+import urllib.request
 from pathlib import Path
+from urllib.parse import urlsplit
 
+import psycopg
 from asyncua import ua
 
 from simulator.fleet import SimulatorFleet
 from tests.fleet_rig import Fleet, write_fleet
 from tests.opcua_client import Client
+from tests.postgres import ADMIN_URL
 from tests.waiting import free_port, wait_until
 
 
@@ -113,3 +121,69 @@ async def test_shards_form_a_redundant_set_with_a_service_level_per_machine(
             assert await asyncio.wait_for(fleet.proc.wait(), 30) == 0
     log = "".join(fleet.err)
     assert "Traceback" not in log, log[-3000:]
+
+
+def serving(port: int) -> set[str]:
+    """The machines a shard serves and is connected to, from its /metrics (empty while it cannot answer)."""
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=2) as answer:
+            text = answer.read().decode()
+    except OSError:
+        return set()
+    return set(re.findall(r'cnc_gateway_machine_connected\{machine="([^"]+)"\} 1\.0', text))
+
+
+def set_reachable(database: str, reachable: bool) -> None:
+    """The database cut as a restart or a network cut looks from the gateway: sessions ended, new refused."""
+    with psycopg.connect(ADMIN_URL, autocommit=True, connect_timeout=5) as admin:
+        admin.execute(f'ALTER DATABASE "{database}" ALLOW_CONNECTIONS {str(reachable).lower()}'.encode())
+        if not reachable:
+            admin.execute(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = %s", (database,)
+            )
+
+
+async def test_a_database_cut_shorter_than_the_lease_keeps_serving_a_longer_one_stops_it(
+    tmp_path: Path, postgres_url: str
+) -> None:
+    """Issue 29: shards keep mirroring through a database restart; a shard that cannot renew stops serving
+    once its lease may have run out (no machine served by anyone meanwhile: nobody can take it), and serves
+    again when the database is back."""
+    lease = 6.0
+    http, opcua, inbox = free_port(), free_port(), free_port()
+    machines = {"laser-001", "laser-002"}
+    database = urlsplit(postgres_url).path.lstrip("/")
+    async with SimulatorFleet(2, store_root=tmp_path / "stores", tick=0.1) as sims:
+        names = [p.name for p in sims.write_mappings(tmp_path)]
+        ports = {"HTTP_PORT": http, "OPCUA_PORT": opcua, "INBOX_PORT": inbox}
+        fleet_file = write_fleet(tmp_path, names, ports, shard="lease",
+                                 gateway=f"queue: {postgres_url}\nlease_time: {lease}\n")  # fmt: skip
+
+        def served() -> set[str]:
+            return serving(http) | serving(http + 1)
+
+        async with Fleet(fleet_file) as fleet:
+            await wait_until(lambda: served() == machines and serving(http) and serving(http + 1),
+                             timeout=60, interval=0.2, message="one machine on each shard")  # fmt: skip
+            seen: list[set[str]] = []
+            try:
+                set_reachable(database, False)  # a restart's length: 2 s
+                deadline = time.monotonic() + 2.0
+                while time.monotonic() < deadline:
+                    seen.append(await asyncio.to_thread(served))
+                    await asyncio.sleep(0.1)
+                set_reachable(database, True)
+                assert seen and all(s == machines for s in seen), f"during a 2-s cut: {seen}; {fleet.err[-30:]}"
+
+                set_reachable(database, False)  # longer than the lease: nobody may serve
+                await wait_until(lambda: served() == set(), timeout=lease + 5, interval=0.1,
+                                 message="both shards stopped serving without the database")  # fmt: skip
+            finally:
+                set_reachable(database, True)
+            await wait_until(lambda: served() == machines, timeout=60, interval=0.2,
+                             message="every machine served again once the database is back")  # fmt: skip
+            fleet.proc.send_signal(signal.SIGTERM)
+            assert await asyncio.wait_for(fleet.proc.wait(), 30) == 0
+    log = "".join(fleet.err)
+    assert "Traceback" not in log, log[-3000:]
+    assert "cannot reach the lease table" in log
