@@ -34,7 +34,9 @@ class Source(Protocol):
     async def __aexit__(self, *exc_info: object) -> None: ...
 
     async def run(self) -> None:
-        """Connect, subscribe, and reconnect with backoff, until cancelled."""
+        """Connect, subscribe, and reconnect with backoff, until cancelled. It may be started again after a
+        cancellation (a lease-served machine, gateway/sources/leased.py): close what it opened on the way
+        out."""
         ...
 
     async def write(self, node: VariableNode, raw: Any) -> ReadBack | None:
