@@ -38,6 +38,28 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def listener_ports(count: int) -> int:
+    """The first of `count` consecutive free ports below the ephemeral range, for `cnc-gateway fleet`'s
+    base ports (shard K listens on base + K - 1: a port handed out by `free_port()` says nothing of the
+    next one, and an outgoing connection took it once: shard 2's console could not listen)."""
+    rng = random.Random()
+    for _ in range(200):
+        base = rng.randrange(20000, 32000 - count)
+        held: list[socket.socket] = []
+        try:
+            for port in range(base, base + count):
+                s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                held.append(s)
+                s.bind(("127.0.0.1", port))
+        except OSError:
+            continue
+        finally:
+            for s in held:
+                s.close()
+        return base
+    raise RuntimeError(f"no {count} consecutive free ports below 32000")
+
+
 def listener_port() -> int:
     """A free port below Linux's ephemeral range (32768-60999), for a server that restarts on it.
 

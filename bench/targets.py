@@ -681,16 +681,22 @@ def judge_29(ctx: Context) -> list[Target]:
     fleet = ctx.results.details.get("fleet", {})
     runs: dict[int, dict[str, Any]] = fleet.get("runs", {})
     lease: dict[str, Any] = fleet.get("lease", {})
+    injected: dict[int, dict[str, Any]] = fleet.get("injected", {})
+    inj1, inj2 = injected.get(1, {}), injected.get(2, {})
+    with_broker: dict[int, dict[str, Any]] = fleet.get("injected_mqtt", {})
+    mq1, mq2 = with_broker.get(1, {}), with_broker.get(2, {})
     if not runs:
         return []
     one, two, four = runs.get(1, {}), runs.get(2, {}), runs.get(4, {})
     return [
         Target(
-            "2 shards vs 1 on 2 cores, total changes/s", 1.6, 1.9, "×",
-            value=_ratio(two.get("changes"), one.get("changes")),
-            source=f"{two.get('changes') or 0:,.0f} vs {one.get('changes') or 0:,.0f} changes/s into the "
-            f"trees, the simulator flat out ({two.get('offered') or 0:,.0f} and "
-            f"{one.get('offered') or 0:,.0f}/s written)",
+            "2 shards vs 1 on 2 cores, total changes/s (in-process source, OPC UA face)", 1.6, 1.9, "×",
+            value=_ratio(inj2.get("changes"), inj1.get("changes")),
+            source=f"{inj2.get('changes') or 0:,.0f} vs {inj1.get('changes') or 0:,.0f} changes/s into the "
+            f"trees, each process fed flat out in-process; also publishing to a broker on the same cores "
+            f"{_ratio(mq2.get('changes'), mq1.get('changes')) or 0:.2f}× ({mq2.get('changes') or 0:,.0f} vs "
+            f"{mq1.get('changes') or 0:,.0f}/s); with the simulator on the same cores "
+            f"{two.get('changes') or 0:,.0f} vs {one.get('changes') or 0:,.0f}/s (its ceiling)",
         ),
         Target(
             "200 machines × 50 variables over 4 shards: start-up to all Good", 30, 10, "s",

@@ -11,6 +11,12 @@ values left from the run before):
   over their `/metrics` (`cnc_gateway_machine_changes_total`), and each shard's CPU and RSS;
 - restart: the last shard SIGKILLed; the time until its machines are connected again on its
   `/metrics` (static shards: the supervisor starts it again; no other shard takes them over);
+- the gateway's own scaling: the same 200 machines with the in-process source (bench/agents/injector.py,
+  `--inject`: no simulator, no OPC UA client) flat out, in 1 process (every machine) and in 2 processes
+  (`shard: 1/2` and `2/2`): the changes the processes take into their trees per second, summed; once with
+  the OPC UA face alone (the broker elsewhere, as in a plant), once also publishing to a Mosquitto on this
+  host (QoS 0), which then takes its share of the two cores. The simulator cannot offer a single shard
+  what it can take on two cores; this is the issue's "2 shards vs 1" as the gateway decides it;
 - failover: 2 shards with `shard: lease` (LEASE_TIME, leases in a scratch PostgreSQL database), shared
   out 100 and 100; shard 2 SIGKILLed (its supervisor waits a minute before starting it again); the time
   until shard 1's `/metrics` has all 200 machines connected.
@@ -34,7 +40,8 @@ import psutil
 import yaml
 
 from bench.context import Context
-from bench.procs import ROOT, Agent, Mosquitto, child_env, free_port
+from bench.procs import ROOT, Agent, Mosquitto, child_env, listener_ports
+from bench.scenarios.common import write_gateway
 from bench.scenarios.queue import database  # a scratch PostgreSQL database, dropped afterwards
 from simulator.noise import NoiseSpec, noise_mapping, split_machines
 
@@ -92,10 +99,11 @@ def _write_fleet(
     if lease is not None:
         gateway.update(shard="lease", queue=lease, lease_time=LEASE_TIME)
     (folder / "gateway.yaml").write_text(yaml.safe_dump(gateway, sort_keys=False), encoding="utf-8")
+    base = listener_ports(2 * shards)
     fleet = {
         "gateway": "gateway.yaml",
         "shards": shards,
-        "ports": {"OPCUA_PORT": free_port(), "HTTP_PORT": free_port()},
+        "ports": {"OPCUA_PORT": base, "HTTP_PORT": base + shards},  # shard K: base + K - 1
         "state_dir": "state",
         "restart": {"initial": 60, "max": 60} if lease else {"initial": 0.2, "max": 1},
     }
@@ -189,6 +197,50 @@ async def _one(ctx: Context, sim: Agent, mappings: dict[str, str], shards: int) 
     return out
 
 
+async def _injected(ctx: Context, mappings: dict[str, str], shards: int, *, mqtt: bool) -> dict[str, Any]:
+    """`shards` gateway processes over the 200 machines, each fed flat out by its own injector; with `mqtt`,
+    each also publishes to one Mosquitto on this host (which then takes its share of the two cores)."""
+    agents: list[Agent] = []
+    tag = f"{shards}-{'mqtt' if mqtt else 'opcua'}"
+    async with Mosquitto(ctx.workdir) as broker:
+        try:
+            for k in range(1, shards + 1):
+                folder = ctx.workdir / f"fleet-inject-{tag}-{k}"
+                extra = {"shard": f"{k}/{shards}", "http": None}
+                port = broker.port if mqtt else None
+                config, _ = write_gateway(folder, mappings, mqtt_port=port, extra=extra)
+                agents.append(await Agent.start(
+                    f"fleet-inject-{tag}-{k}", "bench.agents.gateway",
+                    ["--config", str(config), "--inject"], ctx.workdir,
+                ))  # fmt: skip
+            for agent in agents:
+                await agent.ask("rate", rate="max")
+            await asyncio.sleep(ctx.settings.warmup)
+            before = [await a.ask("snap") for a in agents]
+            t0 = time.monotonic()
+            c0 = [psutil.Process(a.proc.pid).cpu_times() for a in agents]
+            await asyncio.sleep(ctx.settings.window)
+            after = [await a.ask("snap") for a in agents]
+            c1 = [psutil.Process(a.proc.pid).cpu_times() for a in agents]
+            seconds = time.monotonic() - t0
+            for agent in agents:
+                await agent.ask("rate", rate=0)
+        finally:
+            for agent in reversed(agents):
+                await agent.stop()
+    rates = [
+        (b["injector"]["written"] - a["injector"]["written"]) / seconds
+        for a, b in zip(before, after, strict=True)
+    ]
+    cpu = [100.0 * ((b.user + b.system) - (a.user + a.system)) / seconds for a, b in zip(c0, c1, strict=True)]
+    out = {"shards": shards, "mqtt": mqtt, "changes": sum(rates), "per_shard": rates, "cpu": cpu}
+    each = ", ".join(f"{r:,.0f}/s at {c:.0f} %" for r, c in zip(rates, cpu, strict=True))
+    faces = "OPC UA and MQTT to a broker on this host" if mqtt else "OPC UA"
+    ctx.log(f"  in-process source, {shards} process(es) flat out, {faces}: {out['changes']:,.0f} changes/s "
+            f"({each})")  # fmt: skip
+    return out
+
+
 async def _failover(ctx: Context, mappings: dict[str, str]) -> dict[str, Any]:
     """Two lease-served shards; the second SIGKILLed; until the first has every machine connected."""
     out: dict[str, Any] = {"lease_time": LEASE_TIME}
@@ -249,9 +301,24 @@ async def run(ctx: Context) -> None:
         lease = await _failover(ctx, mappings)
     finally:
         await sim.stop()
+    injected = {n: await _injected(ctx, mappings, n, mqtt=False) for n in (1, 2)}
+    with_broker = {n: await _injected(ctx, mappings, n, mqtt=True) for n in (1, 2)}
     ctx.results.details["fleet"] = {
         "machines": MACHINES, "per_machine": PER_MACHINE, "runs": runs, "lease": lease,
+        "injected": injected, "injected_mqtt": with_broker,
     }  # fmt: skip
+    for key, label, table in (
+        ("opcua", "OPC UA", injected),
+        ("mqtt", "OPC UA + MQTT, broker here", with_broker),
+    ):
+        for n, data in table.items():
+            ctx.results.add(
+                f"fleet.injected.{key}.{n}", SECTION,
+                f"{n} process(es), in-process source flat out ({label}): changes/s",
+                data["changes"], "changes/s",
+                baseline=table[1]["changes"] if n > 1 else None, baseline_label="1 process",
+                note="CPU per process " + ", ".join(f"{c:.0f} %" for c in data["cpu"]),
+            )  # fmt: skip
     ctx.results.add(
         "fleet.failover.2", SECTION, f"2 lease shards: kill → all {MACHINES} machines served by the other",
         lease["failover"], "s", note=f"lease_time {LEASE_TIME:g} s",

@@ -154,6 +154,7 @@ class MqttSink(BrokerLink):
         self._lost = asyncio.Event()
         self._pump_scheduled = False
         self._dropped_reported = 0
+        self._served_listed: frozenset[str] = frozenset()  # the machines the last online document listed
         self._coalesced_reported = 0
         self._room = asyncio.Event()  # paho handed everything to the socket: the next QoS 0 chunk may go
 
@@ -665,9 +666,15 @@ class MqttSink(BrokerLink):
                 self._last_status[name] = payload
                 self._emit(topic, payload, 1, True, name, True)
 
+    def _served(self) -> frozenset[str]:
+        """The machines this process serves (shard: lease: those it holds; otherwise every machine)."""
+        return frozenset(self.tree.machines.keys() - self.tree.standby)
+
     def _online_payload(self) -> bytes:
         dropped = self.backlog.dropped_total if self.backlog is not None else 0
-        return gateway_online(__version__, self.started, list(self.tree.machines), dropped)
+        self._served_listed = served = self._served()
+        machines = [name for name in self.tree.machines if name in served]
+        return gateway_online(__version__, self.started, machines, dropped)
 
     async def _tick(self) -> None:
         """Once a second: drop counts into Status/MqttDropped and the status topic, coalesced counts into
@@ -685,10 +692,14 @@ class MqttSink(BrokerLink):
                 by_machine = self._sub.coalesced_by if self._sub is not None else {}
                 for name, node in self._coalesced_nodes.items():
                     self.tree.machines[name].set_internal(node, by_machine.get(name, 0))
-            if backlog.dropped_total != self._dropped_reported:
+            dropped = backlog.dropped_total != self._dropped_reported
+            if dropped:
                 self._dropped_reported = backlog.dropped_total
                 for name, node in self._dropped_nodes.items():
                     self.tree.machines[name].set_internal(node, backlog.dropped.get(name, 0))
+            # shard: lease: the status document lists the machines served here, as leases come and go (a
+            # consumer learns which shard's will covers which machines).
+            if dropped or self._served() != self._served_listed:
                 self._emit(self.routes.status_topic, self._online_payload(), 1, True, None, True)
             if not self._online and backlog and loop.time() - last_reminder >= REMIND_EVERY:
                 last_reminder = loop.time()

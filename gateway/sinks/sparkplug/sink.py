@@ -507,7 +507,8 @@ class SparkplugSink(BrokerLink):
         self._set_state(STATE_ONLINE, "")
         for device in self.devices.values():
             self._dbirth(device)
-        log.info("Sparkplug: NBIRTH (bdSeq %d) and %d DBIRTHs published", self.bdseq, len(self.devices))
+        born = sum(1 for name in self.devices if name not in self.tree.standby)  # shard: lease: its own only
+        log.info("Sparkplug: NBIRTH (bdSeq %d) and %d DBIRTHs published", self.bdseq, born)
         self._replay()
         self._fence()
 

@@ -30,3 +30,18 @@ async def test_a_fence_only_while_the_last_renewal_is_recent_enough(postgres_url
     async with LeaseHolder(postgres_url, "gw-b", ["laser"], lease_time=10.0) as other:
         taken = other.fence("laser")  # the clean stop released it: taken at once
         assert taken is not None and taken.token > fence.token
+
+
+async def test_the_holder_wakes_when_a_renewal_stops_being_trusted_and_not_again_after(
+    postgres_url: str,
+) -> None:
+    clock = Clock()
+    async with LeaseHolder(
+        postgres_url, "gw-c", ["laser"], lease_time=10.0, margin=2.0, clock=clock
+    ) as holder:
+        assert abs(holder._until_doubt() - 8.01) < 1e-9  # the renewal is trusted 8 s: wake then, and tell
+        clock.now += 5.0
+        assert abs(holder._until_doubt() - 3.01) < 1e-9
+        clock.now += 4.0  # past it (the table out of reach, say): told already; the next wake is a round's
+        assert holder.fence("laser") is None
+        assert holder._until_doubt() > 1.0
