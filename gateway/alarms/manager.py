@@ -17,6 +17,7 @@ it is reconciled like any other change: what is gone is cleared then.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import time
 from collections.abc import Awaitable, Callable, Sequence
@@ -67,6 +68,18 @@ def who(ctx: WriteContext) -> str:
     return ctx.user or f"anonymous ({ctx.origin})"
 
 
+SERVED_PATH = "Status/Served"  # a lease-served machine's (gateway/sources/leased.py)
+
+
+def _step(old: AlarmRecord, new: AlarmRecord) -> Kind:
+    """The furthest step an occurrence took between two of its states: cleared, acknowledged, confirmed."""
+    if old.active and not new.active:
+        return Kind.CLEARED
+    if not old.acked and new.acked:
+        return Kind.ACKNOWLEDGED
+    return Kind.CONFIRMED
+
+
 class AlarmManager:
     """The alarms of one machine with an `alarms:` section."""
 
@@ -110,12 +123,17 @@ class AlarmManager:
         hub = self.machine.tree.hub
         sub = hub.subscribe(f"alarms:{self.name}")
         loop = asyncio.get_running_loop()
+        # shard: lease (gateway/sources/leased.py): the machine's lease arriving here, after another shard
+        # served it, is the moment to take over the alarms as that shard left them in the shared history.
+        served = self.machine.nodes.get(SERVED_PATH)
         try:
             self.publish_active()
             await self.apply(self.source.read())
             watched = self.source.nodes
             while True:
                 batch = await sub.next_batch()
+                if served is not None and any(n is served and s.value is True for n, s in batch):
+                    await self.take_over()
                 if not any(node in watched for node, _ in batch):
                     continue
                 reading = self.source.read()
@@ -129,6 +147,49 @@ class AlarmManager:
                 await self.apply(reading)
         finally:
             sub.close()
+
+    async def take_over(self) -> None:
+        """This process serves the machine from now on (shard: lease). Another shard may have raised,
+        cleared, acknowledged or confirmed its alarms since this one loaded them: the shared history's
+        retained occurrences replace what it holds. The listeners (OPC UA conditions) hear of each
+        difference; the event stream does not (the other shard published those events when they
+        happened), the retained list does."""
+        async with self._lock:
+            try:
+                fresh = {r.occurrence: r for r in await self._db(self.store.retained, self.name)}
+                gone = [n for n in self.records if n not in fresh]
+                ended: dict[int, AlarmRecord] = {}
+                if gone:
+                    since = min(self.records[n].raised_at for n in gone)
+                    read = functools.partial(self.store.history, self.name, since, limit=10_000)
+                    ended = {r.occurrence: r for r in await self._db(read) if r.occurrence in gone}
+            except AlarmStoreError as exc:
+                log.error("%s: the alarm history cannot be read at the takeover (kept as loaded): %s",
+                          self.name, exc)  # fmt: skip
+                return
+            now = utcnow()
+            changes: list[AlarmChange] = []
+            for number in gone:  # ended on the other shard: cleared and acknowledged (and confirmed)
+                old = self.records[number]
+                done = ended.get(number) or replace(
+                    old, cleared_at=old.cleared_at or now, acked_at=old.acked_at or now,
+                    confirmed_at=old.confirmed_at or now,
+                )  # fmt: skip
+                changes.append(self._put(_step(old, done), self._as_here(done), now))
+            for number, record in fresh.items():
+                held = self.records.get(number)
+                if held is None:  # raised on the other shard after this one loaded the history
+                    changes.append(self._put(Kind.RAISED, self._as_here(record), record.raised_at))
+                elif (held.cleared_at, held.acked_at, held.confirmed_at) != (
+                    record.cleared_at, record.acked_at, record.confirmed_at,
+                ):  # fmt: skip
+                    changes.append(self._put(_step(held, record), self._as_here(record), now))
+            if changes:
+                log.info("%s: taken over: %d alarm change(s) made on another shard", self.name, len(changes))
+            await self._emit(changes, events=False)
+
+    def _as_here(self, record: AlarmRecord) -> AlarmRecord:
+        return replace(record, quality=self.quality, reason=self.reason)
 
     async def apply(self, reading: Reading) -> None:
         """One look at the controller's list (or at its absence)."""
@@ -328,12 +389,12 @@ class AlarmManager:
             self.records.pop(record.occurrence, None)
         return AlarmChange(kind, record, ts, retained, user, comment)
 
-    async def _emit(self, changes: list[AlarmChange]) -> None:
+    async def _emit(self, changes: list[AlarmChange], *, events: bool = True) -> None:
         if not changes:
             return
         bus = self.machine.tree.events
         for change in changes:
-            if change.kind is not Kind.QUALITY:
+            if events and change.kind is not Kind.QUALITY:
                 payload = {"event": change.kind.value, **change.record.as_dict()}
                 if change.user:
                     payload["user"] = change.user

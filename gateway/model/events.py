@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
@@ -39,16 +39,21 @@ class Event:
 
 
 class EventSubscription:
-    __slots__ = ("_bus", "_event", "_queue", "dropped", "name")
+    __slots__ = ("_accept", "_bus", "_event", "_queue", "dropped", "name")
 
-    def __init__(self, bus: EventBus, name: str, limit: int) -> None:
+    def __init__(
+        self, bus: EventBus, name: str, limit: int, accept: Callable[[Event], bool] | None = None
+    ) -> None:
         self.name = name
         self.dropped = 0
         self._queue: deque[Event] = deque(maxlen=limit)
         self._event = asyncio.Event()
         self._bus = bus
+        self._accept = accept
 
     def push(self, event: Event) -> None:
+        if self._accept is not None and not self._accept(event):
+            return  # decided as the event is published, not when the subscriber gets round to it
         queue = self._queue
         if len(queue) == queue.maxlen:
             self.dropped += 1
@@ -75,8 +80,11 @@ class EventBus:
     def __init__(self) -> None:
         self._subs: tuple[EventSubscription, ...] = ()
 
-    def subscribe(self, name: str, *, limit: int = 10_000) -> EventSubscription:
-        sub = EventSubscription(self, name, limit)
+    def subscribe(
+        self, name: str, *, limit: int = 10_000, accept: Callable[[Event], bool] | None = None
+    ) -> EventSubscription:
+        """`accept`: the events this subscriber wants, judged when each is published."""
+        sub = EventSubscription(self, name, limit, accept)
         self._subs = (*self._subs, sub)
         return sub
 

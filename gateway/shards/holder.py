@@ -132,7 +132,7 @@ class LeaseHolder:
                 try:
                     await self.step()
                     if not self.reachable:
-                        log.warning("%s: the lease table is reachable again", self.holder)
+                        log.info("%s: the lease table is reachable again", self.holder)
                     self.reachable = True
                 except LeaseError as exc:  # the database is away: the leases run out, fence() says None
                     if self.reachable:

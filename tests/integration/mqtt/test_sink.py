@@ -125,6 +125,41 @@ async def test_events_go_out_as_json_retained_state_and_an_ordered_stream(
         assert late.on("cnc/m1/jobs/events") == []  # the stream is not retained
 
 
+async def test_a_machine_another_shard_serves_publishes_nothing_here(
+    mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path
+) -> None:
+    """shard: lease: while the machine is on standby (Machine.served false) neither its values, nor its status
+    document, nor its events leave this sink, and no sample marked as a standby's does even once it is
+    served; once served, everything does, and the gateway's status document lists it."""
+    from gateway.model.events import Event
+    from gateway.model.status import STANDBY_STATUS
+
+    tree = make_tree()
+    m = tree.machines["m1"]
+    async with running(tree, mqtt_config(mosquitto.port), tmp_path) as sink:
+        await wait_until(lambda: sink.online, message="the sink to connect")
+        live = subscriber(recorders, mosquitto.port, topics=["cnc/#"])
+        m.served = False  # (no value arrives on standby: the machine's source does not run)
+        m.invalidate(STANDBY_STATUS, "served by another shard")
+        m.status.standby("served by another shard")
+        tree.events.publish(Event("m1", "alarms/active", [], retain=True))
+        m.served = True  # as gateway/sources/leased.py does when the lease arrives
+        m.status.error("")
+        m.status.connecting()
+        m.invalidate(STANDBY_STATUS, "served by another shard")  # queued as the lease arrives: not sent
+        ingest(m, "Axes/X/Position", 8.0)
+        tree.events.publish(Event("m1", "alarms/active", [{"id": "1001"}], retain=True))
+        await wait_until(lambda: live.on("cnc/m1/alarms/active") and live.on("cnc/m1/axes/x/position"),
+                         timeout=10, message="the served machine's messages")  # fmt: skip
+        await wait_until(lambda: any("m1" in (r.json().get("machines") or []) for r in live.on("cnc/status")),
+                         timeout=10, message="the status document listing the machine again")  # fmt: skip
+        await wait_until(lambda: sink.settled, message="everything acknowledged")
+        assert [r.json()["value"] for r in live.on("cnc/m1/axes/x/position")] == [8.0]
+        assert [r.json() for r in live.on("cnc/m1/alarms/active")] == [[{"id": "1001"}]]
+        leaked = [r for r in live.messages if b"another shard" in r.payload or b"standby" in r.payload]
+        assert leaked == []
+
+
 async def test_quality_turns_bad_with_the_reason_and_the_status_follows(
     mosquitto: Mosquitto, recorders: list[Recorder], tmp_path: Path
 ) -> None:

@@ -243,3 +243,49 @@ async def test_the_running_manager_follows_the_hub_and_waits_for_arrays_that_lag
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
+
+
+async def test_a_takeover_replaces_the_alarms_with_those_another_shard_left(
+    tmp_path: Path, postgres_url: str
+) -> None:
+    """shard: lease. Shard B loaded the history at its start; shard A served the machine meanwhile (cleared
+    and acknowledged one occurrence, raised another). When the machine's lease reaches B (`Status/Served`
+    turns true under its running manager), B holds what A left: its listeners hear of each difference,
+    the retained list is published again, the event stream repeats nothing."""
+    tree_a, tree_b = MappedTree([mapping()]), MappedTree([mapping()])
+    async with AlarmService(tree_a, tree_a.mappings, tmp_path / "a", postgres_url) as shard_a:
+        a = Rig(tree_a, shard_a)
+        a.controller((1001, "Soft limit", 3))
+        await a.look()
+        [first] = a.manager.retained()
+        async with AlarmService(tree_b, tree_b.mappings, tmp_path / "b", postgres_url) as shard_b:
+            b = Rig(tree_b, shard_b)
+            assert [r.occurrence for r in b.manager.retained()] == [first.occurrence]  # loaded at its start
+
+            async def listen(change: AlarmChange) -> None:
+                b.changes.append(change)
+
+            b.manager.listen(listen)
+            served = b.machine.add_internal("Status/Served", "Boolean", "leased", False)
+            running = asyncio.create_task(b.manager.run())
+            try:
+                await wait_until(lambda: any(s.name == "alarms:m" for s in tree_b.hub.subscriptions))
+                a.controller((2001, "Door open", 1))  # on A: 1001 cleared, 2001 raised
+                await a.look()
+                await a.manager.acknowledge(first.occurrence, OPERATOR, "seen")
+                [second] = a.manager.retained()
+                b.events.take()
+                b.machine.set_internal(served, True)  # the lease arrives at B
+                await wait_until(lambda: [r.occurrence for r in b.manager.retained()] == [second.occurrence],
+                                 timeout=10, message="B holding what A left")  # fmt: skip
+            finally:
+                running.cancel()
+                await asyncio.gather(running, return_exceptions=True)
+            kinds = [(c.kind, c.record.occurrence) for c in b.changes]
+            assert kinds == [(Kind.CLEARED, first.occurrence), (Kind.RAISED, second.occurrence)]
+            cleared = b.changes[0].record
+            assert cleared.acked_by == "olga" and not cleared.active and not b.changes[0].retained
+            published = b.events.take()
+            assert [e for e in published if e.channel == "alarms/events"] == []  # A published those
+            active = [e.payload for e in published if e.channel == "alarms/active"]
+            assert active and [r["occurrence"] for r in active[-1]] == [second.occurrence]
